@@ -1,0 +1,113 @@
+"""A registered pair: both clouds in scan 1's sensor frame, and the pose of sensor 2 in frame 1.
+
+This is the object every hypothesis receives, and what the registered-pair and stage-points
+Parquet files hold (column ``cloud`` = 1 or 2, ``x, y, z`` in frame 1, plus attributes).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from .errors import InputError
+from .io.parquet_table import read_table, write_table
+from .sensors import SensorModel
+
+
+@dataclass
+class RegisteredPair:
+    xyz1: np.ndarray  # (N1, 3) cloud 1, frame 1
+    xyz2: np.ndarray  # (N2, 3) cloud 2, frame 1
+    T_1_2: np.ndarray = field(default_factory=lambda: np.eye(4))  # pose of sensor 2 in frame 1
+    sensor1: SensorModel | None = None
+    sensor2: SensorModel | None = None
+    attributes1: dict[str, np.ndarray] = field(default_factory=dict)
+    attributes2: dict[str, np.ndarray] = field(default_factory=dict)
+    # method, fitness, inlier_rmse, converged, errors against reference poses, ...
+    registration: dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        self.xyz1 = np.ascontiguousarray(self.xyz1, dtype=np.float64).reshape(-1, 3)
+        self.xyz2 = np.ascontiguousarray(self.xyz2, dtype=np.float64).reshape(-1, 3)
+        self.T_1_2 = np.asarray(self.T_1_2, dtype=np.float64).reshape(4, 4)
+
+    @property
+    def origin1(self) -> np.ndarray:
+        return np.zeros(3)
+
+    @property
+    def origin2(self) -> np.ndarray:
+        """Sensor 2's origin in frame 1."""
+        return self.T_1_2[:3, 3].copy()
+
+    def subset(self, keep1: np.ndarray, keep2: np.ndarray) -> "RegisteredPair":
+        return RegisteredPair(
+            self.xyz1[keep1],
+            self.xyz2[keep2],
+            self.T_1_2,
+            self.sensor1,
+            self.sensor2,
+            {k: v[keep1] for k, v in self.attributes1.items()},
+            {k: v[keep2] for k, v in self.attributes2.items()},
+            self.registration,
+        )
+
+    # --- the points table -------------------------------------------------------------
+    def to_columns(self) -> dict[str, np.ndarray]:
+        n1, n2 = len(self.xyz1), len(self.xyz2)
+        xyz = np.vstack([self.xyz1, self.xyz2])
+        columns = {
+            "cloud": np.concatenate([np.full(n1, 1, np.uint8), np.full(n2, 2, np.uint8)]),
+            "x": xyz[:, 0],
+            "y": xyz[:, 1],
+            "z": xyz[:, 2],
+        }
+        for name in sorted(set(self.attributes1) | set(self.attributes2)):
+            a1 = self.attributes1.get(name)
+            a2 = self.attributes2.get(name)
+            a1 = np.full(n1, np.nan) if a1 is None else a1
+            a2 = np.full(n2, np.nan) if a2 is None else a2
+            columns[name] = np.concatenate([a1, a2])
+        return columns
+
+    def metadata(self) -> dict:
+        return {
+            "T_1_2": self.T_1_2.tolist(),
+            "sensor1": None if self.sensor1 is None else self.sensor1.to_dict(),
+            "sensor2": None if self.sensor2 is None else self.sensor2.to_dict(),
+            "registration": self.registration,
+        }
+
+    @classmethod
+    def from_columns(cls, columns: dict[str, np.ndarray], meta: dict) -> "RegisteredPair":
+        cloud = columns["cloud"]
+        in1, in2 = cloud == 1, cloud == 2
+        xyz = np.column_stack([columns["x"], columns["y"], columns["z"]]).astype(np.float64)
+        attrs = {k: v for k, v in columns.items() if k not in ("cloud", "x", "y", "z")}
+        return cls(
+            xyz[in1],
+            xyz[in2],
+            np.asarray(meta.get("T_1_2", np.eye(4)), dtype=np.float64),
+            SensorModel.from_dict(meta["sensor1"]) if meta.get("sensor1") else None,
+            SensorModel.from_dict(meta["sensor2"]) if meta.get("sensor2") else None,
+            {k: v[in1] for k, v in attrs.items()},
+            {k: v[in2] for k, v in attrs.items()},
+            meta.get("registration", {}),
+        )
+
+
+def write_pair(path: str | Path, pair: RegisteredPair, extra_meta: dict | None = None) -> None:
+    """Write a registered pair (or a stage's points) as a points Parquet file, atomically."""
+    meta = pair.metadata()
+    meta.update(extra_meta or {})
+    write_table(path, pair.to_columns(), meta)
+
+
+def read_pair(path: str | Path) -> tuple[RegisteredPair, dict]:
+    """Read a points Parquet file: the pair and the file's full metadata."""
+    columns, meta = read_table(path, required=("cloud", "x", "y", "z"))
+    if "T_1_2" not in meta:
+        raise InputError("not a registered-pair file (no T_1_2 in its lidarfield metadata)", path)
+    return RegisteredPair.from_columns(columns, meta), meta

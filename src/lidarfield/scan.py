@@ -1,0 +1,43 @@
+"""A single lidar scan: points in its sensor frame, per-point attributes, sensor model and pose."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .sensors import SensorModel
+
+# Attributes the contracts know; readers may add others (kept as they are).
+KNOWN_ATTRIBUTES = ("intensity", "ring", "time")
+
+
+@dataclass
+class Scan:
+    xyz: np.ndarray  # (N, 3) float64, metres, sensor frame
+    attributes: dict[str, np.ndarray] = field(default_factory=dict)  # each of length N
+    sensor: SensorModel | None = None
+    pose: np.ndarray | None = None  # 4x4 world-from-sensor, when known
+    source: str | None = None  # where the scan came from (file path or simulation spec)
+    dropped_invalid: int = 0  # rows dropped by the reader for NaN / infinite coordinates
+
+    def __post_init__(self):
+        self.xyz = np.ascontiguousarray(self.xyz, dtype=np.float64).reshape(-1, 3)
+        for name, values in self.attributes.items():
+            if len(values) != len(self.xyz):
+                raise ValueError(f"attribute {name!r} has {len(values)} values for {len(self.xyz)} points")
+        if self.pose is not None:
+            self.pose = np.asarray(self.pose, dtype=np.float64).reshape(4, 4)
+
+    def __len__(self) -> int:
+        return len(self.xyz)
+
+    def subset(self, mask: np.ndarray) -> "Scan":
+        return Scan(
+            self.xyz[mask],
+            {k: v[mask] for k, v in self.attributes.items()},
+            self.sensor,
+            self.pose,
+            self.source,
+            self.dropped_invalid,
+        )

@@ -1,0 +1,280 @@
+"""Voxel grids shared by the field and the hypotheses: spherical about an origin, or Cartesian.
+
+``assign(xyz, origin)`` gives every point an int64 voxel id, or -1 when the point is outside
+the grid. A point outside the elevation range or outside the range shells is *out*: it is
+counted by the caller, never folded into an edge bin. Interval convention: each bin holds
+``[lower edge, upper edge)``, except that the last elevation bin and the last range shell also
+hold their upper edge (the grid is the closed interval ``[lo, hi]``), matching the
+``field_of_view`` rule that drops points *strictly* outside a sensor's limits.
+
+Spherical ids are dense: ``az_bin + azimuth_bins * (el_bin + elevation_bins * r_bin)``, so
+``0 <= id < n_voxels`` and a bincount over the whole id range needs no compaction.
+
+Cartesian ids pack the cell indices, each offset by ``CARTESIAN_OFFSET`` = 2**20 so negative
+indices are fine, into 21 bits per axis: ``(ix + off) | (iy + off) << 21 | (iz + off) << 42``.
+Indices beyond +-2**20 cells (1048 km at 1 m cells) are out of the grid. Sorting by id sorts
+by (iz, iy, ix).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from .errors import ConfigError
+
+CARTESIAN_BITS = 21
+CARTESIAN_OFFSET = 1 << (CARTESIAN_BITS - 1)
+_CARTESIAN_MASK = (1 << CARTESIAN_BITS) - 1
+
+SPHERICAL_KEYS = ("azimuth_bins", "azimuth_offset_deg", "elevation_deg", "elevation_bins", "range_edges_m")
+CARTESIAN_KEYS = ("cell_m", "origin")
+FIELD_KEYS = ("min_points", "max_component_m")
+
+
+def _as_points(xyz: np.ndarray) -> np.ndarray:
+    xyz = np.asarray(xyz, dtype=np.float64)
+    if xyz.ndim != 2 or xyz.shape[1] != 3:
+        raise ValueError(f"expected an (N, 3) array of points, got shape {xyz.shape}")
+    return xyz
+
+
+def _relative(xyz: np.ndarray, origin) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    xyz = _as_points(xyz)
+    ox, oy, oz = (float(c) for c in origin)
+    return xyz[:, 0] - ox, xyz[:, 1] - oy, xyz[:, 2] - oz
+
+
+@dataclass(frozen=True)
+class SphericalGrid:
+    """Azimuth bins over 360 deg (bin 0 starts at ``azimuth_offset_deg``), elevation bins over
+    ``elevation_deg`` = (lo, hi), and optional range shells with edges ``range_edges_m``."""
+
+    azimuth_bins: int = 36
+    azimuth_offset_deg: float = 0.0
+    elevation_deg: tuple[float, float] = (-20.0, 20.0)
+    elevation_bins: int = 5
+    range_edges_m: tuple[float, ...] | None = None
+
+    kind = "spherical"
+
+    def __post_init__(self) -> None:
+        for name in ("elevation_deg", "range_edges_m"):
+            object.__setattr__(self, name, _number_tuple(getattr(self, name)))
+        _check_spherical(self)
+
+    @property
+    def range_bins(self) -> int:
+        return 0 if self.range_edges_m is None else len(self.range_edges_m) - 1
+
+    @property
+    def n_voxels(self) -> int:
+        return self.azimuth_bins * self.elevation_bins * max(1, self.range_bins)
+
+    def assign(self, xyz: np.ndarray, origin=(0.0, 0.0, 0.0)) -> np.ndarray:
+        """Voxel id of each point binned about ``origin``; -1 outside the grid."""
+        dx, dy, dz = _relative(xyz, origin)
+        rho = np.hypot(dx, dy)
+
+        az = np.degrees(np.arctan2(dy, dx))
+        az -= self.azimuth_offset_deg
+        az %= 360.0
+        az *= self.azimuth_bins / 360.0
+        az_bin = az.astype(np.int64)
+        # x % 360 can round up to exactly 360 for tiny negative x: that is bin 0's edge.
+        az_bin[az_bin >= self.azimuth_bins] = 0
+
+        lo, hi = self.elevation_deg
+        el = np.degrees(np.arctan2(dz, rho))
+        inside = (el >= lo) & (el <= hi)  # False for NaN
+        el -= lo
+        el *= self.elevation_bins / (hi - lo)
+        el_bin = np.minimum(np.where(inside, el, 0.0).astype(np.int64), self.elevation_bins - 1)
+
+        ids = az_bin
+        ids += self.azimuth_bins * el_bin
+        if self.range_edges_m is not None:
+            edges = np.asarray(self.range_edges_m, dtype=np.float64)
+            r = np.sqrt(rho * rho + dz * dz)
+            inside &= (r >= edges[0]) & (r <= edges[-1])
+            r_bin = np.searchsorted(edges, r, side="right") - 1
+            np.minimum(r_bin, self.range_bins - 1, out=r_bin)
+            ids += (self.azimuth_bins * self.elevation_bins) * r_bin
+        ids[~inside] = -1
+        return ids
+
+    def bins(self, voxel_ids: np.ndarray) -> dict[str, np.ndarray]:
+        """``az_bin, el_bin, r_bin`` of each id (r_bin -1 without shells; all -1 for id -1)."""
+        ids = np.asarray(voxel_ids, dtype=np.int64)
+        out = ids < 0
+        az = ids % self.azimuth_bins
+        el = (ids // self.azimuth_bins) % self.elevation_bins
+        if self.range_edges_m is None:
+            r = np.full(ids.shape, -1, dtype=np.int64)
+        else:
+            r = ids // (self.azimuth_bins * self.elevation_bins)
+        for a in (az, el, r):
+            a[out] = -1
+        return {"az_bin": az, "el_bin": el, "r_bin": r}
+
+    def to_config(self) -> dict[str, Any]:
+        return {
+            "kind": self.kind,
+            "azimuth_bins": self.azimuth_bins,
+            "azimuth_offset_deg": self.azimuth_offset_deg,
+            "elevation_deg": list(self.elevation_deg),
+            "elevation_bins": self.elevation_bins,
+            "range_edges_m": None if self.range_edges_m is None else list(self.range_edges_m),
+        }
+
+
+@dataclass(frozen=True)
+class CartesianGrid:
+    """Cubic cells of side ``cell_m``; cell (0, 0, 0) spans [origin, origin + cell_m)."""
+
+    cell_m: float = 1.0
+    origin: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+    kind = "cartesian"
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "origin", _number_tuple(self.origin))
+        _check_cartesian(self)
+
+    n_voxels = None  # the id space is sparse (63 bits)
+
+    def assign(self, xyz: np.ndarray, origin=(0.0, 0.0, 0.0)) -> np.ndarray:
+        """Voxel id of each point; -1 for non-finite points or indices beyond +-2**20.
+
+        ``origin`` is added to the grid's own origin (the frame the points are binned in).
+        """
+        shifted = tuple(float(a) + float(b) for a, b in zip(self.origin, origin))
+        ids = np.zeros(len(_as_points(xyz)), dtype=np.int64)
+        inside = np.ones(len(ids), dtype=bool)
+        for axis, d in enumerate(_relative(xyz, shifted)):
+            cell = np.floor(d / self.cell_m)
+            inside &= (cell >= -CARTESIAN_OFFSET) & (cell < CARTESIAN_OFFSET)  # False for NaN
+            index = np.where(inside, cell, 0.0).astype(np.int64) + CARTESIAN_OFFSET
+            ids |= index << (CARTESIAN_BITS * axis)
+        ids[~inside] = -1
+        return ids
+
+    def bins(self, voxel_ids: np.ndarray) -> dict[str, np.ndarray]:
+        """``ix, iy, iz`` cell indices of each id (-1 ids give -1 everywhere)."""
+        ids = np.asarray(voxel_ids, dtype=np.int64)
+        out = ids < 0
+        result = {}
+        for axis, name in enumerate(("ix", "iy", "iz")):
+            index = ((ids >> (CARTESIAN_BITS * axis)) & _CARTESIAN_MASK) - CARTESIAN_OFFSET
+            index[out] = -1
+            result[name] = index
+        return result
+
+    def to_config(self) -> dict[str, Any]:
+        return {"kind": self.kind, "cell_m": self.cell_m, "origin": list(self.origin)}
+
+
+Grid = SphericalGrid | CartesianGrid
+
+
+def count_out_of_grid(voxel_ids: np.ndarray) -> int:
+    """Number of points that ``assign`` put outside the grid."""
+    return int(np.count_nonzero(np.asarray(voxel_ids) < 0))
+
+
+@dataclass(frozen=True)
+class FieldSettings:
+    """The grid and the validity rules of the field (``grid`` section of the config)."""
+
+    grid: Grid
+    min_points: int = 30
+    max_component_m: float | None = None
+
+    def __post_init__(self) -> None:
+        if isinstance(self.min_points, bool) or not isinstance(self.min_points, (int, np.integer)) or self.min_points < 1:
+            raise ConfigError(f"grid: min_points must be an integer >= 1, got {self.min_points!r}")
+        if self.max_component_m is not None and not _positive(self.max_component_m):
+            raise ConfigError(f"grid: max_component_m must be a positive number or null, got {self.max_component_m!r}")
+
+    def to_config(self) -> dict[str, Any]:
+        return {**self.grid.to_config(), "min_points": int(self.min_points), "max_component_m": self.max_component_m}
+
+
+def grid_from_config(d: dict) -> Grid:
+    """The grid of a config ``grid`` section (``min_points``/``max_component_m`` are ignored here)."""
+    if not isinstance(d, dict):
+        raise ConfigError(f"grid: expected a mapping of grid settings, got {type(d).__name__}")
+    kind = d.get("kind", "spherical")
+    own = {"spherical": SPHERICAL_KEYS, "cartesian": CARTESIAN_KEYS}.get(kind)
+    if own is None:
+        raise ConfigError(f"grid.kind: must be 'spherical' or 'cartesian', got {kind!r}")
+    for key in d:
+        if key == "kind" or key in own or key in FIELD_KEYS:
+            continue
+        if key in SPHERICAL_KEYS or key in CARTESIAN_KEYS:
+            raise ConfigError(f"grid.{key}: not a setting of a {kind} grid")
+        raise ConfigError(f"grid.{key}: unknown key (known: kind, {', '.join(own + FIELD_KEYS)})")
+    kwargs = {key: d[key] for key in own if key in d}
+    return SphericalGrid(**kwargs) if kind == "spherical" else CartesianGrid(**kwargs)
+
+
+def field_settings_from_config(d: dict) -> FieldSettings:
+    """Grid plus ``min_points`` (default 30) and ``max_component_m`` (default null)."""
+    grid = grid_from_config(d)
+    return FieldSettings(grid, min_points=d.get("min_points", 30), max_component_m=d.get("max_component_m"))
+
+
+def _number_tuple(value):
+    """Lists/tuples of plain numbers as a tuple of floats (hashable, JSON-stable); else as is."""
+    if isinstance(value, (list, tuple)) and all(_is_number(v) for v in value):
+        return tuple(float(v) for v in value)
+    return value
+
+
+def _is_number(value) -> bool:
+    return isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, bool)
+
+
+def _positive(value) -> bool:
+    return isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, bool) and math.isfinite(value) and value > 0
+
+
+def _is_int(value) -> bool:
+    return isinstance(value, (int, np.integer)) and not isinstance(value, bool)
+
+
+def _check_spherical(g: SphericalGrid) -> None:
+    if not _is_int(g.azimuth_bins) or g.azimuth_bins < 1:
+        raise ConfigError(f"grid.azimuth_bins: must be an integer >= 1, got {g.azimuth_bins!r}")
+    if not _is_int(g.elevation_bins) or g.elevation_bins < 1:
+        raise ConfigError(f"grid.elevation_bins: must be an integer >= 1, got {g.elevation_bins!r}")
+    if not isinstance(g.azimuth_offset_deg, (int, float)) or isinstance(g.azimuth_offset_deg, bool) or not math.isfinite(g.azimuth_offset_deg):
+        raise ConfigError(f"grid.azimuth_offset_deg: must be a finite number, got {g.azimuth_offset_deg!r}")
+    el = g.elevation_deg
+    if (
+        not isinstance(el, tuple)
+        or len(el) != 2
+        or not all(isinstance(a, (int, float)) and not isinstance(a, bool) for a in el)
+        or not -90.0 <= el[0] < el[1] <= 90.0
+    ):
+        raise ConfigError(f"grid.elevation_deg: must be [lo, hi] with -90 <= lo < hi <= 90, got {el!r}")
+    edges = g.range_edges_m
+    if edges is not None:
+        ok = isinstance(edges, tuple) and len(edges) >= 2 and all(
+            isinstance(e, (int, float)) and not isinstance(e, bool) and math.isfinite(e) for e in edges
+        )
+        if not ok or edges[0] < 0 or any(b <= a for a, b in zip(edges, edges[1:])):
+            raise ConfigError(f"grid.range_edges_m: must be null or >= 2 increasing finite edges >= 0, got {edges!r}")
+
+
+def _check_cartesian(g: CartesianGrid) -> None:
+    if not _positive(g.cell_m):
+        raise ConfigError(f"grid.cell_m: must be a positive number, got {g.cell_m!r}")
+    o = g.origin
+    if not isinstance(o, tuple) or len(o) != 3 or not all(
+        isinstance(c, (int, float)) and not isinstance(c, bool) and math.isfinite(c) for c in o
+    ):
+        raise ConfigError(f"grid.origin: must be three finite numbers, got {o!r}")

@@ -1,0 +1,131 @@
+"""``lidarfield job``: the entry points the Snakemake rules call, one per rule.
+
+Rules pass only paths and the canonical JSON of their own settings; everything else is in the
+library. Not meant for interactive use (see ``lidarfield run`` for one pair without Snakemake).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+
+
+def _json(text: str):
+    return json.loads(text)
+
+
+def add_parser(subparsers) -> None:
+    parser = subparsers.add_parser("job", help="one workflow job (called by the Snakemake rules)")
+    jobs = parser.add_subparsers(dest="job", required=True, metavar="JOB")
+
+    for kind in ("simulate", "ingest"):
+        p = jobs.add_parser(kind)
+        p.add_argument("--spec", type=_json, required=True)
+        p.add_argument("--out", required=True)
+        p.set_defaults(func=_scan, kind="simulated" if kind == "simulate" else "recorded")
+
+    p = jobs.add_parser("register")
+    p.add_argument("--scan1", required=True)
+    p.add_argument("--scan2", required=True)
+    p.add_argument("--settings", type=_json, required=True)
+    p.add_argument("--out", required=True)
+    p.set_defaults(func=_register)
+
+    p = jobs.add_parser("mitigate")
+    p.add_argument("--points-in", required=True)
+    p.add_argument("--step", type=_json, required=True)
+    p.add_argument("--stage", required=True)
+    p.add_argument("--level", type=int, required=True)
+    p.add_argument("--grid", type=_json, required=True)
+    p.add_argument("--points-out", required=True)
+    p.add_argument("--removed-out", required=True)
+    p.set_defaults(func=_mitigate)
+
+    p = jobs.add_parser("field")
+    p.add_argument("--points", required=True)
+    p.add_argument("--removed", required=True)
+    p.add_argument("--grid", type=_json, required=True)
+    p.add_argument("--pair", required=True)
+    p.add_argument("--field-out", required=True)
+    p.add_argument("--stats-out", required=True)
+    p.set_defaults(func=_field)
+
+    p = jobs.add_parser("plot-stage")
+    p.add_argument("--stage-dir", required=True)
+    p.add_argument("--previous", default="", help="the previous stage's folder ('' for stage 0)")
+    p.add_argument("--plots", type=_json, required=True)
+    p.add_argument("--out", required=True)
+    p.set_defaults(func=_plot_stage)
+
+    p = jobs.add_parser("plot-pair")
+    p.add_argument("--stats", nargs="+", required=True)
+    p.add_argument("--out", required=True)
+    p.set_defaults(func=_plot_pair)
+
+    p = jobs.add_parser("summary")
+    p.add_argument("--stats", nargs="+", required=True)
+    p.add_argument("--parquet", required=True)
+    p.add_argument("--csv", required=True)
+    p.set_defaults(func=_summary)
+
+    p = jobs.add_parser("report")
+    p.add_argument("--study", type=_json, required=True, help='{"config": ..., "stages": {pair: [ids]}}')
+    p.add_argument("--results", required=True)
+    p.add_argument("--out", required=True)
+    p.set_defaults(func=_report)
+
+
+def _scan(args: argparse.Namespace) -> None:
+    from ..jobs import scan_job
+
+    scan_job(args.kind, args.spec, args.out)
+
+
+def _register(args: argparse.Namespace) -> None:
+    from ..jobs import register_job
+
+    register_job(args.scan1, args.scan2, args.settings, args.out)
+
+
+def _mitigate(args: argparse.Namespace) -> None:
+    from ..pipeline import mitigate_stage
+
+    mitigate_stage(
+        args.points_in, args.step, args.stage, args.level, args.points_out, args.removed_out, study_grid=args.grid
+    )
+
+
+def _field(args: argparse.Namespace) -> None:
+    from ..pipeline import field_stage
+
+    field_stage(args.points, args.removed, args.grid, args.pair, args.field_out, args.stats_out)
+
+
+def _plot_stage(args: argparse.Namespace) -> None:
+    from ..plots import plot_stage
+
+    plot_stage(args.stage_dir, args.previous or None, args.out, args.plots)
+
+
+def _plot_pair(args: argparse.Namespace) -> None:
+    from ..plots import plot_pair
+
+    plot_pair([json.loads(open(p).read()) for p in args.stats], args.out)
+
+
+def _summary(args: argparse.Namespace) -> None:
+    from ..pipeline import write_summary
+
+    write_summary(args.stats, args.parquet, args.csv)
+
+
+def _report(args: argparse.Namespace) -> None:
+    from pathlib import Path
+
+    from ..report import write_report
+
+    results = Path(args.results)
+    stages = args.study["stages"]
+    pairs = {pair: [results / pair / "stages" / stage for stage in ids] for pair, ids in stages.items()}
+    summary = [json.loads((d / "stats.json").read_text()) for dirs in pairs.values() for d in dirs]
+    write_report(args.study["config"], pairs, summary, args.out)

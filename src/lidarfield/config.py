@@ -1,0 +1,265 @@
+"""The study config: loaded from YAML, validated once against the JSON schema, defaults filled.
+
+The schema (``workflow/schemas/config.schema.yaml``, shipped in the package as
+``lidarfield/schemas/config.schema.yaml``) is the one source of truth: the Snakemake workflow
+and ``lidarfield run`` both go through :func:`validate_config`. Relative paths in a config are
+relative to the folder the study is run from (the working directory), as in Snakemake.
+
+Validation also expands ``sequences`` into consecutive pairs and resolves every scan of the
+study into a :class:`ScanSpec`, so that the workflow knows all its jobs when it is parsed.
+"""
+
+from __future__ import annotations
+
+import copy
+import glob
+from dataclasses import dataclass, field
+from functools import cache
+from pathlib import Path
+
+import jsonschema
+import numpy as np
+import yaml
+
+from .errors import ConfigError, LidarfieldError
+from .poses import pose_from_xyzrpy
+from .stages import stage_ids
+
+SCHEMA_PATH = Path(__file__).parent / "schemas" / "config.schema.yaml"
+
+
+@dataclass(frozen=True)
+class ScanSpec:
+    """One scan of the study: simulated from a scene, or read from a file."""
+
+    id: str  # unique in the study; the scan's file is results/scans/{kind}/{id}.parquet
+    kind: str  # "simulated" | "recorded"
+    spec: dict  # JSON-able settings of the simulate or ingest job
+
+
+@dataclass(frozen=True)
+class PairSpec:
+    name: str
+    scan1: ScanSpec
+    scan2: ScanSpec
+    register: str | dict
+
+    def inputs(self) -> dict:
+        """What ``hash_0`` of the pair's stage ids covers."""
+        return {"scan1": self.scan1.spec, "scan2": self.scan2.spec, "register": self.register}
+
+
+@dataclass
+class Study:
+    config: dict  # validated, defaults filled in
+    base_dir: Path
+    pairs: dict[str, PairSpec]
+    grid: dict
+    hypotheses: list[dict]  # normalised stack, defaults filled in
+    plots: dict
+    scans: dict[str, ScanSpec] = field(default_factory=dict)
+
+    def stage_ids(self, pair: str) -> list[str]:
+        return stage_ids(self.pairs[pair].inputs(), self.hypotheses, self.base_dir)
+
+
+@cache
+def schema() -> dict:
+    return yaml.safe_load(SCHEMA_PATH.read_text())
+
+
+def _extend_with_defaults(validator_class):
+    """A validator that fills in schema defaults as it validates (jsonschema's FAQ recipe)."""
+    validate_properties = validator_class.VALIDATORS["properties"]
+
+    def set_defaults(validator, properties, instance, schema):
+        if isinstance(instance, dict):
+            for name, subschema in properties.items():
+                if "default" in subschema and name not in instance:
+                    instance[name] = copy.deepcopy(subschema["default"])
+        yield from validate_properties(validator, properties, instance, schema)
+
+    return jsonschema.validators.extend(validator_class, {"properties": set_defaults})
+
+
+_DefaultFillingValidator = _extend_with_defaults(jsonschema.Draft7Validator)
+
+
+def _error_location(error: jsonschema.ValidationError) -> str:
+    return ".".join(str(p) for p in error.absolute_path) or "(top level)"
+
+
+def _check_schema(config: dict, source: str) -> None:
+    validator = _DefaultFillingValidator(schema())
+    errors = sorted(validator.iter_errors(config), key=lambda e: list(e.absolute_path))
+    if not errors:
+        return
+    # oneOf failures bury the useful message: report the deepest one.
+    error = errors[0]
+    while error.context:
+        error = max(error.context, key=lambda e: len(e.absolute_path))
+    raise ConfigError(f"config key {_error_location(error)}: {error.message}", source)
+
+
+def load_config(path: str | Path, base_dir: str | Path | None = None) -> Study:
+    """Read a study YAML file and validate it (paths relative to ``base_dir``, default: cwd)."""
+    path = Path(path)
+    if not path.is_file():
+        raise ConfigError("config file not found", path)
+    try:
+        config = yaml.safe_load(path.read_text())
+    except yaml.YAMLError as e:
+        raise ConfigError(f"not valid YAML: {e}", path) from None
+    if not isinstance(config, dict):
+        raise ConfigError("a study config is a YAML mapping (pairs, grid, hypotheses, ...)", path)
+    return validate_config(config, base_dir, source=str(path))
+
+
+def validate_config(config: dict, base_dir: str | Path | None = None, source: str = "config") -> Study:
+    """Validate a config dict in place (defaults filled in) and resolve its pairs and stack."""
+    from .grid import grid_from_config
+    from .hypotheses import validate_stack
+
+    base_dir = Path.cwd() if base_dir is None else Path(base_dir)
+    _check_schema(config, source)
+    try:
+        grid_from_config(config["grid"])
+        hypotheses = validate_stack(config["hypotheses"], base_dir, study_grid=config["grid"])
+        pairs: dict[str, PairSpec] = {}
+        for name, entry in config["pairs"].items():
+            pairs[name] = _pair(name, entry, base_dir)
+        for name, entry in config["sequences"].items():
+            for pair in _sequence_pairs(name, entry, base_dir):
+                if pair.name in pairs:
+                    raise ConfigError(f"sequences.{name}: pair name {pair.name!r} is also a pair of 'pairs'")
+                pairs[pair.name] = pair
+    except LidarfieldError as e:
+        raise type(e)(str(e) if e.path else f"{source}: {e}") from None
+    if not pairs:
+        raise ConfigError("the study has no pairs: add entries under 'pairs' or 'sequences'", source)
+    scans = {}
+    for pair in pairs.values():
+        scans[pair.scan1.id] = pair.scan1
+        scans[pair.scan2.id] = pair.scan2
+    return Study(config, base_dir, pairs, config["grid"], hypotheses, config["plots"], scans)
+
+
+# --- pairs -------------------------------------------------------------------------------------
+
+
+def _existing_file(path: str, key: str, base_dir: Path) -> str:
+    """A scan reference ``file`` or ``file#k`` whose file exists."""
+    file = path.split("#", 1)[0]
+    if not (base_dir / file).is_file():
+        raise ConfigError(f"{key}: file not found: {base_dir / file}")
+    return path
+
+
+def _register(setting, key: str, base_dir: Path):
+    if isinstance(setting, dict) and "transform" in setting:
+        _existing_file(setting["transform"], f"{key}.register.transform", base_dir)
+    return setting
+
+
+def _pair(name: str, entry: dict, base_dir: Path) -> PairSpec:
+    key = f"pairs.{name}"
+    if "simulate" in entry:
+        sim = entry["simulate"]
+        scans = []
+        for i in (0, 1):
+            spec = {
+                "scene": sim["scene"],
+                "sensor": sim["sensor"],
+                "pose": pose_from_xyzrpy(sim[f"pose{i + 1}"]).round(12).tolist(),
+                "time_s": float(sim["time_s"][i]),
+                "velocity_mps": sim["velocity_mps"][i] if "velocity_mps" in sim else [0.0, 0.0, 0.0],
+                "angular_velocity_rps": (
+                    sim["angular_velocity_rps"][i] if "angular_velocity_rps" in sim else [0.0, 0.0, 0.0]
+                ),
+                **sim["options"],
+            }
+            scans.append(ScanSpec(f"{name}-{i + 1}", "simulated", spec))
+        return PairSpec(name, scans[0], scans[1], entry["register"])
+    scans = []
+    for i in (1, 2):
+        path = _existing_file(entry[f"scan{i}"], f"{key}.scan{i}", base_dir)
+        spec = {"path": path, "format": entry.get("format"), "sensor": entry.get("sensor"), "pose": None}
+        scans.append(ScanSpec(f"{name}-{i}", "recorded", spec))
+    return PairSpec(name, scans[0], scans[1], _register(entry.get("register", "identity"), key, base_dir))
+
+
+def _sequence_pairs(name: str, entry: dict, base_dir: Path) -> list[PairSpec]:
+    key = f"sequences.{name}"
+    scans = _simulated_sequence(name, entry) if "simulate" in entry else _recorded_sequence(name, entry, base_dir)
+    register = _register(entry["register"], key, base_dir)
+    stride = entry["stride"]
+    return [
+        PairSpec(f"{name}-{i:03d}", scans[j], scans[j + stride], register)
+        for i, j in enumerate(range(0, len(scans) - stride, stride))
+    ]
+
+
+def _simulated_sequence(name: str, entry: dict) -> list[ScanSpec]:
+    from .trajectory import arc_trajectory
+
+    sim = entry["simulate"]
+    traj = sim["trajectory"]
+    steps = arc_trajectory(
+        center_xy=traj["center_xy"],
+        radius_m=traj["radius_m"],
+        start_angle_rad=traj["start_angle_rad"],
+        speed_mps=traj["speed_mps"],
+        rate_hz=traj["rate_hz"],
+        frames=traj["frames"],
+        height_m=traj["height_m"],
+    )
+    scans = []
+    for k, (pose, velocity, angular_velocity) in enumerate(steps):
+        spec = {
+            "scene": sim["scene"],
+            "sensor": sim["sensor"],
+            "pose": np.asarray(pose, dtype=float).round(12).tolist(),
+            "time_s": k / traj["rate_hz"],
+            "velocity_mps": np.asarray(velocity, dtype=float).round(12).tolist(),
+            "angular_velocity_rps": np.asarray(angular_velocity, dtype=float).round(12).tolist(),
+            **sim["options"],
+        }
+        scans.append(ScanSpec(f"{name}-s{k:03d}", "simulated", spec))
+    return scans
+
+
+def _recorded_sequence(name: str, entry: dict, base_dir: Path) -> list[ScanSpec]:
+    from .io import scan_count
+    from .poses import read_kitti_poses
+
+    key = f"sequences.{name}.scans"
+    scans = entry["scans"]
+    if isinstance(scans, list):
+        files = [_existing_file(s, key, base_dir) for s in scans]
+    elif any(ch in scans for ch in "*?["):
+        files = sorted(str(Path(p).relative_to(base_dir)) for p in glob.glob(str(base_dir / scans)))
+        if not files:
+            raise ConfigError(f"{key}: no file matches {scans!r} (relative to {base_dir})")
+    else:
+        _existing_file(scans, key, base_dir)
+        files = [f"{scans}#{k}" for k in range(scan_count(base_dir / scans))]
+    last = len(files) - 1 if entry["last"] is None else entry["last"]
+    if not entry["first"] <= last < len(files):
+        raise ConfigError(f"sequences.{name}: first/last ({entry['first']}, {last}) outside the {len(files)} scans")
+    poses = None
+    if "poses" in entry:
+        _existing_file(entry["poses"], f"sequences.{name}.poses", base_dir)
+        poses = read_kitti_poses(base_dir / entry["poses"], expected=len(files))
+    return [
+        ScanSpec(
+            f"{name}-s{k:03d}",
+            "recorded",
+            {
+                "path": files[k],
+                "format": entry.get("format"),
+                "sensor": entry.get("sensor"),
+                "pose": None if poses is None else poses[k].tolist(),
+            },
+        )
+        for k in range(entry["first"], last + 1)
+    ]

@@ -1,0 +1,105 @@
+# Config validation and the input/params functions of every rule.
+import re
+from pathlib import Path
+
+from snakemake.utils import min_version
+
+import lidarfield.config
+from lidarfield.stages import canonical_json
+
+min_version("9.0")
+
+
+# The default study, unless the user names one with --configfile (the directive would merge
+# the default's pairs into theirs).
+if not config:
+
+    configfile: "config/config.yaml"
+
+
+# Validated once against workflow/schemas/config.schema.yaml, with defaults filled in: the
+# same function validates the config of `lidarfield run`. Relative paths are relative to the
+# working directory.
+STUDY = lidarfield.config.validate_config(config, base_dir=Path.cwd())
+RESULTS = config["results"]
+PAIRS = sorted(STUDY.pairs)
+STAGES = {pair: STUDY.stage_ids(pair) for pair in PAIRS}
+
+
+wildcard_constraints:
+    pair="|".join(re.escape(pair) for pair in PAIRS),
+    stage=r"\d\d-[A-Za-z0-9_]+-[0-9a-f]{8}",
+    scan=r"[A-Za-z0-9][A-Za-z0-9_.-]*",
+
+
+def scan_path(scan):
+    return f"{RESULTS}/scans/{scan.kind}/{scan.id}.parquet"
+
+
+def scan_spec(wildcards):
+    return canonical_json(STUDY.scans[wildcards.scan].spec)
+
+
+def pair_scans(wildcards):
+    pair = STUDY.pairs[wildcards.pair]
+    return {"scan1": scan_path(pair.scan1), "scan2": scan_path(pair.scan2)}
+
+
+def registration(wildcards):
+    return canonical_json(STUDY.pairs[wildcards.pair].register)
+
+
+def stage_level(wildcards):
+    return STAGES[wildcards.pair].index(wildcards.stage)
+
+
+def stage_dir(pair, stage):
+    return f"{RESULTS}/{pair}/stages/{stage}"
+
+
+def this_stage_dir(wildcards):
+    return stage_dir(wildcards.pair, wildcards.stage)
+
+
+def previous_stage_points(wildcards):
+    """Stage 0 starts from the registered pair; stage k from stage k-1's survivors."""
+    level = stage_level(wildcards)
+    if level == 0:
+        return f"{RESULTS}/{wildcards.pair}/registered.parquet"
+    return f"{stage_dir(wildcards.pair, STAGES[wildcards.pair][level - 1])}/points.parquet"
+
+
+def stage_step(wildcards):
+    level = stage_level(wildcards)
+    return canonical_json(STUDY.hypotheses[level - 1] if level else None)
+
+
+def plugin_source(wildcards):
+    """A plugin hypothesis's file is an input of its stage: editing it reruns the stage."""
+    level = stage_level(wildcards)
+    step = STUDY.hypotheses[level - 1] if level else {}
+    return [step["plugin"]["file"]] if "plugin" in step else []
+
+
+def previous_stage_dir(wildcards):
+    level = stage_level(wildcards)
+    return stage_dir(wildcards.pair, STAGES[wildcards.pair][level - 1]) if level else ""
+
+
+def previous_stage_field(wildcards):
+    level = stage_level(wildcards)
+    if level == 0:
+        return []
+    return f"{stage_dir(wildcards.pair, STAGES[wildcards.pair][level - 1])}/field.parquet"
+
+
+def pair_stats(wildcards):
+    return [f"{stage_dir(wildcards.pair, stage)}/stats.json" for stage in STAGES[wildcards.pair]]
+
+
+def all_stage_files(name):
+    return [f"{stage_dir(pair, stage)}/{name}" for pair in PAIRS for stage in STAGES[pair]]
+
+
+GRID = canonical_json(STUDY.grid)
+PLOTS = canonical_json(STUDY.plots)

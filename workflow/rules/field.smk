@@ -1,0 +1,22 @@
+# Voxelize both clouds of a stage on the study's grid and diff them: the discrepancy field and
+# its summary row. Only the grid settings are params, so a grid edit reruns only this and after.
+
+
+rule field:
+    input:
+        points=f"{RESULTS}/{{pair}}/stages/{{stage}}/points.parquet",
+        removed=f"{RESULTS}/{{pair}}/stages/{{stage}}/removed.parquet",
+    output:
+        field=f"{RESULTS}/{{pair}}/stages/{{stage}}/field.parquet",
+        stats=f"{RESULTS}/{{pair}}/stages/{{stage}}/stats.json",
+    params:
+        grid=GRID,
+    log:
+        f"{RESULTS}/logs/field/{{pair}}/{{stage}}.log",
+    threads: 1
+    resources:
+        mem_mb=4000,
+    shell:
+        "lidarfield job field --points {input.points:q} --removed {input.removed:q}"
+        " --grid {params.grid:q} --pair {wildcards.pair} --field-out {output.field:q}"
+        " --stats-out {output.stats:q} > {log:q} 2>&1"

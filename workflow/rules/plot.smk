@@ -1,0 +1,38 @@
+# The figures of each stage (field, removed points, largest voxels, before/after, 3-D view)
+# and the stage-by-stage figures of each pair.
+
+
+rule plot_stage:
+    input:
+        field=f"{RESULTS}/{{pair}}/stages/{{stage}}/field.parquet",
+        points=f"{RESULTS}/{{pair}}/stages/{{stage}}/points.parquet",
+        removed=f"{RESULTS}/{{pair}}/stages/{{stage}}/removed.parquet",
+        previous=previous_stage_field,
+    output:
+        directory(f"{RESULTS}/{{pair}}/stages/{{stage}}/figures"),
+    params:
+        stage=this_stage_dir,
+        previous=previous_stage_dir,
+        plots=PLOTS,
+    log:
+        f"{RESULTS}/logs/plot_stage/{{pair}}/{{stage}}.log",
+    threads: 1
+    resources:
+        mem_mb=3000,
+    shell:
+        "lidarfield job plot-stage --stage-dir {params.stage:q}"
+        " --previous {params.previous:q} --plots {params.plots:q} --out {output:q} > {log:q} 2>&1"
+
+
+rule plot_pair:
+    input:
+        pair_stats,
+    output:
+        directory(f"{RESULTS}/{{pair}}/figures"),
+    log:
+        f"{RESULTS}/logs/plot_pair/{{pair}}.log",
+    threads: 1
+    resources:
+        mem_mb=2000,
+    shell:
+        "lidarfield job plot-pair --stats {input:q} --out {output:q} > {log:q} 2>&1"

@@ -1,0 +1,18 @@
+# Scan 2 expressed in scan 1's frame, keeping the pose of sensor 2 (mitigations need both origins).
+
+
+rule register:
+    input:
+        unpack(pair_scans),
+    output:
+        f"{RESULTS}/{{pair}}/registered.parquet",
+    params:
+        settings=registration,
+    log:
+        f"{RESULTS}/logs/register/{{pair}}.log",
+    threads: 1
+    resources:
+        mem_mb=4000,
+    shell:
+        "lidarfield job register --scan1 {input.scan1:q} --scan2 {input.scan2:q}"
+        " --settings {params.settings:q} --out {output:q} > {log:q} 2>&1"

@@ -1,0 +1,36 @@
+# The study-wide summary table and the self-contained HTML report.
+
+
+rule summary:
+    input:
+        all_stage_files("stats.json"),
+    output:
+        parquet=f"{RESULTS}/summary.parquet",
+        csv=f"{RESULTS}/summary.csv",
+    log:
+        f"{RESULTS}/logs/summary.log",
+    threads: 1
+    resources:
+        mem_mb=2000,
+    shell:
+        "lidarfield job summary --stats {input:q} --parquet {output.parquet:q}"
+        " --csv {output.csv:q} > {log:q} 2>&1"
+
+
+rule report:
+    input:
+        summary=f"{RESULTS}/summary.parquet",
+        stage_figures=all_stage_files("figures"),
+        pair_figures=expand(f"{RESULTS}/{{pair}}/figures", pair=PAIRS),
+    output:
+        f"{RESULTS}/report.html",
+    params:
+        study=canonical_json({"config": config, "stages": STAGES}),
+        results=RESULTS,
+    log:
+        f"{RESULTS}/logs/report.log",
+    threads: 1
+    resources:
+        mem_mb=4000,
+    shell:
+        "lidarfield job report --study {params.study:q} --results {params.results:q} --out {output:q} > {log:q} 2>&1"

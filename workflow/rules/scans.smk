@@ -1,0 +1,29 @@
+# Stage 1 of the pipeline: every scan of the study as a scan Parquet (points in its sensor frame).
+
+
+rule simulate:
+    output:
+        f"{RESULTS}/scans/simulated/{{scan}}.parquet",
+    params:
+        spec=scan_spec,
+    log:
+        f"{RESULTS}/logs/simulate/{{scan}}.log",
+    threads: 1
+    resources:
+        mem_mb=2000,
+    shell:
+        "lidarfield job simulate --spec {params.spec:q} --out {output:q} > {log:q} 2>&1"
+
+
+rule ingest:
+    output:
+        f"{RESULTS}/scans/recorded/{{scan}}.parquet",
+    params:
+        spec=scan_spec,
+    log:
+        f"{RESULTS}/logs/ingest/{{scan}}.log",
+    threads: 1
+    resources:
+        mem_mb=2000,
+    shell:
+        "lidarfield job ingest --spec {params.spec:q} --out {output:q} > {log:q} 2>&1"

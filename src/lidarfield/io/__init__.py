@@ -116,7 +116,7 @@ def read_scan(
     model = sensor_model(sensor)
     count = fmt.function("count")(path) if fmt.container else 1
     if index is None and count > 1:
-        raise InputError(f"holds {count} scans: select one with {path}#k, k = 0..{count - 1}", path)
+        raise InputError(f"holds {count} scans: select one by appending #k to the path, k = 0..{count - 1}", path)
     index = 0 if index is None else index
     if index >= count:
         raise InputError(f"scan #{index} requested but the file holds {count} scan(s) (#0..#{count - 1})", path)

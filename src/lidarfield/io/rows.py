@@ -46,3 +46,9 @@ def ring_major_rings(n_rows: int, sensor: SensorModel | None) -> np.ndarray | No
     if sensor is None or n_rows == 0 or n_rows % sensor.channels:
         return None
     return np.repeat(np.arange(sensor.channels, dtype=np.uint16), n_rows // sensor.channels)
+
+
+def file_key(path: Path) -> tuple[str, int, int]:
+    """(resolved path, size, modification time): a cache key that changes when the file does."""
+    stat = path.stat()
+    return str(path.resolve()), stat.st_size, stat.st_mtime_ns

@@ -1,6 +1,7 @@
 # Stage k applies hypothesis k of the stack to stage k-1's survivors (stage 0: no mitigation).
 # Stage ids are content addresses, so an edited or appended hypothesis gets new folders and
-# earlier stages are reused.
+# earlier stages are reused. A step that uses the study's grid (shadow without a grid of its
+# own) carries it in its validated spec, so a grid edit changes that stage's id.
 
 
 rule mitigate:
@@ -13,7 +14,6 @@ rule mitigate:
     params:
         step=stage_step,
         level=stage_level,
-        grid=GRID,
     log:
         f"{RESULTS}/logs/mitigate/{{pair}}/{{stage}}.log",
     threads: 1
@@ -21,5 +21,5 @@ rule mitigate:
         mem_mb=4000,
     shell:
         "lidarfield job mitigate --points-in {input.points:q} --step {params.step:q}"
-        " --stage {wildcards.stage} --level {params.level} --grid {params.grid:q}"
+        " --stage {wildcards.stage} --level {params.level}"
         " --points-out {output.points:q} --removed-out {output.removed:q} > {log:q} 2>&1"

@@ -36,7 +36,6 @@ def add_parser(subparsers) -> None:
     p.add_argument("--step", type=_json, required=True)
     p.add_argument("--stage", required=True)
     p.add_argument("--level", type=int, required=True)
-    p.add_argument("--grid", type=_json, required=True)
     p.add_argument("--points-out", required=True)
     p.add_argument("--removed-out", required=True)
     p.set_defaults(func=_mitigate)
@@ -90,9 +89,7 @@ def _register(args: argparse.Namespace) -> None:
 def _mitigate(args: argparse.Namespace) -> None:
     from ..pipeline import mitigate_stage
 
-    mitigate_stage(
-        args.points_in, args.step, args.stage, args.level, args.points_out, args.removed_out, study_grid=args.grid
-    )
+    mitigate_stage(args.points_in, args.step, args.stage, args.level, args.points_out, args.removed_out)
 
 
 def _field(args: argparse.Namespace) -> None:

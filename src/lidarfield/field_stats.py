@@ -1,0 +1,122 @@
+"""Summary statistics of a discrepancy field: sizes, its rigid part, and its directional order.
+
+Everything is computed over the *valid* voxels and returned as plain Python floats (NaN where a
+figure is undefined, e.g. no valid voxel; ``summary_json_safe`` turns NaN into null for JSON).
+
+- The rigid part is the best rigid transform (rotation R, translation t, no scale) mapping the
+  voxel means of cloud 2 onto those of cloud 1, weighted by ``min(n1, n2)`` (weighted
+  Kabsch/Umeyama). ``rigid_translation_m`` is t and ``rigid_rotation_deg`` the angle of R: the
+  correction that would move scan 2 onto scan 1 (a field of +d everywhere gives t = -d).
+  ``rigid_energy_share`` = 1 - sum w |R m2 + t - m1|^2 / sum w |m2 - m1|^2: near 1 when a
+  registration error explains the field, low for a scale error or local disagreements.
+- ``mean_resultant_length`` = |sum w u/|u|| / sum w: 1 when all vectors point the same way,
+  about 1/sqrt(voxels) for random directions.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+STATISTIC_KEYS = (
+    "voxels",
+    "voxels_valid",
+    "max_magnitude",
+    "mean_magnitude",
+    "rms_magnitude",
+    "p95_magnitude",
+    "paper_max_metric",
+    "rigid_translation_m",
+    "rigid_rotation_deg",
+    "rigid_energy_share",
+    "mean_resultant_length",
+)
+
+
+def field_statistics(columns: dict[str, np.ndarray]) -> dict:
+    """The summary figures of a field (the columns of ``field.discrepancy_field``)."""
+    valid = np.asarray(columns["valid"], dtype=bool)
+    uvw = np.column_stack([columns[c][valid] for c in ("u", "v", "w")]).astype(np.float64)
+    magnitude = np.asarray(columns["magnitude"], dtype=np.float64)[valid]
+    mean1 = np.column_stack([columns[c][valid] for c in ("x1", "y1", "z1")]).astype(np.float64)
+    mean2 = np.column_stack([columns[c][valid] for c in ("x2", "y2", "z2")]).astype(np.float64)
+    weight = np.minimum(columns["n1"][valid], columns["n2"][valid]).astype(np.float64)
+
+    stats: dict = {"voxels": int(len(valid)), "voxels_valid": int(valid.sum())}
+    if magnitude.size:
+        stats["max_magnitude"] = float(magnitude.max())
+        stats["mean_magnitude"] = float(magnitude.mean())
+        stats["rms_magnitude"] = float(np.sqrt(np.mean(magnitude**2)))
+        stats["p95_magnitude"] = float(np.percentile(magnitude, 95))
+        stats["paper_max_metric"] = float(np.linalg.norm(np.abs(uvw).max(axis=0)))
+    else:
+        for key in ("max_magnitude", "mean_magnitude", "rms_magnitude", "p95_magnitude", "paper_max_metric"):
+            stats[key] = math.nan
+    rotation, translation = weighted_rigid_transform(mean2, mean1, weight)
+    stats["rigid_translation_m"] = [float(c) for c in translation]
+    stats["rigid_rotation_deg"] = rotation_angle_deg(rotation)
+    stats["rigid_energy_share"] = rigid_energy_share(mean2, mean1, weight, rotation, translation)
+    stats["mean_resultant_length"] = mean_resultant_length(uvw, weight)
+    return stats
+
+
+def weighted_rigid_transform(source: np.ndarray, target: np.ndarray, weight: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """R (3x3) and t (3,) minimising sum w |R source + t - target|^2 (weighted Kabsch).
+
+    NaN-filled when fewer than 3 points carry weight (the rotation is then undetermined).
+    """
+    if np.count_nonzero(weight > 0) < 3:
+        return np.full((3, 3), np.nan), np.full(3, np.nan)
+    w = weight / weight.sum()
+    centroid_source = w @ source
+    centroid_target = w @ target
+    covariance = (source - centroid_source).T @ ((target - centroid_target) * w[:, None])
+    u, _, vt = np.linalg.svd(covariance)
+    # Reflection guard: force det(R) = +1.
+    d = np.sign(np.linalg.det(vt.T @ u.T)) or 1.0
+    rotation = vt.T @ np.diag([1.0, 1.0, d]) @ u.T
+    return rotation, centroid_target - rotation @ centroid_source
+
+
+def rotation_angle_deg(rotation: np.ndarray) -> float:
+    """The angle of a rotation matrix, degrees in [0, 180] (NaN for a NaN matrix).
+
+    atan2(sin, cos) rather than arccos(cos): arccos loses all precision near zero angle.
+    """
+    cosine = (np.trace(rotation) - 1.0) / 2.0
+    skew = rotation - rotation.T
+    sine = np.linalg.norm([skew[2, 1], skew[0, 2], skew[1, 0]]) / 2.0
+    return float(np.degrees(np.arctan2(sine, cosine))) if np.isfinite(cosine) else math.nan
+
+
+def rigid_energy_share(
+    source: np.ndarray, target: np.ndarray, weight: np.ndarray, rotation: np.ndarray, translation: np.ndarray
+) -> float:
+    """1 - weighted residual energy after the rigid transform / weighted field energy."""
+    energy = float(weight @ np.sum((source - target) ** 2, axis=1))
+    if not energy > 0 or not np.all(np.isfinite(rotation)):
+        return math.nan
+    residual = source @ rotation.T + translation - target
+    return float(1.0 - (weight @ np.sum(residual**2, axis=1)) / energy)
+
+
+def mean_resultant_length(vectors: np.ndarray, weight: np.ndarray) -> float:
+    """Weighted length of the mean unit vector (zero vectors ignored); NaN without any."""
+    length = np.linalg.norm(vectors, axis=1)
+    keep = (length > 0) & (weight > 0)
+    if not keep.any():
+        return math.nan
+    units = vectors[keep] / length[keep, None]
+    return float(np.linalg.norm(weight[keep] @ units) / weight[keep].sum())
+
+
+def summary_json_safe(value):
+    """``value`` with every NaN/inf float replaced by None (strict JSON has no NaN)."""
+    if isinstance(value, dict):
+        return {k: summary_json_safe(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [summary_json_safe(v) for v in value]
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value

@@ -64,8 +64,9 @@ def _uniform(first_deg: float, step_deg: float, n: int) -> tuple[float, ...]:
     return tuple(round(first_deg + i * step_deg, 6) for i in range(n))
 
 
-# Elevation tables from the manufacturers' manuals.
-_HDL32_ELEVATION = _uniform(-30.67, 4.0 / 3.0, 32)
+# Elevation tables from the manufacturers' manuals. The HDL-32E and the HDL-64E upper block are
+# spaced in exact thirds of a degree (-30.67 = -92/3, +10.67 = 32/3, -8.33 = -25/3).
+_HDL32_ELEVATION = _uniform(-92.0 / 3.0, 4.0 / 3.0, 32)
 PRESETS: dict[str, SensorModel] = {
     # The source paper's simulated sensor: 80 channels 0.4 deg apart from -22 deg upward,
     # whole scan at one instant.
@@ -75,11 +76,12 @@ PRESETS: dict[str, SensorModel] = {
     # Velodyne HDL-32E: 32 channels from -30.67 to +10.67 deg, 1.33 deg apart, 100 m.
     "hdl32": SensorModel("hdl32", _HDL32_ELEVATION, 0.16, 1.0, 100.0, 10.0),
     # Velodyne HDL-64E: upper block +2..-8.33 deg (1/3 deg steps), lower block -8.83..-24.33
-    # deg (1/2 deg steps), 120 m.
+    # deg (1/2 deg steps), 120 m. Azimuth: ~20,800 firings per laser per second, so 0.1728 deg
+    # at 10 Hz (the datasheet's 0.09 deg holds at 5 Hz).
     "hdl64": SensorModel(
         "hdl64",
-        _uniform(-24.33, 0.5, 32) + _uniform(-8.33, 1.0 / 3.0, 32),
-        0.09,
+        _uniform(-24.33, 0.5, 32) + _uniform(-25.0 / 3.0, 1.0 / 3.0, 32),
+        0.1728,
         0.9,
         120.0,
         10.0,

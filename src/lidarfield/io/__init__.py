@@ -102,9 +102,7 @@ def scan_count(reference: str | Path, format: str | None = None) -> int:
     return fmt.function("count")(path) if fmt.container else 1
 
 
-def read_scan(
-    reference: str | Path, format: str | None = None, sensor: str | dict | SensorModel | None = None
-) -> Scan:
+def read_scan(reference: str | Path, format: str | None = None, sensor: str | dict | SensorModel | None = None) -> Scan:
     """Read one scan from ``path`` or ``path#k`` (scan k of a container file, 0-based).
 
     ``sensor`` (a preset name, a YAML file, a dict or a model) is attached to the scan and

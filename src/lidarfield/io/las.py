@@ -69,7 +69,9 @@ def write_las(scan: Scan, path: Path) -> None:
 
 def _fits_uint16(values: np.ndarray) -> bool:
     values = np.asarray(values)
-    return bool(values.size == 0 or (np.all(values == np.round(values)) and values.min() >= 0 and values.max() <= 65535))
+    return bool(
+        values.size == 0 or (np.all(values == np.round(values)) and values.min() >= 0 and values.max() <= 65535)
+    )
 
 
 def _las_type(dtype: np.dtype, name: str) -> np.dtype:

@@ -49,7 +49,7 @@ def _load(name: str, size: int, mtime_ns: int) -> list[np.ndarray]:
         variables = {"pc": variables["pc"]}
     if len(variables) != 1:
         raise InputError(f"expected one variable (a cell array of scans), found {sorted(variables)}", path)
-    (name, value), = variables.items()
+    ((name, value),) = variables.items()
     cells = list(value.ravel(order="F")) if value.dtype == object else [value]
     for k, cell in enumerate(cells):
         if not (isinstance(cell, np.ndarray) and cell.ndim == 3 and cell.shape[2] == 3 and cell.dtype.kind in "fiu"):

@@ -81,7 +81,9 @@ def _open(path: Path):
             return sdk.open_source(str(path), sensor_idx=0, index=True)
     except Exception as e:  # the SDK raises its own exception types for unreadable recordings
         detail = " ".join(str(e).split())
-        raise InputError(f"ouster-sdk cannot open the recording (is its .json metadata beside it?): {detail}", path) from None
+        raise InputError(
+            f"ouster-sdk cannot open the recording (is its .json metadata beside it?): {detail}", path
+        ) from None
 
 
 @lru_cache(maxsize=32)

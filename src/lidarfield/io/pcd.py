@@ -184,7 +184,9 @@ def _compressed_rows(body: bytes, dtype: np.dtype, points: int, path: Path) -> n
     if len(body) < 8 + compressed_size:
         raise InputError(f"truncated binary_compressed PCD: {len(body) - 8} of {compressed_size} bytes", path)
     if size != points * dtype.itemsize:
-        raise InputError(f"binary_compressed PCD holds {size} bytes, POINTS x row size is {points * dtype.itemsize}", path)
+        raise InputError(
+            f"binary_compressed PCD holds {size} bytes, POINTS x row size is {points * dtype.itemsize}", path
+        )
     try:
         plain = lzf_decompress(body[8 : 8 + compressed_size], size)
     except (IndexError, ValueError) as e:

@@ -27,7 +27,7 @@ _TYPES = {
     "int": "i4", "int32": "i4", "uint": "u4", "uint32": "u4",
     "float": "f4", "float32": "f4", "double": "f8", "float64": "f8",
 }  # fmt: skip
-_NAMES = {"i1": "char", "u1": "uchar", "i2": "short", "u2": "ushort", "i4": "int", "u4": "uint", "f4": "float", "f8": "double"}
+_NAMES = {code: name for name, code in _TYPES.items() if not name[-1].isdigit()}  # char, uchar, ... double
 _ENDIAN = {"binary_little_endian": "<", "binary_big_endian": ">", "ascii": "<"}
 
 
@@ -57,7 +57,9 @@ def read_ply(path: Path, index: int = 0, sensor: SensorModel | None = None) -> S
         start = offset + sum(e.count * _fixed_size(e, encoding) for e in elements[:position])
         need = vertex.count * dtype.itemsize
         if len(raw) - start < need:
-            raise InputError(f"truncated PLY: {len(raw) - start} bytes of vertex data, {vertex.count} vertices need {need}", path)
+            raise InputError(
+                f"truncated PLY: {len(raw) - start} bytes of vertex data, {vertex.count} vertices need {need}", path
+            )
         rows = np.frombuffer(raw, dtype=dtype, count=vertex.count, offset=start)
     names = [name for name, _ in vertex.properties]
     missing = [a for a in "xyz" if a not in names]
@@ -132,7 +134,9 @@ def _ascii_rows(body: bytes, skip: int, count: int, dtype: np.dtype, path: Path)
     except (pd.errors.ParserError, pd.errors.EmptyDataError, ValueError) as e:
         raise InputError(f"bad ASCII PLY data ({str(e).strip() or 'no rows'})", path) from None
     if table.shape != (count, len(dtype.names)):
-        raise InputError(f"ASCII PLY vertex data has shape {table.shape}, header says {count} x {len(dtype.names)}", path)
+        raise InputError(
+            f"ASCII PLY vertex data has shape {table.shape}, header says {count} x {len(dtype.names)}", path
+        )
     rows = np.empty(count, dtype=dtype)
     for column, name in enumerate(dtype.names):
         rows[name] = table[:, column]

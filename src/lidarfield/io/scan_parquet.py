@@ -38,7 +38,12 @@ def read_parquet(path: Path, index: int = 0, sensor: SensorModel | None = None) 
     except (LidarfieldError, ValueError, TypeError) as e:
         raise InputError(f"bad lidarfield metadata ({e})", path) from None
     scan = scan_from_rows(
-        xyz, columns, path, sensor=sensor or stored_sensor, pose=pose, dropped_before=int(meta.get("dropped_invalid", 0))
+        xyz,
+        columns,
+        path,
+        sensor=sensor or stored_sensor,
+        pose=pose,
+        dropped_before=int(meta.get("dropped_invalid", 0)),
     )
     if meta.get("source"):
         scan.source = meta["source"]

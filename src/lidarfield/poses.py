@@ -1,0 +1,177 @@
+"""Rigid poses as 4x4 homogeneous matrices: files, KITTI pose lines, x-y-z-roll-pitch-yaw.
+
+Conventions: ``T_a_b`` maps points from frame b to frame a (``x_a = T_a_b @ x_b``), so a
+world-from-sensor pose is ``T_w_s``. Angles are radians with R = Rz(yaw) Ry(pitch) Rx(roll).
+"""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import numpy as np
+
+from .errors import InputError
+from .io.atomic import write_text
+
+# A rotation block farther than this from orthonormal is not a rigid pose (KITTI files
+# print 9 to 19 significant digits, so real poses are orthonormal to ~1e-6).
+_ORTHONORMAL_TOLERANCE = 1e-3
+_SEPARATORS = re.compile(r"[\s,;]+")
+
+
+# --- files -----------------------------------------------------------------------------------
+def read_pose(path: str | Path, line: int = 0) -> np.ndarray:
+    """A 4x4 pose from a text file: a 4x4 matrix (4 rows of 4, or one row of 16), a 3x4 matrix
+    (3 rows of 4), or KITTI pose lines of 12 numbers, of which ``line`` (0-based) is taken."""
+    path = Path(path)
+    rows = _numeric_rows(path)
+    widths = {len(r) for r in rows}
+    if widths == {12}:
+        if not 0 <= line < len(rows):
+            raise InputError(f"pose line {line} requested but the file holds {len(rows)} KITTI pose line(s)", path)
+        return _rigid(_from_numbers(rows[line]), path)
+    if line != 0:
+        raise InputError(f"pose line {line} requested but the file holds one matrix, not KITTI pose lines", path)
+    if widths == {4} and len(rows) in (3, 4) or widths == {16} and len(rows) == 1:
+        return _rigid(_from_numbers(np.concatenate(rows)), path)
+    shape = " + ".join(str(len(r)) for r in rows) if len(rows) <= 6 else f"{len(rows)} rows of {sorted(widths)}"
+    raise InputError(
+        f"not a pose: found {len(rows)} row(s) of numbers ({shape}); expected a 4x4 or 3x4 matrix or "
+        "KITTI lines of 12 numbers",
+        path,
+    )
+
+
+def read_kitti_poses(path: str | Path, expected: int | None = None) -> np.ndarray:
+    """All poses of a KITTI pose file, (M, 4, 4); one 12-number line per scan.
+
+    With ``expected`` (the number of scans), a file with fewer lines is an error.
+    """
+    path = Path(path)
+    rows = _numeric_rows(path)
+    bad = [k for k, r in enumerate(rows) if len(r) != 12]
+    if bad:
+        raise InputError(f"KITTI pose line {bad[0] + 1} has {len(rows[bad[0]])} numbers, expected 12", path)
+    if expected is not None and len(rows) < expected:
+        raise InputError(f"holds {len(rows)} pose line(s) for {expected} scans: every scan needs one", path)
+    return np.stack([_rigid(_from_numbers(r), path) for r in rows])
+
+
+def write_kitti_poses(path: str | Path, poses: np.ndarray) -> None:
+    """One KITTI line (top 3x4, row-major) per pose, written whole."""
+    lines = [" ".join(f"{v:.17g}" for v in np.asarray(T)[:3].ravel()) for T in poses]
+    write_text(path, "\n".join(lines) + "\n")
+
+
+def _numeric_rows(path: Path) -> list[np.ndarray]:
+    if not path.is_file():
+        raise InputError("pose file not found", path)
+    rows = []
+    try:
+        text = path.read_text()
+    except UnicodeDecodeError:
+        raise InputError("not a text pose file", path) from None
+    for number, line in enumerate(text.splitlines(), start=1):
+        line = line.split("#", 1)[0].strip()
+        if not line:
+            continue
+        try:
+            rows.append(np.array([float(v) for v in _SEPARATORS.split(line) if v], dtype=np.float64))
+        except ValueError:
+            raise InputError(f"line {number} is not numeric: {line[:60]!r}", path) from None
+    if not rows:
+        raise InputError("empty pose file", path)
+    return rows
+
+
+# --- conversions -------------------------------------------------------------------------------
+def pose_from_xyzrpy(values) -> np.ndarray:
+    """4x4 pose from (x, y, z, roll, pitch, yaw): metres and radians, R = Rz(yaw) Ry(pitch) Rx(roll)."""
+    x, y, z, roll, pitch, yaw = np.asarray(values, dtype=np.float64).reshape(6)
+    cr, sr, cp, sp, cy, sy = np.cos(roll), np.sin(roll), np.cos(pitch), np.sin(pitch), np.cos(yaw), np.sin(yaw)
+    T = np.eye(4)
+    T[:3, :3] = [
+        [cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
+        [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
+        [-sp, cp * sr, cp * cr],
+    ]
+    T[:3, 3] = x, y, z
+    return T
+
+
+def xyzrpy_from_pose(T: np.ndarray) -> np.ndarray:
+    """(x, y, z, roll, pitch, yaw) of a pose; pitch in [-pi/2, pi/2] (the inverse of pose_from_xyzrpy)."""
+    T = np.asarray(T, dtype=np.float64)
+    R = T[:3, :3]
+    pitch = np.arctan2(-R[2, 0], np.hypot(R[0, 0], R[1, 0]))
+    roll = np.arctan2(R[2, 1], R[2, 2])
+    yaw = np.arctan2(R[1, 0], R[0, 0])
+    return np.array([*T[:3, 3], roll, pitch, yaw])
+
+
+def parse_pose_arg(text: str) -> np.ndarray:
+    """A pose from a command-line string of numbers separated by commas or spaces:
+    6 = x,y,z,roll,pitch,yaw (m, rad); 12 = KITTI 3x4 row-major; 16 = 4x4 row-major."""
+    try:
+        numbers = np.array([float(v) for v in _SEPARATORS.split(str(text).strip()) if v], dtype=np.float64)
+    except ValueError:
+        raise InputError(f"pose {text!r} is not a list of numbers") from None
+    if len(numbers) == 6:
+        return pose_from_xyzrpy(numbers)
+    if len(numbers) in (12, 16):
+        return _rigid(_from_numbers(numbers), f"pose {text!r}")
+    raise InputError(
+        f"pose {text!r} has {len(numbers)} numbers; expected 6 (x,y,z,roll,pitch,yaw), 12 (3x4) or 16 (4x4)"
+    )
+
+
+def _from_numbers(numbers: np.ndarray) -> np.ndarray:
+    T = np.eye(4)
+    T[: len(numbers) // 4] = numbers.reshape(-1, 4)
+    return T
+
+
+def _rigid(T: np.ndarray, where) -> np.ndarray:
+    R = T[:3, :3]
+    if not np.allclose(T[3], [0, 0, 0, 1], atol=1e-9):
+        raise InputError(f"not a rigid pose: bottom row is {T[3].tolist()}, expected [0, 0, 0, 1]", where)
+    if not np.isfinite(T).all() or np.abs(R.T @ R - np.eye(3)).max() > _ORTHONORMAL_TOLERANCE or np.linalg.det(R) <= 0:
+        raise InputError("not a rigid pose: the 3x3 block is not a rotation", where)
+    return T
+
+
+# --- algebra ----------------------------------------------------------------------------------
+def apply_pose(T: np.ndarray, xyz: np.ndarray) -> np.ndarray:
+    """Points (N, 3) mapped by the pose: ``R @ p + t`` for each point."""
+    T = np.asarray(T, dtype=np.float64)
+    return np.asarray(xyz, dtype=np.float64) @ T[:3, :3].T + T[:3, 3]
+
+
+def invert_pose(T: np.ndarray) -> np.ndarray:
+    """The inverse of a rigid pose (exact: transpose of the rotation)."""
+    T = np.asarray(T, dtype=np.float64)
+    inverse = np.eye(4)
+    inverse[:3, :3] = T[:3, :3].T
+    inverse[:3, 3] = -T[:3, :3].T @ T[:3, 3]
+    return inverse
+
+
+def relative_pose(T_w_1: np.ndarray, T_w_2: np.ndarray) -> np.ndarray:
+    """The pose of frame 2 in frame 1, ``T_1_2 = inv(T_w_1) @ T_w_2``."""
+    return invert_pose(T_w_1) @ np.asarray(T_w_2, dtype=np.float64)
+
+
+def rotation_angle(R: np.ndarray) -> float:
+    """The angle (radians) of a rotation matrix, accurate for small angles too."""
+    R = np.asarray(R, dtype=np.float64)[:3, :3]
+    sine = 0.5 * np.linalg.norm([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])
+    cosine = 0.5 * (np.trace(R) - 1.0)
+    return float(np.arctan2(sine, cosine))
+
+
+def pose_error(T_est: np.ndarray, T_ref: np.ndarray) -> tuple[float, float]:
+    """(translation error in metres, rotation error in degrees) of ``T_est`` against ``T_ref``:
+    the translation and angle of ``inv(T_ref) @ T_est``."""
+    E = relative_pose(T_ref, T_est)
+    return float(np.linalg.norm(E[:3, 3])), float(np.degrees(rotation_angle(E)))

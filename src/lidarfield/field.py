@@ -168,3 +168,15 @@ def read_field(path: str | Path) -> tuple[dict[str, np.ndarray], dict]:
         raise InputError(f"field Parquet lacks grid column(s) {missing}", path)
     return columns, meta
 
+
+
+def field_meta(settings: FieldSettings, statistics: dict, **extra) -> dict:
+    """The field Parquet metadata of the layout: grid config, validity rules, statistics, plus
+    ``extra`` (e.g. ``stage=...``)."""
+    return {
+        "grid": settings.grid.to_config(),
+        "min_points": int(settings.min_points),
+        "max_component_m": settings.max_component_m,
+        "statistics": statistics,
+        **extra,
+    }

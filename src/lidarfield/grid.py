@@ -65,6 +65,8 @@ class SphericalGrid:
     def __post_init__(self) -> None:
         for name in ("elevation_deg", "range_edges_m"):
             object.__setattr__(self, name, _number_tuple(getattr(self, name)))
+        if _is_number(self.azimuth_offset_deg):
+            object.__setattr__(self, "azimuth_offset_deg", float(self.azimuth_offset_deg))
         _check_spherical(self)
 
     @property
@@ -160,6 +162,8 @@ class CartesianGrid:
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "origin", _number_tuple(self.origin))
+        if _is_number(self.cell_m):
+            object.__setattr__(self, "cell_m", float(self.cell_m))
         _check_cartesian(self)
 
     n_voxels = None  # the id space is sparse (63 bits)
@@ -231,12 +235,12 @@ def grid_from_config(d: dict) -> Grid:
     own = {"spherical": SPHERICAL_KEYS, "cartesian": CARTESIAN_KEYS}.get(kind)
     if own is None:
         raise ConfigError(f"grid.kind: must be 'spherical' or 'cartesian', got {kind!r}")
+    # The other kind's keys are ignored, not refused: the config schema fills in defaults for
+    # both kinds, so a validated spherical config also carries cell_m and origin.
+    known = ("kind", *SPHERICAL_KEYS, *CARTESIAN_KEYS, *FIELD_KEYS)
     for key in d:
-        if key == "kind" or key in own or key in FIELD_KEYS:
-            continue
-        if key in SPHERICAL_KEYS or key in CARTESIAN_KEYS:
-            raise ConfigError(f"grid.{key}: not a setting of a {kind} grid")
-        raise ConfigError(f"grid.{key}: unknown key (known: kind, {', '.join(own + FIELD_KEYS)})")
+        if key not in known:
+            raise ConfigError(f"grid.{key}: unknown key (known: {', '.join(known)})")
     kwargs = {key: d[key] for key in own if key in d}
     return SphericalGrid(**kwargs) if kind == "spherical" else CartesianGrid(**kwargs)
 

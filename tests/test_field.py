@@ -1,0 +1,140 @@
+"""The discrepancy field: analytic fields, validity rules, kernel vs reference, Parquet round trip."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from lidarfield.field import discrepancy_field, field_columns, read_field, write_field
+from lidarfield.field_reference import discrepancy_field_reference
+from lidarfield.field_stats import field_statistics
+from lidarfield.grid import CartesianGrid, FieldSettings, SphericalGrid
+
+GRID = SphericalGrid()  # the experimental grid: 36 x 10 deg, 5 x 8 deg from -20 to +20
+
+
+def voxel_centre_clouds(per_voxel: int = 40, seed: int = 0, spread_deg: float = 1.0) -> np.ndarray:
+    """Blobs of points around the centre of every voxel of GRID, at 8-12 m: at least 4 deg
+    from any voxel edge, so a motion of a few millimetres (or 2 deg of yaw) keeps every point
+    in its voxel."""
+    rng = np.random.default_rng(seed)
+    az_c, el_c = np.meshgrid(np.arange(5.0, 360.0, 10.0), np.arange(-16.0, 20.0, 8.0))
+    az = np.repeat(az_c.ravel(), per_voxel) + rng.uniform(-spread_deg, spread_deg, az_c.size * per_voxel)
+    el = np.repeat(el_c.ravel(), per_voxel) + rng.uniform(-spread_deg, spread_deg, az_c.size * per_voxel)
+    r = rng.uniform(8.0, 12.0, az.size)
+    az, el = np.radians(az), np.radians(el)
+    return np.column_stack([r * np.cos(el) * np.cos(az), r * np.cos(el) * np.sin(az), r * np.sin(el)])
+
+
+def test_small_translation_appears_in_every_voxel():
+    xyz1 = voxel_centre_clouds()
+    shift = np.array([0.004, -0.003, 0.002])
+    field = discrepancy_field(xyz1, xyz1 + shift, FieldSettings(GRID))
+    assert list(field) == list(field_columns(GRID))
+    assert field["valid"].all() and len(field["voxel"]) == 180
+    assert (field["n1"] == field["n2"]).all()
+    uvw = np.column_stack([field["u"], field["v"], field["w"]])
+    np.testing.assert_allclose(uvw, np.broadcast_to(shift, uvw.shape), atol=1e-9, rtol=0)
+    np.testing.assert_allclose(field["magnitude"], np.linalg.norm(shift), atol=1e-9)
+
+
+def test_scaling_about_the_origin_points_outward():
+    xyz1 = voxel_centre_clouds()
+    field = discrepancy_field(xyz1, 1.002 * xyz1, FieldSettings(GRID))
+    valid = field["valid"]
+    assert valid.all()
+    uvw = np.column_stack([field["u"], field["v"], field["w"]])
+    mean1 = np.column_stack([field["x1"], field["y1"], field["z1"]])
+    # Each vector is 0.002 * mean1: parallel to it and pointing away from the sensor.
+    np.testing.assert_allclose(uvw, 0.002 * mean1, atol=1e-9)
+    assert (np.einsum("ij,ij->i", uvw, mean1) > 0).all()
+    stats = field_statistics(field)
+    assert stats["rigid_energy_share"] < 0.2
+    assert stats["mean_resultant_length"] < 0.1
+
+
+def test_identical_clouds_give_a_zero_field():
+    xyz = voxel_centre_clouds(seed=4)
+    field = discrepancy_field(xyz, xyz.copy(), FieldSettings(GRID))
+    assert field["valid"].all()
+    for c in ("u", "v", "w", "magnitude"):
+        assert (field[c] == 0.0).all()
+    stats = field_statistics(field)
+    assert stats["max_magnitude"] == 0.0 and stats["paper_max_metric"] == 0.0
+
+
+def test_min_points_and_max_component_invalidate_but_keep_rows():
+    xyz1 = voxel_centre_clouds(per_voxel=40)
+    # Cloud 2: only 10 points in voxel 0's blob, the others as cloud 1, one voxel far off.
+    in_voxel0 = GRID.assign(xyz1) == 0
+    xyz2 = np.vstack([xyz1[~in_voxel0], xyz1[in_voxel0][:10]])
+    far_voxel = GRID.assign(xyz2) == 7
+    xyz2[far_voxel] *= 1.5  # stays in voxel 7 (same direction, 12-18 m), |vector| > 4 m
+    field = discrepancy_field(xyz1, xyz2, FieldSettings(GRID, min_points=30, max_component_m=2.0))
+    assert len(field["voxel"]) == 180
+    row0, row7 = np.searchsorted(field["voxel"], [0, 7])
+    assert field["n2"][row0] == 10 and not field["valid"][row0]
+    assert not field["valid"][row7] and field["n1"][row7] == field["n2"][row7] == 40
+    for row in (row0, row7):
+        assert np.isnan([field["u"][row], field["v"][row], field["w"][row], field["magnitude"][row]]).all()
+        assert np.isfinite([field["x1"][row], field["x2"][row]]).all()  # the means are kept
+    assert field["valid"].sum() == 178
+    # Without the outlier limit voxel 7 is valid.
+    assert discrepancy_field(xyz1, xyz2, FieldSettings(GRID, min_points=30))["valid"][row7]
+
+
+def test_voxel_of_one_cloud_only_has_nan_means_of_the_other():
+    xyz1 = voxel_centre_clouds(per_voxel=5)
+    xyz2 = xyz1[GRID.assign(xyz1) != 3]
+    field = discrepancy_field(xyz1, xyz2, FieldSettings(GRID, min_points=1))
+    row = np.searchsorted(field["voxel"], 3)
+    assert field["voxel"][row] == 3 and field["n2"][row] == 0
+    assert np.isnan([field["x2"][row], field["y2"][row], field["z2"][row]]).all()
+    assert not field["valid"][row]
+
+
+def test_points_outside_elevation_are_counted_not_folded():
+    xyz1 = voxel_centre_clouds(per_voxel=40)
+    high = np.array([[10.0, 0.0, 10.0], [10.0, 1.0, -9.0], [5.0, 5.0, 100.0]])  # 45, -42, 86 deg
+    field = discrepancy_field(np.vstack([xyz1, high]), xyz1, FieldSettings(GRID))
+    assert field["n1"].sum() == len(xyz1)
+    assert (field["n1"] == field["n2"]).all()
+    assert (field["magnitude"] == 0.0).all()
+
+
+GRIDS = {
+    "spherical": SphericalGrid(azimuth_bins=12, azimuth_offset_deg=7.0, elevation_deg=(-30.0, 25.0), elevation_bins=6),
+    "spherical-shells": SphericalGrid(range_edges_m=(1.0, 4.0, 8.0, 15.0, 30.0)),
+    "cartesian": CartesianGrid(cell_m=2.5, origin=(0.3, -0.2, 0.1)),
+    "cartesian-sparse": CartesianGrid(cell_m=0.2),  # a bounding box too large for dense counting
+}
+
+
+@pytest.mark.parametrize("name", GRIDS)
+def test_kernel_matches_reference(name):
+    rng = np.random.default_rng(11)
+    xyz1 = rng.normal(scale=[12.0, 12.0, 4.0], size=(30_000, 3))
+    xyz2 = np.vstack([xyz1[5000:], rng.normal(scale=8.0, size=(2000, 3))]) + rng.normal(scale=0.3, size=(27_000, 3))
+    xyz1[::997] = np.nan  # NaN points are out of any grid
+    settings = FieldSettings(GRIDS[name], min_points=1 if name == "cartesian-sparse" else 8, max_component_m=0.5)
+    origin = (0.7, -1.1, 0.4)
+    fast = discrepancy_field(xyz1, xyz2, settings, origin)
+    reference = discrepancy_field_reference(xyz1, xyz2, settings, origin)
+    assert list(fast) == list(reference) == list(field_columns(settings.grid))
+    assert len(fast["voxel"]) > 50 and 0 < fast["valid"].sum() < len(fast["voxel"])
+    for column in fast:
+        assert fast[column].dtype == reference[column].dtype, column
+        np.testing.assert_allclose(fast[column], reference[column], atol=1e-9, rtol=0, equal_nan=True, err_msg=column)
+
+
+def test_write_read_round_trip(tmp_path):
+    xyz1 = voxel_centre_clouds(per_voxel=20)
+    settings = FieldSettings(CartesianGrid(cell_m=3.0), min_points=3)
+    field = discrepancy_field(xyz1, xyz1 + 0.01, settings)
+    write_field(tmp_path / "field.parquet", field, {"grid": settings.grid.to_config(), "stage": "00-none-x"})
+    columns, meta = read_field(tmp_path / "field.parquet")
+    assert list(columns) == list(field)
+    for name in field:
+        np.testing.assert_array_equal(columns[name], field[name])
+        assert columns[name].dtype == field[name].dtype
+    assert meta == {"grid": settings.grid.to_config(), "stage": "00-none-x"}

@@ -1,0 +1,116 @@
+"""The hypothesis registry: built-in mitigations and the analyst's plugins.
+
+A hypothesis is a pure function ``(pair, params) -> (keep1, keep2)`` of a
+:class:`~lidarfield.pair.RegisteredPair` and a frozen dataclass of typed parameters, returning
+one boolean keep-mask per cloud. A stack entry is a one-key mapping ``{name: {params}}``;
+:func:`validate_stack` checks every entry before anything runs and returns the normalised
+entries (defaults filled in, the study's grid filled into ``shadow``), which are what stage ids
+are computed from.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..errors import HypothesisError
+from ..pair import RegisteredPair
+from . import crop, ego_vehicle, field_of_view, outliers, plugin, shadow
+from .params import describe, params_to_dict, parse_params
+
+Masks = tuple[np.ndarray, np.ndarray]
+
+
+@dataclass(frozen=True)
+class Hypothesis:
+    name: str
+    function: Callable[[RegisteredPair, Any], Masks]
+    params: type  # frozen dataclass of the parameters, with defaults and docs
+    summary: str
+
+
+def _builtin(module, name: str) -> Hypothesis:
+    return Hypothesis(name, getattr(module, name), module.Params, module.__doc__.strip().splitlines()[0])
+
+
+BUILTINS: dict[str, Hypothesis] = {
+    h.name: h
+    for h in (
+        _builtin(ego_vehicle, "ego_vehicle"),
+        _builtin(field_of_view, "field_of_view"),
+        _builtin(shadow, "shadow"),
+        _builtin(crop, "crop"),
+        _builtin(outliers, "outliers"),
+    )
+}
+PLUGIN = Hypothesis("plugin", plugin.run_plugin, plugin.Params, plugin.__doc__.strip().splitlines()[0])
+
+
+def available_hypotheses() -> list[str]:
+    """The names a stack entry may use."""
+    return [*BUILTINS, PLUGIN.name]
+
+
+def _where(name: str, level: int | None) -> str:
+    return f"hypothesis {name}" if level is None else f"hypothesis {level} ({name})"
+
+
+def parse_step(step: dict, base_dir: str | Path = ".", study_grid: dict | None = None, level: int | None = None):
+    """(name, params instance) of one stack entry, validated, with the study's grid filled in.
+
+    ``level`` (the entry's 1-based position, = its stage) only makes error messages precise.
+    """
+    if not isinstance(step, dict) or len(step) != 1:
+        at = "" if level is None else f"hypothesis {level}: "
+        raise HypothesisError(f"{at}a stack entry is a one-key mapping {{name: {{parameters}}}}, got {step!r}")
+    ((name, raw),) = step.items()
+    if name != PLUGIN.name and name not in BUILTINS:
+        raise HypothesisError(f"{_where(name, level)}: unknown hypothesis; available: {', '.join(available_hypotheses())}")
+    entry = PLUGIN if name == PLUGIN.name else BUILTINS[name]
+    params = parse_params(entry.params, raw, _where(name, level))
+    if entry is PLUGIN:
+        plugin.check_plugin_file(params, base_dir, level)
+    if hasattr(params, "in_study"):
+        params = params.in_study(study_grid)
+    return name, params
+
+
+def validate_step(step: dict, base_dir: str | Path = ".", study_grid: dict | None = None, level: int | None = None) -> dict:
+    """The normalised entry ``{name: {params}}`` (defaults filled in), or a HypothesisError.
+
+    Idempotent: validating a normalised entry gives it back unchanged.
+    """
+    name, params = parse_step(step, base_dir, study_grid, level)
+    return {name: params_to_dict(params)}
+
+
+def validate_stack(stack: list[dict] | None, base_dir: str | Path = ".", study_grid: dict | None = None) -> list[dict]:
+    """Every entry of the stack validated and normalised, before anything runs.
+
+    Pass the study's ``grid`` section as ``study_grid`` so that ``shadow``'s default grid is
+    written into its entry (and so into its stage id).
+    """
+    if stack is None:
+        return []
+    if not isinstance(stack, list):
+        raise HypothesisError(f"the hypothesis stack is a list of {{name: {{parameters}}}} entries, got {stack!r}")
+    return [validate_step(step, base_dir, study_grid, level) for level, step in enumerate(stack, start=1)]
+
+
+def apply_step(
+    pair: RegisteredPair, step: dict, base_dir: str | Path = ".", study_grid: dict | None = None, level: int | None = None
+) -> Masks:
+    """Validate one stack entry and apply it: the keep-masks of both clouds."""
+    name, params = parse_step(step, base_dir, study_grid, level)
+    if name == PLUGIN.name:
+        return plugin.run_plugin(pair, params, base_dir, level)
+    return BUILTINS[name].function(pair, params)
+
+
+def describe_hypotheses() -> dict[str, list[tuple[str, str, Any, str]]]:
+    """(name, type, default, doc) of every parameter of every hypothesis, for help and docs."""
+    return {h.name: describe(h.params) for h in (*BUILTINS.values(), PLUGIN)}

@@ -1,0 +1,99 @@
+"""``field_of_view``: remove the points of each cloud that the *other* sensor could not have seen.
+
+Cloud 1 is expressed in sensor 2's frame (``T_1_2``, rotation included) and tested against
+sensor 2's limits; cloud 2 against sensor 1's limits in frame 1. A point is dropped when its
+elevation ``atan2(z, hypot(x, y))`` is strictly below or above the sensor's elevation limits
+(the lowest and highest channel of its model, or ``elevation_deg``), widened by ``margin_deg``.
+Where the model has them (or the parameters give them), points outside the range limits
+``[min_range_m, max_range_m]`` and the azimuth sector are dropped by the same rule.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..errors import HypothesisError
+from ..pair import RegisteredPair
+from ..sensors import SensorModel
+from .geometry import in_sensor_frame, sensor_pose
+from .params import doc
+
+
+@dataclass(frozen=True)
+class Params:
+    elevation_deg: tuple[float, float] | None = field(
+        default=None, metadata=doc("[lo, hi] elevation limits for both sensors (null: each sensor model's lowest and highest channel)")
+    )
+    range_m: tuple[float, float] | None = field(
+        default=None, metadata=doc("[min, max] range limits for both sensors (null: the sensor models' range limits, if any)")
+    )
+    azimuth_deg: tuple[float, float] | None = field(
+        default=None,
+        metadata=doc("[start, end] azimuth sector, counter-clockwise from +x, for both sensors (null: the models' sector, or 360 deg)"),
+    )
+    margin_deg: float = field(
+        default=0.0, metadata=doc("widen the angular limits by this much on each side (negative: narrow them)")
+    )
+
+    def __post_init__(self):
+        if self.elevation_deg is not None and not self.elevation_deg[0] < self.elevation_deg[1]:
+            raise ValueError(f"elevation_deg must be [lo, hi] with lo < hi, got {list(self.elevation_deg)}")
+        if self.range_m is not None and not 0 <= self.range_m[0] < self.range_m[1]:
+            raise ValueError(f"range_m must be [min, max] with 0 <= min < max, got {list(self.range_m)}")
+
+
+@dataclass(frozen=True)
+class Limits:
+    """What one sensor can see: elevation [lo, hi] deg, range [min, max] m, azimuth sector or None."""
+
+    elevation_deg: tuple[float, float]
+    range_m: tuple[float, float] = (0.0, math.inf)
+    azimuth_deg: tuple[float, float] | None = None
+
+
+def sensor_limits(model: SensorModel | None, params: Params, sensor: int) -> Limits:
+    """The limits of sensor 1 or 2: the parameters where given, else its model."""
+    if params.elevation_deg is None and model is None:
+        raise HypothesisError(
+            f"field_of_view: sensor {sensor} has no sensor model, so its elevation limits are unknown: "
+            "give the sensor (--sensor, or 'sensor' in the pair's config) or field_of_view's elevation_deg"
+        )
+    elevation = params.elevation_deg or model.elevation_limits_deg
+    if params.range_m is not None:
+        range_m = params.range_m
+    else:
+        range_m = (0.0, math.inf) if model is None else (model.min_range_m, model.max_range_m)
+    azimuth = params.azimuth_deg or (None if model is None else model.azimuth_limits_deg)
+    return Limits(tuple(elevation), tuple(range_m), azimuth)
+
+
+def visible(xyz: np.ndarray, limits: Limits, margin_deg: float = 0.0) -> np.ndarray:
+    """Mask of the points (in the sensor's frame) inside its limits; boundaries are inside."""
+    x, y, z = xyz[:, 0], xyz[:, 1], xyz[:, 2]
+    horizontal = np.hypot(x, y)
+    elevation = np.degrees(np.arctan2(z, horizontal))
+    lo, hi = limits.elevation_deg
+    keep = (elevation >= lo - margin_deg) & (elevation <= hi + margin_deg)
+    r_min, r_max = limits.range_m
+    if r_min > 0 or math.isfinite(r_max):
+        r = np.hypot(horizontal, z)
+        keep &= (r >= r_min) & (r <= r_max)
+    if limits.azimuth_deg is not None:
+        start, end = limits.azimuth_deg
+        width = (end - start) % 360.0 + 2 * margin_deg
+        if width < 360.0:
+            offset = (np.degrees(np.arctan2(y, x)) - (start - margin_deg)) % 360.0
+            keep &= offset <= width
+    return keep
+
+
+def field_of_view(pair: RegisteredPair, params: Params) -> tuple[np.ndarray, np.ndarray]:
+    """Keep-masks: cloud 1 against sensor 2's limits, cloud 2 against sensor 1's."""
+    limits1 = sensor_limits(pair.sensor1, params, 1)
+    limits2 = sensor_limits(pair.sensor2, params, 2)
+    keep1 = visible(in_sensor_frame(pair.xyz1, sensor_pose(pair, 2)), limits2, params.margin_deg)
+    keep2 = visible(pair.xyz2, limits1, params.margin_deg)
+    return keep1, keep2

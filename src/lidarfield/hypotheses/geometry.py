@@ -1,0 +1,47 @@
+"""Where the points of a registered pair are as seen from either sensor."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..pair import RegisteredPair
+
+
+def sensor_pose(pair: RegisteredPair, sensor: int) -> np.ndarray:
+    """4x4 pose of sensor 1 or 2 in frame 1."""
+    if sensor not in (1, 2):
+        raise ValueError(f"sensor must be 1 or 2, got {sensor!r}")
+    return np.eye(4) if sensor == 1 else pair.T_1_2
+
+
+def in_sensor_frame(xyz: np.ndarray, pose: np.ndarray) -> np.ndarray:
+    """Points given in frame 1 expressed in the frame of a sensor at ``pose`` (rotation included)."""
+    rotation, origin = pose[:3, :3], pose[:3, 3]
+    # p_s = R^T (p - t), written row-wise as (p - t) R.
+    return (xyz - origin) @ rotation
+
+
+def own_frame_points(pair: RegisteredPair) -> tuple[np.ndarray, np.ndarray]:
+    """Each cloud in its own sensor's frame."""
+    return pair.xyz1, in_sensor_frame(pair.xyz2, pair.T_1_2)
+
+
+def ranges(xyz: np.ndarray) -> np.ndarray:
+    """3-D distance of each point from the origin of its frame."""
+    return np.sqrt(np.einsum("ij,ij->i", xyz, xyz))
+
+
+def elevation_deg(xyz: np.ndarray) -> np.ndarray:
+    return np.degrees(np.arctan2(xyz[:, 2], np.hypot(xyz[:, 0], xyz[:, 1])))
+
+
+def inside_box(xyz: np.ndarray, box: tuple[float, ...]) -> np.ndarray:
+    """Points inside the closed box [xmin, xmax, ymin, ymax, zmin, zmax]."""
+    lo, hi = np.asarray(box[0::2]), np.asarray(box[1::2])
+    return np.all((xyz >= lo) & (xyz <= hi), axis=1)
+
+
+def check_box(box: tuple[float, ...] | None, name: str = "box_m") -> None:
+    """ValueError unless ``box`` is None or [xmin, xmax, ymin, ymax, zmin, zmax] with min <= max."""
+    if box is not None and any(lo > hi for lo, hi in zip(box[0::2], box[1::2])):
+        raise ValueError(f"{name}: expected [xmin, xmax, ymin, ymax, zmin, zmax] with each min <= max, got {list(box)}")

@@ -1,0 +1,153 @@
+"""``shadow``: the first radial cluster (McDermott & Rife 2022).
+
+For each origin o in ``origins``, each cloud's points are binned about o on an angular grid
+(azimuth x elevation; points are expressed in that sensor's frame). In each cell, that cloud's
+ranges sorted ascending are split into segments wherever two consecutive ranges differ by more
+than ``jump_m``; the first segment holding more than ``min_points`` points is the surface the
+sensor sees first, and the cell's points nearer or farther than that segment are removed. A
+cell with no such segment, and a point outside the grid, is left alone. Removals over all
+origins are united: a point that one sensor sees past an object's edge, where the other is
+blocked, is dropped.
+
+:func:`first_cluster_keep` is the vectorised kernel (one sort, then cumulative tricks);
+:func:`first_cluster_keep_loop` is the plain per-cell reference it is tested against.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from ..errors import ConfigError
+from ..grid import SphericalGrid, grid_from_config
+from ..pair import RegisteredPair
+from .geometry import in_sensor_frame, ranges
+from .params import doc
+
+# The keys of a grid section that shape the angular cells (range shells play no part: the
+# segmentation runs along the range).
+ANGULAR_KEYS = ("azimuth_bins", "azimuth_offset_deg", "elevation_deg", "elevation_bins")
+
+
+@dataclass(frozen=True)
+class Params:
+    jump_m: float = field(default=1.0, metadata=doc("a gap between consecutive ranges larger than this starts a new segment"))
+    min_points: int = field(default=30, metadata=doc("the first segment with MORE than this many points is the visible surface"))
+    origins: tuple[int, ...] = field(default=(1, 2), metadata=doc("the sensors about which cells are formed (1, 2 or both); removals are united"))
+    grid: dict | None = field(
+        default=None,
+        metadata=doc("angular grid {azimuth_bins, azimuth_offset_deg, elevation_deg, elevation_bins}; null: the study's grid"),
+    )
+
+    def __post_init__(self):
+        if not self.jump_m > 0:
+            raise ValueError(f"jump_m must be > 0, got {self.jump_m}")
+        if self.min_points < 0:
+            raise ValueError(f"min_points must be >= 0, got {self.min_points}")
+        if not self.origins or any(o not in (1, 2) for o in self.origins) or len(set(self.origins)) != len(self.origins):
+            raise ValueError(f"origins must list sensor 1, sensor 2 or both, got {list(self.origins)}")
+        if self.grid is not None:
+            unknown = sorted(set(self.grid) - set(ANGULAR_KEYS) - {"kind"})
+            if unknown or self.grid.get("kind", "spherical") != "spherical":
+                raise ValueError(f"grid takes the angular keys {', '.join(ANGULAR_KEYS)} of a spherical grid, got {self.grid}")
+            try:
+                grid_from_config(self.grid)
+            except ConfigError as e:
+                raise ValueError(f"grid: {e}") from None
+
+    def in_study(self, study_grid: dict | None) -> "Params":
+        """These parameters with the study's angular grid filled in under any keys not given."""
+        if study_grid is None or study_grid.get("kind", "spherical") != "spherical":
+            return self
+        study = {key: study_grid[key] for key in ANGULAR_KEYS if key in study_grid}
+        given = {key: value for key, value in (self.grid or {}).items() if key != "kind"}
+        merged = SphericalGrid(**{**study, **given}).to_config()
+        return replace(self, grid={key: merged[key] for key in ANGULAR_KEYS})
+
+    def angular_grid(self) -> SphericalGrid:
+        """The grid of the cells (the grid defaults where neither params nor study gave one)."""
+        return SphericalGrid(**{key: value for key, value in (self.grid or {}).items() if key != "kind"})
+
+
+def first_cluster_keep(cells: np.ndarray, r: np.ndarray, jump_m: float, min_points: int) -> np.ndarray:
+    """Keep-mask of the first radial cluster rule.
+
+    ``cells``: dense non-negative cell ids (< 0: outside the grid, kept); ``r``: ranges >= 0.
+    One value sort of the key ``cell * span + range`` (``span`` a power of two above every
+    range, so cell and range come back out exactly up to the key's rounding, about 1e-11 m for
+    a few hundred cells of 200 m); segments start where the cell changes or the range jumps;
+    each cell's chosen segment is its first one longer than ``min_points``, and a point is kept
+    when its range lies within that segment's [first, last] range. The comparison uses a
+    tolerance of ``jump_m / 2``, which cannot change the answer: the nearest point of another
+    segment is more than ``jump_m`` away.
+    """
+    inside = (cells >= 0) & np.isfinite(r)
+    n_inside = int(np.count_nonzero(inside))
+    if n_inside == 0:
+        return np.ones(len(r), dtype=bool)
+    n_cells = int(cells.max()) + 1
+    span = 2.0 ** math.ceil(math.log2(float(r[inside].max()) + 1.0))
+    key = cells * span + r
+    key[~inside] = np.inf  # sorted to the end and cut off
+    ordered = np.sort(key)[:n_inside]
+    c = np.floor(ordered / span)
+    rs = ordered - c * span
+    c = c.astype(np.int64)
+
+    starts = np.empty(n_inside, dtype=bool)
+    starts[0] = True
+    starts[1:] = (c[1:] != c[:-1]) | (np.diff(rs) > jump_m)
+    first = np.flatnonzero(starts)  # sorted position of each segment's first point
+    last = np.append(first[1:], n_inside) - 1
+    segment_cell = c[first]
+
+    # Segments are in (cell, range) order: a cell's first large segment is the first large
+    # segment whose cell differs from the previous large segment's.
+    large = np.flatnonzero(last - first + 1 > min_points)
+    large_cell = segment_cell[large]
+    is_first = np.ones(len(large), dtype=bool)
+    is_first[1:] = large_cell[1:] != large_cell[:-1]
+    chosen = large[is_first]
+
+    # Per cell (plus one slot for the points outside): the kept range interval.
+    lo = np.full(n_cells + 1, -np.inf)
+    hi = np.full(n_cells + 1, np.inf)
+    lo[segment_cell[chosen]] = rs[first[chosen]] - 0.5 * jump_m
+    hi[segment_cell[chosen]] = rs[last[chosen]] + 0.5 * jump_m
+    slot = np.where(inside, cells, n_cells)
+    return (r >= lo[slot]) & (r <= hi[slot]) | ~inside
+
+
+def first_cluster_keep_loop(cells: np.ndarray, r: np.ndarray, jump_m: float, min_points: int) -> np.ndarray:
+    """Reference implementation of :func:`first_cluster_keep`: one plain loop per cell."""
+    keep = np.ones(len(r), dtype=bool)
+    for cell in np.unique(cells[cells >= 0]):
+        index = np.flatnonzero(cells == cell)
+        index = index[np.argsort(r[index], kind="stable")]
+        segments, current = [], [index[0]]
+        for previous, point in zip(index[:-1], index[1:]):
+            if r[point] - r[previous] > jump_m:
+                segments.append(current)
+                current = []
+            current.append(point)
+        segments.append(current)
+        for seg in segments:
+            if len(seg) > min_points:
+                lo, hi = r[seg[0]], r[seg[-1]]
+                keep[index] = (r[index] >= lo) & (r[index] <= hi)
+                break
+    return keep
+
+
+def shadow(pair: RegisteredPair, params: Params) -> tuple[np.ndarray, np.ndarray]:
+    """Keep-masks of the first radial cluster rule about each origin in ``params.origins``."""
+    grid = params.angular_grid()
+    keep1 = np.ones(len(pair.xyz1), dtype=bool)
+    keep2 = np.ones(len(pair.xyz2), dtype=bool)
+    for origin in params.origins:
+        for xyz, keep in ((pair.xyz1, keep1), (pair.xyz2, keep2)):
+            local = xyz if origin == 1 else in_sensor_frame(xyz, pair.T_1_2)
+            keep &= first_cluster_keep(grid.assign(local), ranges(local), params.jump_m, params.min_points)
+    return keep1, keep2

@@ -100,6 +100,15 @@ def test_lzf_overlapping_back_reference():
     assert lzf_decompress(bytes([1]) + b"ab" + bytes([(4 << 5) | 0, 1]), 8) == b"abababab"
 
 
+def test_laz_is_compressed_and_las_is_not(tmp_path, scan):
+    laspy = pytest.importorskip("laspy")
+    for extension, compressed in (("las", False), ("laz", True)):
+        write_scan(scan, tmp_path / f"s.{extension}")
+        with laspy.open(tmp_path / f"s.{extension}") as reader:
+            assert reader.header.are_points_compressed is compressed
+    assert (tmp_path / "s.laz").stat().st_size < 0.8 * (tmp_path / "s.las").stat().st_size
+
+
 def test_large_float_intensity_survives_las(tmp_path, scan):
     scan.attributes["intensity"] = scan.attributes["intensity"] / 255.0  # reflectance in 0..1
     write_scan(scan, tmp_path / "f.laz")

@@ -34,7 +34,7 @@ def read_las(path: Path, index: int = 0, sensor: SensorModel | None = None) -> S
             attributes["time"] = np.asarray(las.gps_time)
         for name in las.point_format.extra_dimension_names:
             attributes[name] = np.asarray(las[name])
-    except (laspy.errors.LaspyException, ValueError, OSError, EOFError) as e:
+    except (laspy.errors.LaspyException, ValueError, OSError, EOFError, RuntimeError) as e:  # lazrs: RuntimeError
         raise InputError(f"not a readable LAS/LAZ file ({e})", path) from None
     if _FLOAT_INTENSITY in attributes:
         attributes["intensity"] = attributes.pop(_FLOAT_INTENSITY)
@@ -62,9 +62,10 @@ def write_las(scan: Scan, path: Path) -> None:
         las.gps_time = time
     for name, values in extra.items():
         las[name] = values.astype(_las_type(values.dtype, name))
-    with atomic_path(path) as tmp:
-        # The temporary name does not end in .laz: say whether to compress.
-        las.write(tmp, do_compress=path.suffix.lower() == ".laz")
+    with atomic_path(path) as tmp, open(tmp, "wb") as stream:
+        # laspy picks compression from a path's extension (and ignores do_compress for paths);
+        # the temporary name does not end in .laz, so write to a stream and say it.
+        las.write(stream, do_compress=path.suffix.lower() == ".laz")
 
 
 def _fits_uint16(values: np.ndarray) -> bool:

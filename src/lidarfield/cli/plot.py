@@ -1,0 +1,28 @@
+"""``lidarfield plot``: the figures of one stage folder."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+
+def add_parser(subparsers) -> None:
+    p = subparsers.add_parser(
+        "plot",
+        help="figures of one stage: field, removed points, top voxels, before/after, 3-D view",
+        description="Draw the figures of a stage folder (points.parquet, removed.parquet, field.parquet) into --out.",
+    )
+    p.add_argument("stage_dir", type=Path, help="stage folder, e.g. results/PAIR/stages/01-ego_vehicle-1a2b3c4d")
+    p.add_argument("--prev", type=Path, help="the previous stage's folder: adds before_after and shares its axes")
+    p.add_argument("--out", required=True, type=Path, help="output folder for the figures")
+    p.add_argument("--config", type=Path, help="study YAML: its 'plots' section sets magnification, top_k, ...")
+    p.set_defaults(func=run)
+
+
+def run(args) -> int:
+    from ..plots import plot_stage
+    from ..report.discover import read_study_yaml
+
+    settings = read_study_yaml(args.config).get("plots", {}) if args.config else {}
+    for path in plot_stage(args.stage_dir, args.prev, args.out, settings):
+        print(path)
+    return 0

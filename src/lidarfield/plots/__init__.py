@@ -1,0 +1,60 @@
+"""Figures of a stage and of a pair (matplotlib, Agg) and the interactive 3-D view (plotly).
+
+``plot_stage`` writes, into ``out_dir``: ``field_top``, ``field_perspective``, ``removed_top``,
+``removed_perspective``, ``top_voxels``, ``before_after`` (when the previous stage is given),
+as PNG (+ SVG when asked and small), and ``field_3d.html``. ``plot_pair`` writes
+``stages.png`` and ``rigid_randomness.png`` from a pair's summary rows.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from pathlib import Path
+
+import numpy as np
+
+from .before_after import plot_before_after
+from .common import PlotSettings, background, load_stage, magnitude_norm, plot_settings, removed_xyz, view_limits
+from .field_views import magnified_tips, plot_field_perspective, plot_field_top
+from .interactive import plot_interactive
+from .pair_stats import plot_pair
+from .removed import plot_removed
+from .top_voxels import plot_top_voxels
+
+__all__ = ["PlotSettings", "plot_pair", "plot_settings", "plot_stage"]
+
+log = logging.getLogger(__name__)
+
+
+def plot_stage(stage_dir: str | Path, prev_stage_dir: str | Path | None, out_dir: str | Path, settings: dict | None = None) -> list[Path]:
+    """Write every figure of one stage; returns the paths written.
+
+    ``settings`` is the config's ``plots`` section. Axis limits come from the previous stage
+    when given (its points are a superset of this stage's), so that both halves of
+    ``before_after`` and the figures of consecutive stages share their axes.
+    """
+    start = time.perf_counter()
+    s = plot_settings(settings)
+    out_dir = Path(out_dir)
+    stage = load_stage(stage_dir)
+    prev = load_stage(prev_stage_dir) if prev_stage_dir is not None else None
+
+    reference = prev if prev is not None else stage
+    scene = np.vstack([background(reference.pair, s.background_points), removed_xyz(stage.removed, 1), removed_xyz(stage.removed, 2)])
+    drawn = [magnified_tips(st, s.magnification) for st in (stage, prev) if st is not None]
+    drawn += [st.field.tails for st in (stage, prev) if st is not None]
+    limits = view_limits(scene, np.vstack(drawn + [stage.pair.origin2[None, :], np.zeros((1, 3))]))
+
+    bg = background(stage.pair, s.background_points)
+    norm = magnitude_norm(stage.field)
+    written = plot_field_top(stage, bg, norm, limits, out_dir, s)
+    written += plot_field_perspective(stage, bg, norm, limits, out_dir, s)
+    written += plot_removed(stage, limits, out_dir, s)
+    written += plot_top_voxels(stage, limits, out_dir, s)
+    if prev is not None:
+        written += plot_before_after(prev, stage, limits, out_dir, s)
+    if s.interactive:
+        written += plot_interactive(stage, out_dir, s)
+    log.info("plotted %s: %d files in %.2f s", stage.path, len(written), time.perf_counter() - start)
+    return written

@@ -1,0 +1,280 @@
+"""What every figure shares: settings, loading a stage folder, subsampling, styling, saving.
+
+A stage folder holds ``points.parquet`` (survivors), ``removed.parquet`` (points this stage
+removed, with a ``hypothesis`` column) and ``field.parquet`` (one row per voxel); see the
+shared layout. Figures are written atomically: a reader never sees half a PNG.
+"""
+
+from __future__ import annotations
+
+import io
+from dataclasses import dataclass, fields
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")  # before pyplot: batch jobs have no display
+
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+from matplotlib.colors import Normalize  # noqa: E402
+
+from ..errors import ConfigError, InputError  # noqa: E402
+from ..io.atomic import atomic_path  # noqa: E402
+from ..io.parquet_table import read_table  # noqa: E402
+from ..pair import RegisteredPair, read_pair  # noqa: E402
+
+FIELD_COLUMNS = ("voxel", "n1", "n2", "x1", "y1", "z1", "x2", "y2", "z2", "u", "v", "w", "magnitude", "valid")
+CLOUD_COLOURS = {1: "#d62728", 2: "#1f77b4"}  # red = cloud 1, blue = cloud 2 (removed figures)
+KEPT_COLOUR = "0.55"
+BACKGROUND_COLOUR = "0.6"
+MAGNITUDE_CMAP = "viridis"
+SENSOR_STYLE = {1: dict(marker="^", color="#d62728", label="sensor 1"), 2: dict(marker="v", color="#1f77b4", label="sensor 2")}
+SVG_MAX_BYTES = 2_000_000  # "SVG where it stays small": above this only the PNG is kept
+SUBSAMPLE_SEED = 0
+
+
+@dataclass(frozen=True)
+class PlotSettings:
+    """The ``plots`` section of the config."""
+
+    magnification: float = 1.0  # vectors are drawn this many times their length
+    top_k: int = 10  # voxels drawn as wireframes in top_voxels.png
+    background_points: int = 20000  # max points drawn faint behind the vectors, per figure
+    formats: tuple[str, ...] = ("png",)  # "svg" adds an SVG where it stays small
+    dpi: int = 120
+    interactive: bool = True  # write field_3d.html
+
+
+def plot_settings(settings: dict | None) -> PlotSettings:
+    """PlotSettings from a config ``plots`` mapping (missing keys take their defaults)."""
+    settings = dict(settings or {})
+    known = {f.name for f in fields(PlotSettings)}
+    unknown = set(settings) - known
+    if unknown:
+        raise ConfigError(f"plots: unknown key(s) {sorted(unknown)}; known: {sorted(known)}")
+    if "formats" in settings:
+        formats = tuple(settings["formats"])
+        bad = [f for f in formats if f not in ("png", "svg")]
+        if bad or "png" not in formats:
+            raise ConfigError(f"plots.formats: must list 'png' and optionally 'svg', got {list(formats)!r}")
+        settings["formats"] = formats
+    s = PlotSettings(**settings)
+    if not s.magnification > 0:
+        raise ConfigError(f"plots.magnification: must be > 0, got {s.magnification!r}")
+    if s.top_k < 0 or s.background_points < 0 or s.dpi < 50:
+        raise ConfigError("plots: top_k and background_points must be >= 0 and dpi >= 50")
+    return s
+
+
+@dataclass
+class VectorField:
+    """The valid vectors of a stage's field: tails (mean1), vectors (mean2 - mean1), magnitudes."""
+
+    tails: np.ndarray  # (M, 3)
+    vectors: np.ndarray  # (M, 3)
+    magnitude: np.ndarray  # (M,)
+    columns: dict[str, np.ndarray]  # the valid rows of every field column
+    meta: dict
+
+    @property
+    def max_magnitude(self) -> float:
+        return float(self.magnitude.max()) if len(self.magnitude) else 0.0
+
+
+@dataclass
+class Stage:
+    """One stage folder, loaded."""
+
+    path: Path
+    pair: RegisteredPair  # the survivors of this stage
+    points_meta: dict
+    removed: dict[str, np.ndarray]  # removed.parquet columns (empty arrays for stage 0)
+    field: VectorField
+
+    @property
+    def stage_id(self) -> str:
+        return str(self.points_meta.get("stage") or self.field.meta.get("stage") or self.path.name)
+
+    @property
+    def level(self) -> int:
+        level = self.points_meta.get("level")
+        if level is None:
+            prefix = self.stage_id.split("-", 1)[0]
+            level = int(prefix) if prefix.isdigit() else 0
+        return int(level)
+
+    @property
+    def hypothesis(self) -> str:
+        return str(self.points_meta.get("hypothesis") or ("none" if self.level == 0 else "?"))
+
+    @property
+    def label(self) -> str:
+        return f"stage {self.level:02d} {self.hypothesis}"
+
+
+def read_vector_field(path: str | Path) -> VectorField:
+    """The valid rows of a field Parquet file (contract columns required)."""
+    columns, meta = read_table(path, required=FIELD_COLUMNS)
+    valid = np.asarray(columns["valid"], dtype=bool) & np.isfinite(columns["magnitude"])
+    columns = {k: np.asarray(v)[valid] for k, v in columns.items()}
+    tails = np.column_stack([columns["x1"], columns["y1"], columns["z1"]]).astype(np.float64)
+    vectors = np.column_stack([columns["u"], columns["v"], columns["w"]]).astype(np.float64)
+    return VectorField(tails, vectors, columns["magnitude"].astype(np.float64), columns, meta)
+
+
+def load_stage(stage_dir: str | Path) -> Stage:
+    """Read a stage folder; a missing or malformed file raises InputError naming it."""
+    stage_dir = Path(stage_dir)
+    if not stage_dir.is_dir():
+        raise InputError("stage folder not found", stage_dir)
+    field = read_vector_field(stage_dir / "field.parquet")
+    pair, points_meta = read_pair(stage_dir / "points.parquet")
+    removed_path = stage_dir / "removed.parquet"
+    if removed_path.exists():
+        removed, _ = read_table(removed_path, required=("cloud", "x", "y", "z"))
+    else:
+        removed = {"cloud": np.zeros(0, np.uint8), "x": np.zeros(0), "y": np.zeros(0), "z": np.zeros(0)}
+    return Stage(stage_dir, pair, points_meta, removed, field)
+
+
+def subsample(xyz: np.ndarray, n: int, seed: int = SUBSAMPLE_SEED) -> np.ndarray:
+    """At most ``n`` rows of ``xyz``, chosen with a fixed seed (same figure on every run)."""
+    if len(xyz) <= n:
+        return xyz
+    rng = np.random.default_rng(seed)
+    return xyz[np.sort(rng.choice(len(xyz), size=n, replace=False))]
+
+
+def removed_xyz(removed: dict[str, np.ndarray], cloud: int) -> np.ndarray:
+    mask = np.asarray(removed["cloud"]) == cloud
+    return np.column_stack([removed["x"][mask], removed["y"][mask], removed["z"][mask]]).astype(np.float64)
+
+
+def background(pair: RegisteredPair, n: int) -> np.ndarray:
+    """Both clouds together, subsampled to at most ``n`` points."""
+    return subsample(np.vstack([pair.xyz1, pair.xyz2]), n)
+
+
+def view_limits(points: np.ndarray, extra: np.ndarray, pad: float = 0.05) -> np.ndarray:
+    """(3, 2) axis limits: the 0.5..99.5 percentile box of ``points`` (a few far returns do not
+    shrink the scene) grown to hold every row of ``extra`` (the drawn vectors), then padded."""
+    boxes = []
+    if len(points):
+        boxes.append(np.percentile(points, [0.5, 99.5], axis=0).T)
+    if len(extra):
+        boxes.append(np.column_stack([extra.min(axis=0), extra.max(axis=0)]))
+    if not boxes:
+        return np.array([[-1.0, 1.0]] * 3)
+    lo = np.min([b[:, 0] for b in boxes], axis=0)
+    hi = np.max([b[:, 1] for b in boxes], axis=0)
+    span = np.maximum(hi - lo, 1e-6)
+    return np.column_stack([lo - pad * span, hi + pad * span])
+
+
+def magnitude_norm(*fields_: VectorField) -> Normalize:
+    """One colour scale (0 .. largest magnitude) shared by every field given."""
+    vmax = max((f.max_magnitude for f in fields_), default=0.0)
+    return Normalize(vmin=0.0, vmax=vmax if vmax > 0 else 1.0)
+
+
+def nice_length(x: float) -> float:
+    """A round number (1, 2 or 5 times a power of ten) not above ``x``: the scale arrow's length."""
+    if not x > 0:
+        return 1.0
+    power = 10.0 ** np.floor(np.log10(x))
+    for step in (5.0, 2.0, 1.0):
+        if step * power <= x:
+            return float(step * power)
+    return float(power)
+
+
+def format_length(metres: float) -> str:
+    if metres >= 1:
+        return f"{metres:g} m"
+    if metres >= 0.01:
+        return f"{metres * 100:g} cm"
+    return f"{metres * 1000:g} mm"
+
+
+def figure(width_in: float, height_in: float, dpi: int):
+    return plt.figure(figsize=(width_in, height_in), dpi=dpi, layout="constrained")
+
+
+def mark_sensors(ax, origins: dict[int, np.ndarray], three_d: bool = False) -> None:
+    for k, o in origins.items():
+        style = SENSOR_STYLE[k]
+        if three_d:
+            ax.scatter([o[0]], [o[1]], [o[2]], s=50, edgecolors="k", zorder=5, depthshade=False, **style)
+        else:
+            ax.scatter([o[0]], [o[1]], s=80, edgecolors="k", zorder=5, **style)
+
+
+def legend(ax, **kwargs):
+    """A legend whose markers stay readable even when the points themselves are drawn tiny."""
+    handle_box = ax.legend(fontsize=8, framealpha=0.85, **kwargs)
+    for handle in handle_box.legend_handles:
+        if hasattr(handle, "set_sizes"):
+            handle.set_sizes([30])
+        handle.set_alpha(1.0)
+    return handle_box
+
+
+def sensor_origins(pair: RegisteredPair) -> dict[int, np.ndarray]:
+    return {1: pair.origin1, 2: pair.origin2}
+
+
+def set_equal_3d(ax, limits: np.ndarray, min_z_share: float = 0.3) -> None:
+    """True-scale 3-D axes; a flat scene's z range is widened (never squashed) to stay readable."""
+    limits = limits.copy()
+    horizontal = float(np.max(limits[:2, 1] - limits[:2, 0]))
+    if limits[2, 1] - limits[2, 0] < min_z_share * horizontal:
+        mid = limits[2].mean()
+        limits[2] = [mid - min_z_share * horizontal / 2, mid + min_z_share * horizontal / 2]
+    ax.set_xlim(*limits[0])
+    ax.set_ylim(*limits[1])
+    ax.set_zlim(*limits[2])
+    ax.set_box_aspect(tuple(np.maximum(limits[:, 1] - limits[:, 0], 1e-6)))
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("y (m)")
+    ax.set_zlabel("z (m)")
+    for axis in (ax.xaxis, ax.yaxis, ax.zaxis):
+        axis.set_pane_color((1.0, 1.0, 1.0, 0.0))
+
+
+def set_top_axes(ax, limits: np.ndarray) -> None:
+    ax.set_xlim(*limits[0])
+    ax.set_ylim(*limits[1])
+    ax.set_aspect("equal", adjustable="box")
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("y (m)")
+    ax.grid(True, lw=0.3, alpha=0.5)
+
+
+def save(fig, out_dir: Path, stem: str, settings: PlotSettings) -> list[Path]:
+    """Write ``stem.png`` (and ``stem.svg`` when asked and small enough) atomically; close."""
+    written = []
+    try:
+        for fmt in settings.formats:
+            buf = io.BytesIO()
+            fig.savefig(buf, format=fmt, dpi=settings.dpi)
+            data = buf.getvalue()
+            if fmt == "svg" and len(data) > SVG_MAX_BYTES:
+                continue
+            path = out_dir / f"{stem}.{fmt}"
+            with atomic_path(path) as tmp:
+                tmp.write_bytes(data)
+            written.append(path)
+    finally:
+        plt.close(fig)
+    return written
+
+
+def png_bytes(fig, dpi: int) -> bytes:
+    """The figure as PNG bytes (for embedding in a report); closes the figure."""
+    buf = io.BytesIO()
+    try:
+        fig.savefig(buf, format="png", dpi=dpi)
+    finally:
+        plt.close(fig)
+    return buf.getvalue()

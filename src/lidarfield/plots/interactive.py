@@ -1,0 +1,65 @@
+"""A rotatable 3-D view of one stage (plotly, self-contained: works from file:// offline)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import plotly.graph_objects as go
+
+from ..io.atomic import write_text
+from .common import PlotSettings, Stage, subsample
+
+CLOUD_RGB = {1: "rgba(214,39,40,0.45)", 2: "rgba(31,119,180,0.45)"}
+
+
+def vector_segments(tails: np.ndarray, tips: np.ndarray) -> np.ndarray:
+    """Polyline vertices tail, tip, NaN for every vector: one trace draws them all."""
+    seg = np.full((len(tails) * 3, 3), np.nan)
+    seg[0::3] = tails
+    seg[1::3] = tips
+    return seg
+
+
+def field_figure(stage: Stage, settings: PlotSettings) -> go.Figure:
+    f = stage.field
+    m = settings.magnification
+    fig = go.Figure()
+    for c, xyz in ((1, stage.pair.xyz1), (2, stage.pair.xyz2)):
+        pts = subsample(xyz, settings.background_points // 2, seed=c)
+        fig.add_trace(go.Scatter3d(
+            x=pts[:, 0], y=pts[:, 1], z=pts[:, 2], mode="markers", name=f"cloud {c} ({len(xyz)} points, {len(pts)} drawn)",
+            marker=dict(size=1.5, color=CLOUD_RGB[c]), hoverinfo="skip",
+        ))
+    tips = f.tails + m * f.vectors
+    seg = vector_segments(f.tails, tips)
+    colour = np.repeat(f.magnitude, 3)
+    fig.add_trace(go.Scatter3d(
+        x=seg[:, 0], y=seg[:, 1], z=seg[:, 2], mode="lines", name=f"vectors mean1→mean2 (×{m:g})",
+        line=dict(width=5, color=colour, colorscale="Viridis", cmin=0, cmax=max(f.max_magnitude, 1e-9),
+                  colorbar=dict(title="magnitude (m)")),
+        hoverinfo="skip",
+    ))
+    fig.add_trace(go.Scatter3d(
+        x=tips[:, 0], y=tips[:, 1], z=tips[:, 2], mode="markers", name="vector tips (mean2)",
+        marker=dict(size=3, color=f.magnitude, colorscale="Viridis", cmin=0, cmax=max(f.max_magnitude, 1e-9)),
+        text=[f"voxel {int(v)}: {mag:.3f} m" for v, mag in zip(f.columns["voxel"], f.magnitude)], hoverinfo="text",
+    ))
+    origins = np.array([stage.pair.origin1, stage.pair.origin2])
+    fig.add_trace(go.Scatter3d(
+        x=origins[:, 0], y=origins[:, 1], z=origins[:, 2], mode="markers+text", name="sensor origins",
+        text=["sensor 1", "sensor 2"], marker=dict(size=6, color=["#d62728", "#1f77b4"], symbol="diamond"),
+    ))
+    pair_name = stage.path.parent.parent.name
+    fig.update_layout(
+        title=f"{pair_name} · {stage.label} · largest vector {f.max_magnitude:.3f} m",
+        scene=dict(aspectmode="data", xaxis_title="x (m)", yaxis_title="y (m)", zaxis_title="z (m)"),
+        legend=dict(itemsizing="constant"), margin=dict(l=0, r=0, t=40, b=0),
+    )
+    return fig
+
+
+def plot_interactive(stage: Stage, out_dir: Path, settings: PlotSettings) -> list[Path]:
+    path = out_dir / "field_3d.html"
+    write_text(path, field_figure(stage, settings).to_html(include_plotlyjs=True, full_html=True))
+    return [path]

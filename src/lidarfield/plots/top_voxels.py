@@ -1,0 +1,137 @@
+"""The k voxels with the largest vectors, drawn as wireframes over both clouds.
+
+A spherical voxel is the solid between two azimuths, two elevations and two ranges about
+sensor 1; without range shells its ranges are the nearest and farthest of its points.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import matplotlib.pyplot as plt
+import numpy as np
+from matplotlib.lines import Line2D
+
+from ..errors import InputError
+from ..grid import CartesianGrid, Grid, SphericalGrid, grid_from_config
+from .common import CLOUD_COLOURS, PlotSettings, Stage, figure, mark_sensors, save, sensor_origins, set_equal_3d, set_top_axes, subsample
+from .field_views import PERSPECTIVE_VIEW
+
+ARC_SAMPLES = 16
+
+
+def _spherical_to_xyz(az_deg: np.ndarray, el_deg: np.ndarray, r: np.ndarray) -> np.ndarray:
+    az, el = np.radians(az_deg), np.radians(el_deg)
+    return np.column_stack([r * np.cos(el) * np.cos(az), r * np.cos(el) * np.sin(az), r * np.sin(el)])
+
+
+def spherical_voxel_wireframe(az_deg: tuple[float, float], el_deg: tuple[float, float], r_m: tuple[float, float], n_arc: int = ARC_SAMPLES) -> list[np.ndarray]:
+    """The 12 edges of a spherical voxel as (n, 3) polylines: 4 radial segments, 4 azimuth
+    arcs and 4 elevation arcs (arcs sampled with ``n_arc`` points)."""
+    (a0, a1), (e0, e1), (r0, r1) = az_deg, el_deg, r_m
+    t = np.linspace(0.0, 1.0, n_arc)
+    edges = []
+    for a in (a0, a1):
+        for e in (e0, e1):
+            edges.append(_spherical_to_xyz(np.array([a, a]), np.array([e, e]), np.array([r0, r1])))
+    for r in (r0, r1):
+        for e in (e0, e1):
+            edges.append(_spherical_to_xyz(a0 + t * (a1 - a0), np.full(n_arc, e), np.full(n_arc, r)))
+        for a in (a0, a1):
+            edges.append(_spherical_to_xyz(np.full(n_arc, a), e0 + t * (e1 - e0), np.full(n_arc, r)))
+    return edges
+
+
+def box_wireframe(lo: np.ndarray, hi: np.ndarray) -> list[np.ndarray]:
+    """The 12 edges of an axis-aligned box as two-point polylines."""
+    corners = np.array([[hi[i] if (c >> i) & 1 else lo[i] for i in range(3)] for c in range(8)])
+    return [corners[[a, b]] for a in range(8) for b in range(a + 1, 8) if bin(a ^ b).count("1") == 1]
+
+
+def voxel_wireframe(grid: Grid, voxel_id: int, voxel_ids_of_points: np.ndarray, points: np.ndarray) -> list[np.ndarray]:
+    """Wireframe of one voxel of ``grid``; ``points``/``voxel_ids_of_points`` give the range
+    extent of a spherical voxel when the grid has no range shells."""
+    bins = {k: int(v[0]) for k, v in grid.bins(np.array([voxel_id])).items()}
+    if isinstance(grid, CartesianGrid):
+        lo = np.asarray(grid.origin) + grid.cell_m * np.array([bins["ix"], bins["iy"], bins["iz"]])
+        return box_wireframe(lo, lo + grid.cell_m)
+    width = 360.0 / grid.azimuth_bins
+    a0 = grid.azimuth_offset_deg + bins["az_bin"] * width
+    lo, hi = grid.elevation_deg
+    height = (hi - lo) / grid.elevation_bins
+    e0 = lo + bins["el_bin"] * height
+    if grid.range_edges_m is not None:
+        r = (grid.range_edges_m[bins["r_bin"]], grid.range_edges_m[bins["r_bin"] + 1])
+    else:
+        ranges = np.linalg.norm(points[voxel_ids_of_points == voxel_id], axis=1)
+        r = (float(ranges.min()), float(ranges.max())) if len(ranges) else (0.0, 0.0)
+    return spherical_voxel_wireframe((a0, a0 + width), (e0, e0 + height), r)
+
+
+def voxel_description(grid: Grid, voxel_id: int) -> str:
+    bins = {k: int(v[0]) for k, v in grid.bins(np.array([voxel_id])).items()}
+    if isinstance(grid, SphericalGrid):
+        width = 360.0 / grid.azimuth_bins
+        a0 = grid.azimuth_offset_deg + bins["az_bin"] * width
+        lo, hi = grid.elevation_deg
+        e0 = lo + bins["el_bin"] * (hi - lo) / grid.elevation_bins
+        text = f"az {a0:g} to {a0 + width:g}°, el {e0:g} to {e0 + (hi - lo) / grid.elevation_bins:g}°"
+        return text + (f", shell {bins['r_bin']}" if bins["r_bin"] >= 0 else "")
+    return f"cell ({bins['ix']}, {bins['iy']}, {bins['iz']})"
+
+
+def clip_to_box(polyline: np.ndarray, limits: np.ndarray) -> np.ndarray:
+    """NaN out the vertices outside the axis limits (3-D axes do not clip lines themselves)."""
+    inside = np.all((polyline >= limits[:, 0]) & (polyline <= limits[:, 1]), axis=1)
+    out = polyline.copy()
+    out[~inside] = np.nan
+    return out
+
+
+def stage_grid(stage: Stage) -> Grid:
+    grid_config = stage.field.meta.get("grid")
+    if not isinstance(grid_config, dict):
+        raise InputError("field metadata has no 'grid' settings: cannot draw its voxels", stage.path / "field.parquet")
+    return grid_from_config(grid_config)
+
+
+def plot_top_voxels(stage: Stage, limits: np.ndarray, out_dir: Path, settings: PlotSettings) -> list[Path]:
+    f = stage.field
+    grid = stage_grid(stage)
+    k = min(settings.top_k, len(f.magnitude))
+    top = np.argsort(f.magnitude)[::-1][:k]
+    points = np.vstack([stage.pair.xyz1, stage.pair.xyz2])
+    point_ids = grid.assign(points) if k and isinstance(grid, SphericalGrid) and grid.range_edges_m is None else np.zeros(0, np.int64)
+    colours = plt.get_cmap("tab10" if k <= 10 else "turbo")(np.linspace(0, 1, max(k, 1)) if k > 10 else np.arange(max(k, 1)))
+    frames = [voxel_wireframe(grid, int(f.columns["voxel"][i]), point_ids, points) for i in top]
+
+    fig = figure(14.0, 7.0, settings.dpi)
+    ax_top = fig.add_subplot(1, 2, 1)
+    ax_3d = fig.add_subplot(1, 2, 2, projection="3d")
+    n_bg = settings.background_points // 2
+    for c, xyz in ((1, stage.pair.xyz1), (2, stage.pair.xyz2)):
+        bg = subsample(xyz, n_bg, seed=c)
+        ax_top.scatter(bg[:, 0], bg[:, 1], s=0.6, c=CLOUD_COLOURS[c], alpha=0.3, lw=0, rasterized=True)
+        ax_3d.scatter(*bg.T, s=0.3, c=CLOUD_COLOURS[c], alpha=0.15, lw=0, depthshade=False, rasterized=True)
+    handles = [Line2D([], [], ls="", marker=".", color=CLOUD_COLOURS[c], label=f"cloud {c}") for c in (1, 2)]
+    for rank, (i, edges, colour) in enumerate(zip(top, frames, colours), start=1):
+        for e in edges:
+            ax_top.plot(e[:, 0], e[:, 1], color=colour, lw=1.2)
+            clipped = clip_to_box(e, limits)
+            ax_3d.plot(clipped[:, 0], clipped[:, 1], clipped[:, 2], color=colour, lw=1.0)
+        tail, tip = f.tails[i], f.tails[i] + settings.magnification * f.vectors[i]
+        ax_top.annotate("", xy=tip[:2], xytext=tail[:2], arrowprops=dict(arrowstyle="-|>", color="k", lw=1.2))
+        ax_top.text(*tail[:2], f" {rank}", fontsize=8, fontweight="bold", color=colour, va="bottom")
+        ax_3d.plot(*np.column_stack([tail, tip]), color="k", lw=1.5)
+        ax_3d.text(*tail, f"{rank}", fontsize=8, color=colour, fontweight="bold")
+        voxel_id = int(f.columns["voxel"][i])
+        handles.append(Line2D([], [], color=colour, label=f"#{rank}: {f.magnitude[i]:.3f} m · {voxel_description(grid, voxel_id)}"))
+    for ax, three_d in ((ax_top, False), (ax_3d, True)):
+        mark_sensors(ax, sensor_origins(stage.pair), three_d=three_d)
+    set_top_axes(ax_top, limits)
+    set_equal_3d(ax_3d, limits)
+    ax_3d.view_init(**PERSPECTIVE_VIEW)
+    fig.legend(handles=handles, loc="outside right center", fontsize=8, title=f"top {k} voxels (arrow ×{settings.magnification:g})")
+    pair_name = stage.path.parent.parent.name
+    fig.suptitle(f"{pair_name} · {stage.label} · the {k} voxels with the largest vectors", fontsize=11)
+    return save(fig, out_dir, "top_voxels", settings)

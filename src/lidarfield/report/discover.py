@@ -1,0 +1,111 @@
+"""Find the pairs, their stages and their summary rows in a results folder.
+
+A results folder is either a study (``results/``: one folder per pair, each with ``stages/``)
+or one pair (``lidarfield run --out DIR``: ``DIR/stages/`` itself). The summary decides which
+stage folders belong to the study (old stages of other stack variants stay on disk); without
+a summary every stage folder is taken, in the order of its ``{k:02d}-`` prefix.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pandas as pd
+import yaml
+
+from ..errors import ConfigError, InputError
+
+LIST_COLUMNS = ("rigid_translation_m",)
+
+
+def read_summary(folder: Path) -> list[dict] | None:
+    """Rows of ``summary.parquet`` (or ``summary.csv``) in ``folder``; None when neither exists."""
+    for name, reader in (("summary.parquet", pd.read_parquet), ("summary.csv", pd.read_csv)):
+        path = folder / name
+        if path.is_file():
+            try:
+                df = reader(path)
+            except Exception as e:  # pyarrow and pandas raise many types for a bad file
+                raise InputError(f"not a readable summary table ({e})", path) from None
+            if not {"pair", "stage"} <= set(df.columns):
+                raise InputError(f"summary table without 'pair' and 'stage' columns (has {list(df.columns)})", path)
+            return [_clean_row(r) for r in df.to_dict("records")]
+    return None
+
+
+def _clean_row(row: dict) -> dict:
+    out = {}
+    for k, v in row.items():
+        if k in LIST_COLUMNS and isinstance(v, str):
+            try:
+                v = json.loads(v)
+            except ValueError:
+                pass
+        elif hasattr(v, "tolist"):
+            v = v.tolist()
+        out[k] = v
+    return out
+
+
+def _stage_rows(stage_dirs: list[Path]) -> list[dict]:
+    rows = []
+    for d in stage_dirs:
+        stats = d / "stats.json"
+        if stats.is_file():
+            try:
+                rows.append(json.loads(stats.read_text()))
+            except ValueError as e:
+                raise InputError(f"not valid JSON ({e})", stats) from None
+    return rows
+
+
+def _level(stage_dir: Path) -> int:
+    prefix = stage_dir.name.split("-", 1)[0]
+    return int(prefix) if prefix.isdigit() else -1
+
+
+def discover(results_dir: str | Path) -> tuple[dict[str, list[Path]], list[dict]]:
+    """``{pair: [stage folders in order]}`` and the summary rows of a results folder."""
+    results_dir = Path(results_dir)
+    if not results_dir.is_dir():
+        raise InputError("results folder not found", results_dir)
+    single_pair = (results_dir / "stages").is_dir()
+    if single_pair:
+        pair_dirs = {results_dir.name: results_dir}
+    else:
+        pair_dirs = {p.name: p for p in sorted(results_dir.iterdir()) if (p / "stages").is_dir()}
+    if not pair_dirs:
+        raise InputError("no pair folders (folders holding stages/) found", results_dir)
+
+    study_rows = None if single_pair else read_summary(results_dir)
+    pairs, rows = {}, []
+    for name, pair_dir in pair_dirs.items():
+        pair_rows = [r for r in study_rows if str(r["pair"]) == name] if study_rows else read_summary(pair_dir)
+        if pair_rows:
+            pair_rows = sorted(pair_rows, key=lambda r: float(r.get("level", 0)))
+            stages = [pair_dir / "stages" / str(r["stage"]) for r in pair_rows]
+            stages = [s for s in stages if s.is_dir()]
+        else:
+            stages = sorted((s for s in (pair_dir / "stages").iterdir() if s.is_dir()), key=lambda s: (_level(s), s.name))
+            pair_rows = _stage_rows(stages)
+        for r in pair_rows:
+            r.setdefault("pair", name)
+        pairs[name] = stages
+        rows += pair_rows
+    return pairs, rows
+
+
+def read_study_yaml(path: str | Path) -> dict:
+    """A study config file as a plain mapping, for display and for its ``plots`` section (the
+    full validation, with scan files and hypotheses, is ``lidarfield.config.load_config``'s)."""
+    path = Path(path)
+    if not path.is_file():
+        raise ConfigError("config file not found", path)
+    try:
+        config = yaml.safe_load(path.read_text())
+    except yaml.YAMLError as e:
+        raise ConfigError(f"not valid YAML: {e}", path) from None
+    if not isinstance(config, dict):
+        raise ConfigError("a study config is a YAML mapping (pairs, grid, hypotheses, plots, ...)", path)
+    return config

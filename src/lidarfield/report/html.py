@@ -1,0 +1,151 @@
+"""The study report: one self-contained HTML page (figures embedded as data URIs) comparing
+every stage of every pair, so that a team can read it offline or receive it by mail.
+
+The interactive 3-D views are separate files (a few MB each): the page links them by relative
+path, so they open when the report sits in its results folder.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+
+import numpy as np
+import pyarrow.parquet as pq
+import yaml
+
+from .. import __version__
+from ..io.atomic import write_text
+from ..plots.common import figure, png_bytes
+from ..plots.pair_stats import column, pair_figure_png, sorted_rows
+from .page import esc, image, image_file, page, table
+
+SUMMARY_COLUMNS = (
+    "pair", "stage", "level", "hypothesis", "n1", "n2", "removed1", "removed2", "voxels_valid",
+    "max_magnitude", "p95_magnitude", "mean_magnitude", "rms_magnitude", "paper_max_metric",
+    "rigid_translation_m", "rigid_rotation_deg", "rigid_energy_share", "mean_resultant_length",
+    "registration_method", "registration_fitness",
+)
+STAGE_FIGURES = (
+    ("field_top", "field from above"),
+    ("before_after", "before / after (same axes, same colour scale)"),
+    ("removed_top", "removed points from above"),
+    ("top_voxels", "voxels with the largest vectors"),
+    ("field_perspective", "field in perspective"),
+    ("removed_perspective", "removed points in perspective"),
+)
+PAIR_FIGURES = (("stages", "magnitude stage by stage"), ("rigid_randomness", "rigid part and randomness stage by stage"))
+WIDE = {"before_after": 1130, "top_voxels": 1130}  # two-panel figures take a whole row
+MAX_LEGEND_PAIRS = 12
+OPEN_PAIRS = 3  # the first pairs' sections start expanded; the others are one click away
+DPI = 110
+
+
+def registration_problem(row: dict, stage_dir: Path | None) -> str:
+    """Why a row's registration is suspect ('' when it is not): converged False or a warning,
+    from the row itself or from the registration metadata of the stage's points file."""
+    reg = {}
+    if stage_dir is not None and (stage_dir / "points.parquet").is_file():
+        raw = (pq.read_schema(stage_dir / "points.parquet").metadata or {}).get(b"lidarfield")
+        reg = (json.loads(raw) if raw else {}).get("registration") or {}
+    converged = row.get("registration_converged", row.get("converged", reg.get("converged")))
+    warning = row.get("registration_warning", row.get("warning", reg.get("warning")))
+    problems = []
+    if converged is False or (isinstance(converged, str) and converged.lower() == "false"):
+        problems.append("registration did not converge")
+    if warning and not (isinstance(warning, float) and np.isnan(warning)):
+        problems.append(f"warning: {warning}")
+    return "; ".join(problems)
+
+
+def overview_table(rows: list[dict], stage_dirs: dict[tuple[str, str], Path]) -> str:
+    headers = [c for c in SUMMARY_COLUMNS if any(c in r for r in rows)]
+    body, classes = [], []
+    for r in rows:
+        problem = registration_problem(r, stage_dirs.get((str(r.get("pair")), str(r.get("stage")))))
+        body.append([r.get(c, "") for c in headers] + [problem])
+        classes.append("flag" if problem else "")
+    return table(headers + ["registration problem"], body, classes, text_columns=2)
+
+
+def all_pairs_figure(rows: list[dict], key: str = "max_magnitude", title: str = "largest vector, stage by stage, all pairs"):
+    """One line per pair of ``key`` against the stage level (median in black beyond a dozen pairs)."""
+    by_pair: dict[str, list[dict]] = {}
+    for r in rows:
+        by_pair.setdefault(str(r.get("pair")), []).append(r)
+    fig = figure(9.0, 5.0, DPI)
+    ax = fig.add_subplot()
+    many = len(by_pair) > MAX_LEGEND_PAIRS
+    for name, pair_rows in by_pair.items():
+        pair_rows = sorted_rows(pair_rows)
+        ax.plot(column(pair_rows, "level"), column(pair_rows, key), "-" if many else "o-", lw=0.8 if many else 1.5,
+                alpha=0.4 if many else 1.0, label=None if many else name)
+    if many:
+        levels = np.unique(column(rows, "level"))
+        medians = [np.nanmedian(column([r for r in rows if float(r.get("level", -1)) == lv], key)) for lv in levels]
+        ax.plot(levels, medians, "ko-", lw=2.5, label=f"median of {len(by_pair)} pairs")
+    ax.set_xlabel("stage level")
+    ax.set_ylabel(f"{key.replace('_', ' ')} (m)")
+    ax.set_ylim(bottom=0)
+    ax.grid(True, lw=0.3, alpha=0.6)
+    ax.legend(fontsize=8, ncol=2)
+    ax.set_title(title, fontsize=10)
+    levels = sorted({int(float(r.get("level", 0))) for r in rows})
+    ax.set_xticks(levels)
+    return fig
+
+
+def pair_section(name: str, stage_dirs: list[Path], rows: list[dict], out_dir: Path, open_: bool) -> str:
+    parts = [f'<details id="pair-{esc(name)}"{" open" if open_ else ""}><summary>pair {esc(name)}</summary>']
+    pair_dir = stage_dirs[0].parent.parent if stage_dirs else None
+    figs = []
+    for stem, caption in PAIR_FIGURES:
+        path = pair_dir / "figures" / f"{stem}.png" if pair_dir else None
+        if path is not None and path.is_file():
+            figs.append(image_file(path, f"{name}: {caption}", 640))
+        elif rows:
+            figs.append(image(pair_figure_png(stem, rows, DPI), f"{name}: {caption}", 640))
+    parts.append('<div class="figures">' + "".join(figs) + "</div>")
+    for stage_dir in stage_dirs:
+        fig_dir = stage_dir / "figures"
+        parts.append(f"<h3>{esc(name)} · stage {esc(stage_dir.name)}</h3>")
+        view = fig_dir / "field_3d.html"
+        if view.is_file():
+            rel = Path(os.path.relpath(view, out_dir)).as_posix()
+            parts.append(f'<p><a href="{esc(rel)}">interactive 3-D view of this stage</a></p>')
+        stems = [(s, c) for s, c in STAGE_FIGURES if s != "before_after" or (fig_dir / "before_after.png").is_file()]
+        parts.append('<div class="figures">' + "".join(image_file(fig_dir / f"{s}.png", f"{stage_dir.name}: {c}", WIDE.get(s, 560)) for s, c in stems) + "</div>")
+    parts.append("</details>")
+    return "\n".join(parts)
+
+
+def write_report(study: dict, pairs: dict[str, list[Path]], summary_rows: list[dict], out_html: str | Path) -> Path:
+    """Write the study report; returns its path.
+
+    ``study`` is the config (shown as YAML), ``pairs`` maps each pair to its stage folders in
+    order, ``summary_rows`` are the summary table's rows (one per pair and stage).
+    """
+    out_html = Path(out_html)
+    pairs = {name: [Path(d) for d in dirs] for name, dirs in pairs.items()}
+    stage_dirs = {(name, d.name): d for name, dirs in pairs.items() for d in dirs}
+    n_stages = sum(len(d) for d in pairs.values())
+    body = [
+        "<h1>lidarfield study report</h1>",
+        f'<p class="note">lidarfield {esc(__version__)} · {len(pairs)} pair(s) · {n_stages} stage(s). '
+        "Vectors run from the mean of cloud 1 to the mean of cloud 2 in each voxel; a hypothesis that "
+        "explains part of the discrepancy shrinks the field and breaks its pattern.</p>",
+        "<h2>Study configuration</h2>",
+        f"<pre>{esc(yaml.safe_dump(study or {}, sort_keys=False, default_flow_style=None))}</pre>",
+        "<h2>Overview</h2>",
+        '<p class="note">One row per pair and stage; rows in red: the registration did not converge or warned.</p>',
+        overview_table(summary_rows, stage_dirs),
+    ]
+    if summary_rows:
+        body += ["<h2>Stage by stage, all pairs</h2>", image(png_bytes(all_pairs_figure(summary_rows), DPI), "largest vector per stage, one line per pair")]
+    body += ["<h2>Pairs</h2>", "<ul>" + "".join(f'<li><a href="#pair-{esc(n)}">{esc(n)}</a>: ' + ", ".join(esc(d.name) for d in dirs) + "</li>" for n, dirs in pairs.items()) + "</ul>"]
+    for i, (name, dirs) in enumerate(pairs.items()):
+        rows = [r for r in summary_rows if str(r.get("pair")) == name]
+        body.append(pair_section(name, dirs, rows, out_html.parent, i < OPEN_PAIRS))
+    write_text(out_html, page("lidarfield study report", body))
+    return out_html

@@ -1,0 +1,96 @@
+"""HTML building blocks for self-contained pages: every text escaped, images as data URIs."""
+
+from __future__ import annotations
+
+import base64
+import html
+import io
+import math
+from pathlib import Path
+
+from PIL import Image
+
+EMBED_MAX_WIDTH = 1100
+
+STYLE = """
+body { font-family: system-ui, -apple-system, "Segoe UI", sans-serif; margin: 1.5em auto; max-width: 1800px; padding: 0 1.5em; color: #222; }
+h1 { margin-bottom: 0.2em; } h2 { border-bottom: 1px solid #ccc; padding-bottom: 0.2em; margin-top: 1.6em; }
+table { border-collapse: collapse; font-size: 0.85em; margin: 0.6em 0; }
+th, td { border: 1px solid #ccc; padding: 2px 6px; text-align: right; white-space: nowrap; }
+th { background: #f0f0f0; position: sticky; top: 0; } td.text, th.text { text-align: left; }
+tr.flag td { background: #fde2e2; color: #a00; font-weight: 600; }
+td.better { color: #17741b; } td.worse { color: #b00; }
+pre { background: #f7f7f7; border: 1px solid #ddd; padding: 0.8em; overflow-x: auto; font-size: 0.85em; }
+.figures { display: flex; flex-wrap: wrap; gap: 10px; align-items: flex-start; }
+figure { margin: 0; } figure img { max-width: 100%; height: auto; border: 1px solid #ddd; }
+figcaption { font-size: 0.8em; color: #555; }
+details > summary { cursor: pointer; font-size: 1.15em; font-weight: 600; margin: 0.6em 0; }
+.note { color: #666; font-size: 0.9em; } .missing { color: #a00; font-size: 0.85em; }
+"""
+
+
+def esc(value) -> str:
+    return html.escape(str(value), quote=True)
+
+
+def page(title: str, body: list[str]) -> str:
+    return (
+        "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">"
+        f"<title>{esc(title)}</title><style>{STYLE}</style></head><body>\n" + "\n".join(body) + "\n</body></html>\n"
+    )
+
+
+def compact_png(png: bytes, max_width: int = EMBED_MAX_WIDTH) -> bytes:
+    """The PNG scaled down to ``max_width`` and reduced to a 256-colour palette: a figure
+    embedded in a page drops from a few hundred kB to well under a hundred."""
+    with Image.open(io.BytesIO(png)) as im:
+        im = im.convert("RGB")
+        if im.width > max_width:
+            im = im.resize((max_width, round(im.height * max_width / im.width)), Image.Resampling.LANCZOS)
+        out = io.BytesIO()
+        im.quantize(colors=256, method=Image.Quantize.FASTOCTREE, dither=Image.Dither.NONE).save(out, format="PNG")
+    return out.getvalue()
+
+
+def data_uri(png: bytes) -> str:
+    return "data:image/png;base64," + base64.b64encode(png).decode("ascii")
+
+
+def image(png: bytes, caption: str, width_px: int | None = None) -> str:
+    width = f' style="width:{width_px}px"' if width_px else ""
+    return f'<figure{width}><img src="{data_uri(compact_png(png))}" alt="{esc(caption)}"><figcaption>{esc(caption)}</figcaption></figure>'
+
+
+def image_file(path: Path, caption: str, width_px: int | None = None) -> str:
+    """An embedded PNG file, or a visible note when the figure was not drawn."""
+    if not path.is_file():
+        return f'<p class="missing">{esc(caption)}: not drawn ({esc(path.name)} missing)</p>'
+    return image(path.read_bytes(), caption, width_px)
+
+
+def format_cell(value) -> str:
+    if isinstance(value, float):
+        if math.isnan(value):
+            return ""
+        return f"{value:.4g}"
+    if isinstance(value, (list, tuple)):
+        return "[" + ", ".join(format_cell(float(v)) if isinstance(v, (int, float)) else esc(v) for v in value) + "]"
+    return esc(value)
+
+
+def table(headers: list[str], rows: list[list], row_classes: list[str] | None = None, text_columns: int = 0, cell_classes: list[list[str]] | None = None) -> str:
+    """An HTML table; the first ``text_columns`` columns are left-aligned text."""
+    def cls(i: int) -> str:
+        return ' class="text"' if i < text_columns else ""
+
+    head = "".join(f"<th{cls(i)}>{esc(h)}</th>" for i, h in enumerate(headers))
+    body = []
+    for r, row in enumerate(rows):
+        row_cls = f' class="{row_classes[r]}"' if row_classes and row_classes[r] else ""
+        cells = []
+        for i, v in enumerate(row):
+            extra = cell_classes[r][i] if cell_classes else ""
+            klass = " ".join(c for c in ("text" if i < text_columns else "", extra) if c)
+            cells.append(f'<td class="{klass}">{format_cell(v)}</td>' if klass else f"<td>{format_cell(v)}</td>")
+        body.append(f"<tr{row_cls}>" + "".join(cells) + "</tr>")
+    return f"<table><thead><tr>{head}</tr></thead><tbody>" + "".join(body) + "</tbody></table>"

@@ -81,7 +81,7 @@ def first_hits_reference(mesh: trimesh.Trimesh, origins: np.ndarray, directions:
             q = np.cross(s, e1)
             v = np.einsum("rtk,rtk->rt", d, q) * inv
             t = np.einsum("tk,rtk->rt", e2, q) * inv
-        valid = (np.abs(det) > 1e-12) & (u >= 0) & (v >= 0) & (u + v <= 1) & (t > 0)
+            valid = (np.abs(det) > 1e-12) & (u >= 0) & (v >= 0) & (u + v <= 1) & (t > 0)
         t = np.where(valid, t, np.inf)
         best = np.argmin(t, axis=1)
         best_t = t[np.arange(len(best)), best]
@@ -136,7 +136,7 @@ def simulate_scan(
     ray_time = np.repeat(motion_time, sensor.channels)
 
     distance = _scene_hits(scene, time_s, origins, world_dirs, ray_time)
-    keep = (distance >= sensor.min_range_m) & (distance <= limit)
+    keep = np.isfinite(distance) & (distance >= sensor.min_range_m) & (distance <= limit)
     rng = np.random.default_rng(seed)
     if dropout > 0:
         keep &= rng.random(len(keep)) >= dropout

@@ -1,0 +1,227 @@
+"""Ray-cast scans: geometry against analytic answers, options, reproducibility."""
+
+from __future__ import annotations
+
+import numpy as np
+import open3d as o3d
+import pytest
+import trimesh
+
+from lidarfield.errors import ConfigError
+from lidarfield.io import write_scan
+from lidarfield.scene import load_scene, scene_from_dict
+from lidarfield.sensors import PRESETS, SensorModel
+from lidarfield.simulate import azimuth_steps, first_hits, first_hits_reference, simulate_scan
+from lidarfield.trajectory import pose_from_values
+
+SENSOR = PRESETS["paper-sim-80"]
+POSE1 = pose_from_values([0, 0, 3, 0, 0, 0])
+POSE2 = pose_from_values([1, 1, 3, 0, 0, 0.05])
+GROUND_RING_M = 3 / np.tan(np.radians(22))  # 7.4253 m
+
+
+@pytest.fixture(scope="module")
+def paper():
+    return load_scene("paper-intersection")
+
+
+@pytest.fixture(scope="module")
+def scan1(paper):
+    return simulate_scan(paper, SENSOR, POSE1)
+
+
+def _world(scan, pose=None):
+    pose = scan.pose if pose is None else pose
+    return scan.xyz @ pose[:3, :3].T + pose[:3, 3]
+
+
+def _surface_distance(mesh: trimesh.Trimesh, points: np.ndarray) -> np.ndarray:
+    caster = o3d.t.geometry.RaycastingScene()
+    caster.add_triangles(o3d.core.Tensor(mesh.vertices.astype(np.float32)), o3d.core.Tensor(mesh.faces.astype(np.uint32)))
+    return caster.compute_distance(o3d.core.Tensor(points.astype(np.float32))).numpy()
+
+
+def _exact_surface_distance(mesh: trimesh.Trimesh, points: np.ndarray) -> np.ndarray:
+    """Float64 distance to the nearest triangle, by brute force over all triangles."""
+    n, m = len(points), len(mesh.faces)
+    closest = trimesh.triangles.closest_point(np.tile(mesh.triangles, (n, 1, 1)), np.repeat(points, m, axis=0))
+    return np.linalg.norm(closest - np.repeat(points, m, axis=0), axis=1).reshape(n, m).min(axis=1)
+
+
+def _azimuth_deg(xyz):
+    return np.degrees(np.arctan2(xyz[:, 1], xyz[:, 0])) % 360
+
+
+def _elevation_deg(xyz):
+    return np.degrees(np.arctan2(xyz[:, 2], np.hypot(xyz[:, 0], xyz[:, 1])))
+
+
+def test_paper_scan_point_count_and_attributes(scan1):
+    print(f"\npaper-intersection, paper-sim-80 at (0, 0, 3): {len(scan1)} points of {SENSOR.channels * 1800} rays")
+    assert 80_000 < len(scan1) < 100_000  # ground + four buildings; the sky above them is a miss
+    assert scan1.sensor == SENSOR and np.array_equal(scan1.pose, POSE1)
+    assert "paper-intersection" in scan1.source and "paper-sim-80" in scan1.source
+    ring, time = scan1.attributes["ring"], scan1.attributes["time"]
+    assert ring.dtype == np.int32 and ring.min() == 0 and ring.max() <= 79
+    assert time.min() == 0 and time.max() == pytest.approx(1799 / 1800 / SENSOR.rotation_hz)
+    # each point lies along its own beam: ring -> elevation, time -> azimuth
+    assert np.allclose(_elevation_deg(scan1.xyz), np.asarray(SENSOR.elevation_deg)[ring], atol=1e-9)
+    assert np.allclose(_azimuth_deg(scan1.xyz), time * SENSOR.rotation_hz * 360, atol=1e-7)
+
+
+def test_every_hit_lies_on_the_scene_surface(paper, scan1):
+    mesh = paper.mesh_at(0.0)
+    world = _world(scan1)
+    assert _surface_distance(mesh, world).max() < 1e-4
+    sample = world[np.random.default_rng(1).choice(len(world), 200, replace=False)]
+    assert _exact_surface_distance(mesh, sample).max() < 1e-9  # the float64 range refinement
+
+
+def test_ground_ring_starts_at_3_over_tan_22_in_open_directions(scan1):
+    world = _world(scan1)
+    ground = np.abs(world[:, 2]) < 1e-9
+    step = 360 / 1800 + 1e-9  # one azimuth step, with room for rounding
+    horizontal = np.hypot(world[:, 0], world[:, 1])
+    azimuth = _azimuth_deg(scan1.xyz)
+    for street in (0, 90, 180, 270):
+        near = ground & (np.abs((azimuth - street + 180) % 360 - 180) <= step)
+        nearest = np.argmin(np.where(near, horizontal, np.inf))
+        assert horizontal[nearest] == pytest.approx(GROUND_RING_M, abs=1e-9)
+        assert scan1.attributes["ring"][nearest] == 0
+    # towards the buildings (diagonals) the lowest beam hits a wall before the ground ring
+    lowest = scan1.attributes["ring"] == 0
+    for diagonal in (45, 135, 225, 315):
+        towards = lowest & (np.abs((azimuth - diagonal + 180) % 360 - 180) <= step)
+        assert towards.sum() == 3 and not ground[towards].any() and horizontal[towards].max() < GROUND_RING_M
+
+
+def test_no_return_outside_the_beams(scan1):
+    elevation = _elevation_deg(scan1.xyz)
+    assert elevation.max() <= max(SENSOR.elevation_deg) + 1e-9
+    assert elevation.min() >= min(SENSOR.elevation_deg) - 1e-9
+
+
+def test_open3d_kernel_matches_the_reference(paper):
+    rng = np.random.default_rng(7)
+    origins = rng.uniform([-3, -3, 0.5], [3, 3, 8], size=(4000, 3))
+    directions = rng.normal(size=(4000, 3))
+    directions /= np.linalg.norm(directions, axis=1, keepdims=True)
+    mesh = paper.mesh_at(0.0)
+    fast, _ = first_hits(mesh, origins, directions)
+    plain, _ = first_hits_reference(mesh, origins, directions)
+    assert np.isfinite(fast).sum() > 2000
+    assert np.array_equal(np.isfinite(fast), np.isfinite(plain))
+    hit = np.isfinite(fast)
+    assert np.abs(fast[hit] - plain[hit]).max() < 1e-9
+
+
+def test_range_limits_of_model_and_option(paper, scan1):
+    ranges = np.linalg.norm(scan1.xyz, axis=1)
+    limited = simulate_scan(paper, SENSOR, POSE1, max_range_m=9.0)
+    assert np.linalg.norm(limited.xyz, axis=1).max() <= 9.0
+    assert len(limited) == np.count_nonzero(ranges <= 9.0)
+    near_blind = SensorModel("near-blind", SENSOR.elevation_deg, 0.2, min_range_m=10.0)
+    assert np.linalg.norm(simulate_scan(paper, near_blind, POSE1).xyz, axis=1).min() >= 10.0
+    with pytest.raises(ConfigError):
+        simulate_scan(paper, SENSOR, POSE1, max_range_m=-1)
+    with pytest.raises(ConfigError):
+        simulate_scan(paper, SENSOR, POSE1, dropout=1.5)
+
+
+def test_azimuth_limits(paper):
+    front = SensorModel("front", (-10.0, 0.0), 1.0, azimuth_limits_deg=(-45.0, 45.0))
+    steps, n = azimuth_steps(front)
+    assert n == 360 and len(steps) == 91
+    azimuth = _azimuth_deg(simulate_scan(paper, front, POSE1).xyz)
+    assert np.all((azimuth <= 45 + 1e-9) | (azimuth >= 315 - 1e-9))
+
+
+def test_rolling_shutter_without_motion_is_the_instantaneous_scan(paper, scan1):
+    rolled = simulate_scan(paper, SENSOR, POSE1, rolling_shutter=True)
+    assert np.array_equal(rolled.xyz, scan1.xyz)
+    for name in ("ring", "time"):
+        assert np.array_equal(rolled.attributes[name], scan1.attributes[name])
+
+
+@pytest.fixture(scope="module")
+def wall():
+    """A wall facing the sensor at x = 10 m (a plane turned about y)."""
+    return scene_from_dict({"objects": [{"kind": "plane", "size": [40, 40],
+                                         "transform": {"translation": [10, 0, 0], "rpy": [0, np.pi / 2, 0]}}]})
+
+
+def test_rolling_shutter_seam_gap_is_velocity_times_period(wall):
+    velocity = 2.0
+    scan = simulate_scan(wall, SENSOR, np.eye(4), rolling_shutter=True, linear_velocity_mps=(velocity, 0, 0))
+    time = scan.attributes["time"]
+    first, last = time == time.min(), time == time.max()
+    gap = scan.xyz[first, 0].mean() - scan.xyz[last, 0].mean()
+    period = 1 / SENSOR.rotation_hz
+    assert np.allclose(scan.xyz[first, 0], 10.0)
+    assert gap == pytest.approx(velocity * period, abs=velocity * period / 1800 + 1e-9)
+    # every point: the wall seen from where the sensor was at its firing time
+    assert np.allclose(scan.xyz[:, 0], 10.0 - velocity * time, atol=1e-9)
+
+
+def test_rolling_shutter_turning_sensor_sees_the_wall_at_its_turned_azimuth(wall):
+    yaw_rate = 2.0
+    scan = simulate_scan(wall, SENSOR, np.eye(4), rolling_shutter=True, angular_velocity_rps=(0, 0, yaw_rate))
+    ring, time = scan.attributes["ring"], scan.attributes["time"]
+    elevation = np.radians(np.asarray(SENSOR.elevation_deg)[ring])
+    azimuth = 2 * np.pi * time * SENSOR.rotation_hz
+    expected_range = 10.0 / (np.cos(elevation) * np.cos(azimuth + yaw_rate * time))
+    assert np.allclose(np.linalg.norm(scan.xyz, axis=1), expected_range, rtol=1e-12)
+
+
+def test_noise_and_dropout_are_seeded(paper, scan1, tmp_path):
+    sigma = 0.02
+    noisy = simulate_scan(paper, SENSOR, POSE1, range_noise_m=sigma, seed=3)
+    assert len(noisy) == len(scan1)
+    residual = np.linalg.norm(noisy.xyz, axis=1) - np.linalg.norm(scan1.xyz, axis=1)
+    assert np.std(residual) == pytest.approx(sigma, rel=0.03) and abs(residual.mean()) < 1e-3
+    again = simulate_scan(paper, SENSOR, POSE1, range_noise_m=sigma, seed=3)
+    other = simulate_scan(paper, SENSOR, POSE1, range_noise_m=sigma, seed=4)
+    assert np.array_equal(noisy.xyz, again.xyz) and not np.allclose(noisy.xyz, other.xyz)
+
+    dropped = simulate_scan(paper, SENSOR, POSE1, dropout=0.25, seed=3)
+    kept = len(dropped) / len(scan1)
+    assert kept == pytest.approx(0.75, abs=3 * np.sqrt(0.25 * 0.75 / len(scan1)))
+
+    paths = [tmp_path / f"{name}.parquet" for name in ("a", "b", "c")]
+    for path, seed in zip(paths, (5, 5, 6)):
+        write_scan(simulate_scan(paper, SENSOR, POSE1, range_noise_m=sigma, dropout=0.1, seed=seed), path)
+    a, b, c = (p.read_bytes() for p in paths)
+    assert a == b and a != c
+
+
+def _car_points(scan):
+    """World points off the ground in the car's lane (the buildings are at |y| >= 4), and their times."""
+    world = _world(scan)
+    car = (world[:, 2] > 1e-6) & (np.abs(world[:, 1] - 2) <= 0.9)
+    return world[car], scan.attributes["time"][car]
+
+
+def test_moving_object_is_displaced_by_velocity_times_dt():
+    scene = load_scene("paper-intersection-moving-car")  # car front face at x = 6.75 - 5 t
+    early, _ = _car_points(simulate_scan(scene, SENSOR, POSE1, time_s=0.0))
+    late, _ = _car_points(simulate_scan(scene, SENSOR, POSE1, time_s=0.2))
+    assert len(early) > 100 and len(late) > 100
+    assert early[:, 0].min() == pytest.approx(6.75, abs=1e-9)
+    assert late[:, 0].min() == pytest.approx(5.75, abs=1e-9)
+    assert _surface_distance(scene.mesh_at(0.2), _world(simulate_scan(scene, SENSOR, POSE1, time_s=0.2))).max() < 1e-4
+    # with rolling shutter the car also moves during the sweep: each point at its own time
+    rolled, time = _car_points(simulate_scan(scene, SENSOR, POSE1, time_s=0.2, rolling_shutter=True))
+    front = np.abs(rolled[:, 0] - (5.75 - 5 * time)) < 1e-9
+    assert front.sum() > 50 and time[front].min() > 0
+
+
+def test_paper_pair_by_true_pose_agrees_on_the_building_faces(paper, scan1):
+    scan2 = simulate_scan(paper, SENSOR, POSE2)
+    T_1_2 = np.linalg.inv(POSE1) @ POSE2
+    in_frame1 = scan2.xyz @ T_1_2[:3, :3].T + T_1_2[:3, 3]
+    mesh_in_frame1 = paper.mesh_at(0.0).copy().apply_transform(np.linalg.inv(POSE1))
+    buildings = in_frame1[:, 2] > -3 + 1e-6  # above the ground plane (z = -3 in frame 1)
+    assert buildings.sum() > 20_000
+    assert _surface_distance(mesh_in_frame1, in_frame1[buildings]).max() < 1e-3
+    # and a wrong pose (scan 2 left where it is) does not agree: the check can fail
+    assert np.median(_surface_distance(mesh_in_frame1, scan2.xyz[buildings])) > 0.1

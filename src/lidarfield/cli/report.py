@@ -19,10 +19,10 @@ def add_parser(subparsers) -> None:
 
 
 def run(args) -> int:
+    from ..config import load_config
     from ..report import discover, write_report
-    from ..report.discover import read_study_yaml
 
-    study = read_study_yaml(args.config) if args.config else {}
+    study = load_config(args.config).config if args.config else {}
     pairs, rows = discover(args.results_dir)
     print(write_report(study, pairs, rows, args.out))
     return 0

@@ -54,7 +54,7 @@ def field_figure(stage: Stage, settings: PlotSettings) -> go.Figure:
     fig.update_layout(
         title=f"{pair_name} · {stage.label} · largest vector {f.max_magnitude:.3f} m",
         scene=dict(aspectmode="data", xaxis_title="x (m)", yaxis_title="y (m)", zaxis_title="z (m)"),
-        legend=dict(itemsizing="constant"), margin=dict(l=0, r=0, t=40, b=0),
+        legend=dict(itemsizing="constant", x=0.01, y=0.98, bgcolor="rgba(255,255,255,0.7)"), margin=dict(l=0, r=0, t=40, b=0),
     )
     return fig
 

@@ -12,9 +12,8 @@ import json
 from pathlib import Path
 
 import pandas as pd
-import yaml
 
-from ..errors import ConfigError, InputError
+from ..errors import InputError
 
 LIST_COLUMNS = ("rigid_translation_m",)
 
@@ -95,17 +94,3 @@ def discover(results_dir: str | Path) -> tuple[dict[str, list[Path]], list[dict]
         rows += pair_rows
     return pairs, rows
 
-
-def read_study_yaml(path: str | Path) -> dict:
-    """A study config file as a plain mapping, for display and for its ``plots`` section (the
-    full validation, with scan files and hypotheses, is ``lidarfield.config.load_config``'s)."""
-    path = Path(path)
-    if not path.is_file():
-        raise ConfigError("config file not found", path)
-    try:
-        config = yaml.safe_load(path.read_text())
-    except yaml.YAMLError as e:
-        raise ConfigError(f"not valid YAML: {e}", path) from None
-    if not isinstance(config, dict):
-        raise ConfigError("a study config is a YAML mapping (pairs, grid, hypotheses, plots, ...)", path)
-    return config

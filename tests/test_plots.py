@@ -1,0 +1,173 @@
+"""Per-stage and per-pair figures on a synthetic study folder built to the layout contracts."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from lidarfield.errors import ConfigError, InputError
+from lidarfield.grid import CartesianGrid, SphericalGrid
+from lidarfield.plots import plot_pair, plot_settings, plot_stage
+from lidarfield.plots.common import SVG_MAX_BYTES, nice_length, subsample, view_limits
+from lidarfield.plots.synthetic import write_synthetic_pair
+from lidarfield.plots.top_voxels import box_wireframe, spherical_voxel_wireframe, voxel_wireframe
+
+FAST = {"background_points": 3000, "dpi": 60}
+# figure size (inches) x dpi -> pixels
+EXPECTED_SIZE_IN = {
+    "field_top": (9.0, 7.5), "field_perspective": (9.0, 7.5), "removed_top": (9.0, 7.5),
+    "removed_perspective": (9.0, 7.5), "top_voxels": (14.0, 7.0), "before_after": (16.0, 7.5),
+}
+
+
+def assert_real_image(path, size_in, dpi):
+    with Image.open(path) as im:
+        im.verify()
+    with Image.open(path) as im:
+        assert im.size == (round(size_in[0] * dpi), round(size_in[1] * dpi))
+        grey = np.asarray(im.convert("L"), dtype=np.float64)
+    assert grey.std() > 10.0, f"{path.name} looks blank (pixel std {grey.std():.1f})"
+
+
+@pytest.fixture(scope="module")
+def stages(tmp_path_factory):
+    root = tmp_path_factory.mktemp("study")
+    return write_synthetic_pair(root / "pair-a", "pair-a", seed=3, levels=3, n=9000)
+
+
+@pytest.fixture(scope="module")
+def plotted(stages):
+    """Stage 1 drawn against stage 0 (with SVG and the 3-D view), stage 0 alone."""
+    out1 = stages[1] / "figures"
+    written1 = plot_stage(stages[1], stages[0], out1, {**FAST, "formats": ["png", "svg"], "magnification": 2.0})
+    out0 = stages[0] / "figures"
+    written0 = plot_stage(stages[0], None, out0, {**FAST, "interactive": False})
+    return written0, written1
+
+
+def test_every_stage_figure_is_a_real_image_of_its_size(plotted):
+    written0, written1 = plotted
+    names1 = {p.name for p in written1}
+    for stem, size in EXPECTED_SIZE_IN.items():
+        assert f"{stem}.png" in names1
+        assert_real_image(next(p for p in written1 if p.name == f"{stem}.png"), size, FAST["dpi"])
+    assert "field_3d.html" in names1
+    # stage 0: no previous stage, so no before/after; interactive off, so no 3-D view
+    assert {p.name for p in written0} == {f"{s}.png" for s in EXPECTED_SIZE_IN if s != "before_after"}
+
+
+def test_svg_is_written_only_when_small(plotted):
+    svgs = [p for p in plotted[1] if p.suffix == ".svg"]
+    assert svgs, "field figures should fit an SVG"
+    for p in svgs:
+        assert p.stat().st_size <= SVG_MAX_BYTES
+        assert b"<svg" in p.read_bytes()[:2000]
+
+
+def test_interactive_view_is_self_contained(plotted):
+    html = next(p for p in plotted[1] if p.name == "field_3d.html").read_text()
+    assert '<script src="http' not in html  # plotly.js inline: works from file:// offline
+    assert "plotly" in html.lower() and len(html) > 1_000_000
+    for name in ("cloud 1", "cloud 2", "vectors mean1"):
+        assert name in html
+
+
+def test_no_temporary_files_left(plotted, stages):
+    leftovers = [p for p in (stages[1] / "figures").iterdir() if p.name.startswith(".")]
+    assert leftovers == []
+
+
+def test_missing_field_file_is_one_clear_error(tmp_path, stages):
+    bad = tmp_path / "stage"
+    bad.mkdir()
+    (bad / "points.parquet").write_bytes((stages[0] / "points.parquet").read_bytes())
+    out = tmp_path / "figures"
+    with pytest.raises(InputError, match=r"field\.parquet: file not found"):
+        plot_stage(bad, None, out, FAST)
+    assert not out.exists() or not any(out.iterdir())
+
+
+def test_settings_are_validated():
+    assert plot_settings({}).top_k == 10
+    with pytest.raises(ConfigError, match="magnifcation"):
+        plot_settings({"magnifcation": 2})
+    with pytest.raises(ConfigError, match="formats"):
+        plot_settings({"formats": ["jpg"]})
+
+
+def test_pair_figures(stages, tmp_path):
+    import json
+
+    rows = [json.loads((d / "stats.json").read_text()) for d in stages]
+    written = plot_pair(rows, tmp_path, {"dpi": 60})
+    assert [p.name for p in written] == ["stages.png", "rigid_randomness.png"]
+    assert_real_image(written[0], (8.0, 5.0), 60)
+    assert_real_image(written[1], (8.0, 6.5), 60)
+
+
+def test_spherical_wireframe_lies_on_the_voxel_bounds():
+    edges = spherical_voxel_wireframe((30.0, 40.0), (-4.0, 4.0), (5.0, 12.0), n_arc=9)
+    assert len(edges) == 12
+    pts = np.vstack(edges)
+    r = np.linalg.norm(pts, axis=1)
+    az = np.degrees(np.arctan2(pts[:, 1], pts[:, 0]))
+    el = np.degrees(np.arcsin(pts[:, 2] / r))
+    assert np.all((r > 5.0 - 1e-9) & (r < 12.0 + 1e-9))
+    assert np.all((az > 30.0 - 1e-9) & (az < 40.0 + 1e-9))
+    assert np.all((el > -4.0 - 1e-9) & (el < 4.0 + 1e-9))
+    # every vertex is on a face: at a bound of range, azimuth or elevation (2 of 3 for edges)
+    on_bound = sum(np.isclose(v, b) for v, b in ((r, 5.0), (r, 12.0), (az, 30.0), (az, 40.0), (el, -4.0), (el, 4.0)))
+    assert np.all(on_bound >= 2)
+
+
+def test_voxel_wireframe_encloses_the_voxel_of_its_centre():
+    grid = SphericalGrid(36, 5.0, (-20.0, 20.0), 5, (0.0, 10.0, 30.0))
+    voxel = int(grid.assign(np.array([[8.0, 12.0, 1.5]]))[0])
+    edges = voxel_wireframe(grid, voxel, np.zeros(0, np.int64), np.zeros((0, 3)))
+    pts = np.vstack(edges)
+    centre = pts.mean(axis=0)  # inside a convex-enough wedge of 10 deg x 8 deg
+    assert int(grid.assign(centre[None, :])[0]) == voxel
+    r = np.linalg.norm(pts, axis=1)
+    assert r.min() == pytest.approx(10.0) and r.max() == pytest.approx(30.0)
+
+
+def test_voxel_wireframe_without_shells_spans_its_points():
+    grid = SphericalGrid(36, 0.0, (-20.0, 20.0), 5)
+    points = np.array([[3.0, 0.2, 0.0], [7.0, 0.5, 0.1], [20.0, 40.0, 0.0]])
+    ids = grid.assign(points)
+    edges = voxel_wireframe(grid, int(ids[0]), ids, points)
+    r = np.linalg.norm(np.vstack(edges), axis=1)
+    assert r.min() == pytest.approx(np.linalg.norm(points[0]))
+    assert r.max() == pytest.approx(np.linalg.norm(points[1]))
+
+
+def test_cartesian_voxel_is_a_box():
+    grid = CartesianGrid(0.5, (1.0, 0.0, 0.0))
+    voxel = int(grid.assign(np.array([[1.2, -0.3, 0.7]]))[0])
+    edges = voxel_wireframe(grid, voxel, np.zeros(0, np.int64), np.zeros((0, 3)))
+    assert len(edges) == 12
+    assert all(np.linalg.norm(e[1] - e[0]) == pytest.approx(0.5) for e in edges)
+    pts = np.vstack(edges)
+    assert pts.min(axis=0) == pytest.approx([1.0, -0.5, 0.5]) and pts.max(axis=0) == pytest.approx([1.5, 0.0, 1.0])
+    assert len(box_wireframe(np.zeros(3), np.ones(3))) == 12
+
+
+def test_subsample_is_deterministic_and_capped():
+    xyz = np.random.default_rng(1).normal(size=(1000, 3))
+    a, b = subsample(xyz, 100), subsample(xyz, 100)
+    assert len(a) == 100 and np.array_equal(a, b)
+    assert subsample(xyz, 5000) is xyz
+
+
+def test_view_limits_ignore_stray_returns_but_keep_vectors():
+    rng = np.random.default_rng(0)
+    points = np.vstack([rng.uniform(-10, 10, (5000, 3)), [[500.0, 0.0, 0.0]]])
+    limits = view_limits(points, np.array([[0.0, 30.0, 0.0]]), pad=0.0)
+    assert limits[0, 1] < 20.0  # the one return at 500 m does not shrink the scene
+    assert limits[1, 1] == pytest.approx(30.0)  # a drawn vector is never cut off
+
+
+@pytest.mark.parametrize("x, expected", [(0.37, 0.2), (5.121, 5.0), (1.0, 1.0), (0.012, 0.01), (73.0, 50.0)])
+def test_nice_length(x, expected):
+    assert nice_length(x) == pytest.approx(expected)

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from lidarfield.field import discrepancy_field, field_columns, read_field, write_field
-from lidarfield.field_reference import discrepancy_field_reference
+from lidarfield.field import discrepancy_field, field_columns, field_from_voxel_ids, read_field, write_field
+from lidarfield.field_reference import discrepancy_field_reference, field_from_voxel_ids_reference
 from lidarfield.field_stats import field_statistics
 from lidarfield.grid import CartesianGrid, FieldSettings, SphericalGrid
 
@@ -122,9 +122,23 @@ def test_kernel_matches_reference(name):
     reference = discrepancy_field_reference(xyz1, xyz2, settings, origin)
     assert list(fast) == list(reference) == list(field_columns(settings.grid))
     assert len(fast["voxel"]) > 50 and 0 < fast["valid"].sum() < len(fast["voxel"])
-    for column in fast:
-        assert fast[column].dtype == reference[column].dtype, column
-        np.testing.assert_allclose(fast[column], reference[column], atol=1e-9, rtol=0, equal_nan=True, err_msg=column)
+    assert_same_field(fast, reference)
+    # From precomputed ids (one binning, several subsets): the same field, both implementations.
+    grid = settings.grid
+    ids1, ids2 = grid.assign(xyz1, origin), grid.assign(xyz2, origin)
+    assert_same_field(field_from_voxel_ids(ids1, xyz1, ids2, xyz2, settings), fast)
+    keep = slice(0, 20_000)
+    assert_same_field(
+        field_from_voxel_ids(ids1[keep], xyz1[keep], ids2, xyz2, settings),
+        field_from_voxel_ids_reference(ids1[keep], xyz1[keep], ids2, xyz2, settings),
+    )
+
+
+def assert_same_field(a: dict, b: dict) -> None:
+    assert list(a) == list(b)
+    for column in a:
+        assert a[column].dtype == b[column].dtype, column
+        np.testing.assert_allclose(a[column], b[column], atol=1e-9, rtol=0, equal_nan=True, err_msg=column)
 
 
 def test_write_read_round_trip(tmp_path):

@@ -10,8 +10,6 @@ contract for the tests and the benchmark.
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Callable
-
 import numpy as np
 
 from .errors import InputError
@@ -44,12 +42,42 @@ def discrepancy_field(
     grid = settings.grid
     columns1, columns2 = relative_columns(xyz1, origin), relative_columns(xyz2, origin)
     if isinstance(grid, SphericalGrid):
+        # The out-of-grid id n_voxels lands in a bin that _aggregate drops: no masking pass.
         n = grid.n_voxels
         index1 = grid.assign_columns(*columns1, out_id=n)
         index2 = grid.assign_columns(*columns2, out_id=n)
-        to_voxel: Callable[[np.ndarray], np.ndarray] = lambda occupied: occupied
+        dense = (index1, index2, n, _identity)
     else:
-        index1, index2, n, to_voxel = _cartesian_dense_index(grid.assign_columns(*columns1), grid.assign_columns(*columns2))
+        dense = _cartesian_dense_index(grid.assign_columns(*columns1), grid.assign_columns(*columns2))
+    return _aggregate(dense, columns1, columns2, origin, settings)
+
+
+def field_from_voxel_ids(
+    ids1: np.ndarray, xyz1: np.ndarray, ids2: np.ndarray, xyz2: np.ndarray, settings: FieldSettings
+) -> dict[str, np.ndarray]:
+    """The field from voxel ids already assigned by ``settings.grid`` (-1 = out of grid).
+
+    For callers that bin once and aggregate several subsets (e.g. the survivors of each
+    stage); same result as ``discrepancy_field`` with the origin the ids were assigned about.
+    """
+    grid = settings.grid
+    ids1, ids2 = np.asarray(ids1, dtype=np.int64), np.asarray(ids2, dtype=np.int64)
+    if isinstance(grid, SphericalGrid):
+        n = grid.n_voxels
+        dense = (np.where(ids1 < 0, n, ids1), np.where(ids2 < 0, n, ids2), n, _identity)
+    else:
+        dense = _cartesian_dense_index(ids1, ids2)
+    origin = (0.0, 0.0, 0.0)
+    return _aggregate(dense, relative_columns(xyz1, origin), relative_columns(xyz2, origin), origin, settings)
+
+
+def _identity(occupied: np.ndarray) -> np.ndarray:
+    return occupied
+
+
+def _aggregate(dense, columns1, columns2, origin, settings: FieldSettings) -> dict[str, np.ndarray]:
+    """Counts, sums and means per dense index, then the field columns (see module docstring)."""
+    index1, index2, n, to_voxel = dense
     counts1, sums1 = _bin_sums(index1, columns1, n)
     counts2, sums2 = _bin_sums(index2, columns2, n)
     occupied = np.flatnonzero((counts1 + counts2) > 0)
@@ -60,7 +88,7 @@ def discrepancy_field(
     offset = np.asarray(origin, dtype=np.float64).reshape(3, 1)
     mean1 = _means(sums1[:, occupied], n1) + offset
     mean2 = _means(sums2[:, occupied], n2) + offset
-    return assemble_field(grid, voxel, n1, n2, mean1, mean2, settings)
+    return assemble_field(settings.grid, voxel, n1, n2, mean1, mean2, settings)
 
 
 def assemble_field(
@@ -114,7 +142,7 @@ def _cartesian_dense_index(ids1: np.ndarray, ids2: np.ndarray):
     inside1, inside2 = ids1 >= 0, ids2 >= 0
     packed = np.concatenate([ids1[inside1], ids2[inside2]])
     if packed.size == 0:
-        return np.zeros(len(ids1), np.int64), np.zeros(len(ids2), np.int64), 0, lambda occupied: occupied
+        return np.zeros(len(ids1), np.int64), np.zeros(len(ids2), np.int64), 0, _identity
     mask = (1 << CARTESIAN_BITS) - 1
     lows, sizes = [], []
     for axis in range(3):

@@ -17,10 +17,18 @@ def discrepancy_field_reference(
 ) -> dict[str, np.ndarray]:
     """Same contract as ``field.discrepancy_field``, computed with a pandas groupby."""
     grid = settings.grid
+    return field_from_voxel_ids_reference(grid.assign(xyz1, origin), xyz1, grid.assign(xyz2, origin), xyz2, settings)
+
+
+def field_from_voxel_ids_reference(
+    ids1: np.ndarray, xyz1: np.ndarray, ids2: np.ndarray, xyz2: np.ndarray, settings: FieldSettings
+) -> dict[str, np.ndarray]:
+    """Same contract as ``field.field_from_voxel_ids``, computed with a pandas groupby."""
+    grid = settings.grid
     per_cloud = []
-    for k, xyz in ((1, xyz1), (2, xyz2)):
+    for k, xyz, ids in ((1, xyz1, ids1), (2, xyz2, ids2)):
         frame = pd.DataFrame(np.asarray(xyz, dtype=np.float64), columns=["x", "y", "z"])
-        frame["voxel"] = grid.assign(xyz, origin)
+        frame["voxel"] = ids
         frame = frame[frame["voxel"] >= 0]
         grouped = frame.groupby("voxel").agg(
             **{f"n{k}": ("x", "size"), f"x{k}": ("x", "mean"), f"y{k}": ("y", "mean"), f"z{k}": ("z", "mean")}

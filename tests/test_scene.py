@@ -135,8 +135,11 @@ def test_arc_trajectory_heads_along_the_arc():
         assert np.allclose(heading, [-np.sin(angle), np.cos(angle), 0])
         assert np.allclose(velocity, 5 * heading)
         assert np.allclose(angular, [0, 0, 0.5])
-    clockwise = arc_trajectory((0, 0), 10.0, 0.0, 5.0, 2.0, 2, 0.0, clockwise=True)
-    assert clockwise[1].pose[1, 3] < 0 and clockwise[1].angular_velocity_rps[2] == -0.5
+    clockwise = arc_trajectory((0, 0), 10.0, 0.0, -5.0, 2.0, 2, 0.0)  # negative speed: clockwise
+    pose, velocity, angular = clockwise[1]
+    assert pose[1, 3] < 0 and angular[2] == -0.5
+    assert np.allclose(velocity, 5 * (pose[:3, :3] @ [1, 0, 0]))  # still driving forwards
+    assert np.allclose(clockwise[0].pose[:3, :3] @ [1, 0, 0], [0, -1, 0])
 
 
 def test_paper_turn_stays_in_the_streets():

@@ -57,26 +57,24 @@ def arc_trajectory(
     rate_hz: float,
     frames: int,
     height_m: float,
-    *,
-    clockwise: bool = False,
 ) -> list[TrajectoryFrame]:
     """Scan poses along a circular arc driven at constant speed, heading tangent to the arc.
 
-    The sensor is at angle ``start_angle_rad + k * speed / (radius * rate)`` about
-    ``center_xy`` for frame k (counter-clockwise unless ``clockwise``), ``height_m`` above
-    z = 0, level; its x axis points along the direction of travel.
+    Frame k is at angle ``start_angle_rad + k * speed_mps / (radius_m * rate_hz)`` about
+    ``center_xy``, ``height_m`` above z = 0, level, its x axis along the direction of travel.
+    ``speed_mps`` is signed: positive drives counter-clockwise about the centre, negative
+    clockwise.
     """
     if radius_m <= 0 or rate_hz <= 0 or frames < 1:
         raise ValueError("arc_trajectory: radius_m and rate_hz must be positive, frames >= 1")
-    sign = -1.0 if clockwise else 1.0
-    yaw_rate = sign * speed_mps / radius_m
+    yaw_rate = speed_mps / radius_m
+    side = 1.0 if speed_mps >= 0 else -1.0  # the heading is 90 deg ahead of the radius, in the turn's sense
     out = []
     for k in range(frames):
-        t = k / rate_hz
-        angle = start_angle_rad + yaw_rate * t
+        angle = start_angle_rad + yaw_rate * k / rate_hz
         position = (center_xy[0] + radius_m * np.cos(angle), center_xy[1] + radius_m * np.sin(angle), height_m)
-        heading = angle + sign * np.pi / 2
-        velocity = (speed_mps * np.cos(heading), speed_mps * np.sin(heading), 0.0)
+        heading = angle + side * np.pi / 2
+        velocity = (abs(speed_mps) * np.cos(heading), abs(speed_mps) * np.sin(heading), 0.0)
         out.append(TrajectoryFrame(pose_matrix(position, (0.0, 0.0, heading)), velocity, (0.0, 0.0, yaw_rate)))
     return out
 

@@ -1,0 +1,18 @@
+"""Registration: scan 2 expressed in scan 1's sensor frame (identity, reference poses, a fixed
+transform from a file, or scan matching with Open3D), and the translation hidden in an aligned
+copy of a scan."""
+
+from .aligned import read_xyz_rows, translation_from_aligned_copy, translation_offsets, write_transform
+from .core import register_pair
+from .settings import DEFAULTS, METHODS, parse_settings
+
+__all__ = [
+    "DEFAULTS",
+    "METHODS",
+    "parse_settings",
+    "read_xyz_rows",
+    "register_pair",
+    "translation_from_aligned_copy",
+    "translation_offsets",
+    "write_transform",
+]

@@ -1,0 +1,130 @@
+"""``register_pair``: express scan 2 in scan 1's sensor frame and record how well that went."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import RegistrationError
+from ..pair import RegisteredPair
+from ..poses import apply_pose, pose_error, read_pose, relative_pose
+from ..scan import Scan
+from . import matching
+from .settings import MATCHING_METHODS, RegistrationSettings, parse_settings
+
+# Fewer points than this after downsampling cannot constrain six degrees of freedom robustly.
+_MIN_POINTS = 10
+
+
+def register_pair(
+    scan1: Scan, scan2: Scan, settings: str | dict = "identity", base_dir: str | Path | None = None
+) -> RegisteredPair:
+    """Scan 2 expressed in scan 1's frame, with ``T_1_2`` (pose of sensor 2 in frame 1).
+
+    ``settings`` is the config's ``register`` value (see :mod:`.settings`). The pair's
+    ``registration`` metadata holds the method, fitness, inlier RMSE, ``converged`` and, when
+    both scans carry world-from-sensor poses, the error against their relative pose. A scan
+    matching that fails or fits poorly is not an exception: ``converged`` is False and
+    ``warning`` says why. Relative file names in ``settings`` are taken from ``base_dir``.
+    """
+    s = parse_settings(settings, base_dir)
+    reference = _reference(scan1, scan2)
+    p = s.params
+    source = matching.point_cloud(scan2.xyz, p["voxel_m"], p["min_range_m"])
+    target = matching.point_cloud(scan1.xyz, p["voxel_m"], p["min_range_m"])
+    record: dict = {"method": s.method}
+    if s.method in MATCHING_METHODS:
+        T, record = _scan_match(s, scan1, scan2, source, target, reference)
+    else:
+        T = _fixed_transform(s, scan1, scan2, reference)
+        record["converged"] = True  # nothing to converge; fitness still says how well it fits
+        if s.method == "transform":
+            record["transform_file"] = str(s.transform_file)
+    fitness, rmse = matching.evaluate(source, target, T, p["fitness_distance_m"])
+    record.update(fitness=fitness, inlier_rmse=rmse, fitness_distance_m=p["fitness_distance_m"])
+    record["min_fitness"] = p["min_fitness"]
+    record["points_used"] = [len(target.points), len(source.points)]
+    _judge(record, T, s.method in MATCHING_METHODS)
+    if reference is not None:
+        translation_error, rotation_error = pose_error(T, reference)
+        record.update(translation_error_m=translation_error, rotation_error_deg=rotation_error)
+        record["reference_T_1_2"] = reference.tolist()
+    return RegisteredPair(
+        scan1.xyz,
+        apply_pose(T, scan2.xyz),
+        T,
+        scan1.sensor,
+        scan2.sensor,
+        dict(scan1.attributes),
+        dict(scan2.attributes),
+        record,
+    )
+
+
+def _reference(scan1: Scan, scan2: Scan) -> np.ndarray | None:
+    if scan1.pose is None or scan2.pose is None:
+        return None
+    return relative_pose(scan1.pose, scan2.pose)
+
+
+def _require_reference(reference, scan1: Scan, scan2: Scan, what: str) -> np.ndarray:
+    if reference is None:
+        missing = [s.source or f"scan {k}" for k, s in ((1, scan1), (2, scan2)) if s.pose is None]
+        raise RegistrationError(f"{what} needs the world-from-sensor pose of both scans; missing for {', '.join(missing)}")
+    return reference
+
+
+def _fixed_transform(s: RegistrationSettings, scan1: Scan, scan2: Scan, reference) -> np.ndarray:
+    if s.method == "identity":
+        return np.eye(4)
+    if s.method == "truth":
+        return _require_reference(reference, scan1, scan2, "registration 'truth'")
+    return read_pose(s.transform_file)
+
+
+def _scan_match(s: RegistrationSettings, scan1, scan2, source, target, reference):
+    p = s.params
+    guess = _require_reference(reference, scan1, scan2, "guess 'truth'") if isinstance(s.guess, str) else s.guess
+    for k, cloud in ((1, target), (2, source)):
+        if len(cloud.points) < _MIN_POINTS:
+            raise RegistrationError(
+                f"{s.method}: scan {k} has {len(cloud.points)} point(s) after min_range_m and voxel_m: too few to match"
+            )
+    # NDT models scan 1 with its own cells: give it every point, not the downsampled cloud.
+    ndt_target = matching.point_cloud(scan1.xyz, 0.0, p["min_range_m"]) if s.method == "ndt" else target
+    result = matching.match(s.method, source, ndt_target, guess, p)
+    record = {
+        "method": s.method,
+        "guess": s.guess_description(),
+        "guess_T_1_2": np.asarray(guess).tolist(),
+        "parameters": dict(p),
+    }
+    if result.failure:
+        record["failure"] = result.failure
+    return result.T, record
+
+
+def _judge(record: dict, T: np.ndarray, matched: bool) -> None:
+    """Set ``converged`` (scan matching only) and ``warning`` from the fitness and the estimate.
+
+    Converged means: Open3D ran, the estimate is a finite rigid pose, and the fitness reaches
+    ``min_fitness``. Open3D 0.20 does not report iteration counts or whether its own stopping
+    criteria were met, so these are the checks available.
+    """
+    problems = []
+    if record.get("failure"):
+        problems.append(f"Open3D could not run: {record['failure']}; T_1_2 is the guess")
+    if not np.isfinite(T).all() or abs(np.linalg.det(T[:3, :3]) - 1) > 1e-6:
+        problems.append("the estimate is not a finite rigid pose")
+    if not record["fitness"] >= record["min_fitness"]:
+        problems.append(
+            f"poor fitness {record['fitness']:.3f} < min_fitness {record['min_fitness']} "
+            f"(share of scan-2 points within {record['fitness_distance_m']} m of scan 1)"
+        )
+    if matched:
+        record["converged"] = not problems
+        if problems:
+            problems.insert(0, f"{record['method']} did not converge")
+    if problems:
+        record["warning"] = "; ".join(problems)

@@ -1,0 +1,87 @@
+"""Scan matching through Open3D: ICP (point-to-point, point-to-plane), GICP and NDT.
+
+The estimate is the pose of sensor 2 in frame 1 (Open3D's source = scan 2, target = scan 1,
+so its transformation maps scan-2 points into frame 1). Every method's quality is measured the
+same way, by :func:`evaluate`, so fitness values compare across methods.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import open3d as o3d
+
+reg = o3d.pipelines.registration
+
+
+@dataclass
+class MatchResult:
+    T: np.ndarray  # estimated pose of sensor 2 in frame 1
+    failure: str | None = None  # Open3D's message when it refused to run
+
+
+def point_cloud(xyz: np.ndarray, voxel_m: float, min_range_m: float) -> o3d.geometry.PointCloud:
+    """An Open3D cloud of the points beyond ``min_range_m`` from their sensor, voxel-downsampled."""
+    if min_range_m > 0:
+        xyz = xyz[np.linalg.norm(xyz, axis=1) >= min_range_m]
+    cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(np.ascontiguousarray(xyz, dtype=np.float64)))
+    return cloud.voxel_down_sample(voxel_m) if voxel_m > 0 else cloud
+
+
+def match(method: str, source, target, guess: np.ndarray, p: dict) -> MatchResult:
+    """Run ``method`` from ``guess``; Open3D refusing the input (too few points or NDT cells)
+    gives the guess back with the reason instead of raising."""
+    try:
+        if method == "ndt":
+            return MatchResult(_ndt(source, target, guess, p))
+        return MatchResult(_icp_family(method, source, target, guess, p))
+    except RuntimeError as e:
+        return MatchResult(np.array(guess, dtype=np.float64), _open3d_message(e))
+
+
+def _icp_family(method: str, source, target, guess: np.ndarray, p: dict) -> np.ndarray:
+    criteria = reg.ICPConvergenceCriteria(p["relative_fitness"], p["relative_rmse"], p["max_iterations"])
+    distance = p["max_correspondence_m"]
+    if method == "icp":
+        estimation = reg.TransformationEstimationPointToPoint()
+        return reg.registration_icp(source, target, distance, guess, estimation, criteria).transformation
+    # Point-to-plane needs target normals; GICP computes its own covariances from neighbours.
+    search = o3d.geometry.KDTreeSearchParamHybrid(radius=p["normal_radius_m"], max_nn=p["normal_max_nn"])
+    for cloud in (source, target):
+        cloud.estimate_normals(search)
+    if method == "icp_point_to_plane":
+        estimation = reg.TransformationEstimationPointToPlane()
+        return reg.registration_icp(source, target, distance, guess, estimation, criteria).transformation
+    estimation = reg.TransformationEstimationForGeneralizedICP(p["gicp_epsilon"])
+    return reg.registration_generalized_icp(source, target, distance, guess, estimation, criteria).transformation
+
+
+def _ndt(source, target, guess: np.ndarray, p: dict) -> np.ndarray:
+    """Coarse-to-fine NDT: one run per cell size of ``ndt_resolution_m``, each from the last."""
+    T = np.array(guess, dtype=np.float64)
+    for cell_m in p["ndt_resolution_m"]:
+        option = reg.NormalDistributionsTransformOption(
+            voxel_size=cell_m,
+            min_points_per_voxel=p["ndt_min_points_per_voxel"],
+            outlier_threshold=p["ndt_outlier_threshold"],
+            max_iteration=p["max_iterations"],
+        )
+        T = np.asarray(reg.registration_ndt(source, target, option, T).transformation)
+    return T
+
+
+def evaluate(source, target, T: np.ndarray, distance_m: float) -> tuple[float, float | None]:
+    """(fitness, inlier RMSE): the share of source points with a target point within
+    ``distance_m`` once mapped by ``T``, and the RMS distance of those pairs (None without any:
+    the metadata is JSON, which has no NaN)."""
+    if len(source.points) == 0 or len(target.points) == 0 or not np.isfinite(T).all():
+        return 0.0, None
+    result = reg.evaluate_registration(source, target, distance_m, T)
+    return float(result.fitness), float(result.inlier_rmse) if result.fitness > 0 else None
+
+
+def _open3d_message(error: RuntimeError) -> str:
+    # Open3D wraps its messages in ANSI colour codes and a source location: keep the sentence.
+    text = str(error).replace("\x1b[1;31m", "").replace("\x1b[0;m", "").strip()
+    return text.rsplit(": ", 1)[-1] if ".cpp:" in text else text

@@ -159,14 +159,13 @@ class CartesianGrid:
     origin: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
     kind = "cartesian"
+    n_voxels = None  # the id space is sparse (63 bits)
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "origin", _number_tuple(self.origin))
         if _is_number(self.cell_m):
             object.__setattr__(self, "cell_m", float(self.cell_m))
         _check_cartesian(self)
-
-    n_voxels = None  # the id space is sparse (63 bits)
 
     def assign(self, xyz: np.ndarray, origin=(0.0, 0.0, 0.0)) -> np.ndarray:
         """Voxel id of each point; -1 for non-finite points or indices beyond +-2**20.
@@ -219,9 +218,9 @@ class FieldSettings:
 
     def __post_init__(self) -> None:
         if isinstance(self.min_points, bool) or not isinstance(self.min_points, (int, np.integer)) or self.min_points < 1:
-            raise ConfigError(f"grid: min_points must be an integer >= 1, got {self.min_points!r}")
+            raise ConfigError(f"grid.min_points: must be an integer >= 1, got {self.min_points!r}")
         if self.max_component_m is not None and not _positive(self.max_component_m):
-            raise ConfigError(f"grid: max_component_m must be a positive number or null, got {self.max_component_m!r}")
+            raise ConfigError(f"grid.max_component_m: must be a positive number or null, got {self.max_component_m!r}")
 
     def to_config(self) -> dict[str, Any]:
         return {**self.grid.to_config(), "min_points": int(self.min_points), "max_component_m": self.max_component_m}

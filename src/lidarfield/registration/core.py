@@ -96,7 +96,7 @@ def _scan_match(s: RegistrationSettings, scan1, scan2, source, target, reference
     result = matching.match(s.method, source, ndt_target, guess, p)
     record = {
         "method": s.method,
-        "guess": s.guess_description(),
+        "guess": s.guess_given,
         "guess_T_1_2": np.asarray(guess).tolist(),
         "parameters": dict(p),
     }

@@ -46,9 +46,7 @@ class RegistrationSettings:
     guess: np.ndarray | str = field(default_factory=lambda: np.eye(4))  # 4x4, or "truth"
     transform_file: Path | None = None
     params: dict = field(default_factory=lambda: dict(DEFAULTS))
-
-    def guess_description(self):
-        return self.guess if isinstance(self.guess, str) else np.asarray(self.guess).tolist()
+    guess_given: object = None  # the guess as the settings wrote it (numbers, file name, "truth")
 
 
 def parse_settings(settings, base_dir: str | Path | None = None) -> RegistrationSettings:
@@ -76,7 +74,8 @@ def parse_settings(settings, base_dir: str | Path | None = None) -> Registration
     params = dict(DEFAULTS)
     params.update({k: v for k, v in settings.items() if k in DEFAULTS})
     _check_params(params)
-    return RegistrationSettings(method, _guess(settings.get("guess"), base), params=params)
+    given = settings.get("guess")
+    return RegistrationSettings(method, _guess(given, base), params=params, guess_given=given)
 
 
 def _guess(value, base: Path) -> np.ndarray | str:

@@ -103,7 +103,10 @@ def _coerce(value: Any, hint: Any, what: str) -> Any:
         if value is None:
             return None
         (inner,) = [a for a in typing.get_args(hint) if a is not type(None)]
-        return _coerce(value, inner, what)
+        try:
+            return _coerce(value, inner, what)
+        except HypothesisError:
+            raise HypothesisError(f"{what}: expected {type_label(hint)}, got {value!r}") from None
     origin = typing.get_origin(hint)
     if origin is tuple and isinstance(value, (list, tuple)):
         args = typing.get_args(hint)

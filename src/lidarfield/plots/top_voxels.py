@@ -10,7 +10,9 @@ from pathlib import Path
 
 import matplotlib.pyplot as plt
 import numpy as np
+from matplotlib.collections import LineCollection
 from matplotlib.lines import Line2D
+from mpl_toolkits.mplot3d.art3d import Line3DCollection
 
 from ..errors import InputError
 from ..grid import CartesianGrid, Grid, SphericalGrid, grid_from_config
@@ -81,11 +83,10 @@ def voxel_description(grid: Grid, voxel_id: int) -> str:
 
 
 def clip_to_box(polyline: np.ndarray, limits: np.ndarray) -> np.ndarray:
-    """NaN out the vertices outside the axis limits (3-D axes do not clip lines themselves)."""
+    """The vertices inside the axis limits (3-D axes do not clip lines themselves); an edge
+    leaving the view is cut at its last sampled vertex inside."""
     inside = np.all((polyline >= limits[:, 0]) & (polyline <= limits[:, 1]), axis=1)
-    out = polyline.copy()
-    out[~inside] = np.nan
-    return out
+    return polyline[inside]
 
 
 def stage_grid(stage: Stage) -> Grid:
@@ -114,11 +115,13 @@ def plot_top_voxels(stage: Stage, limits: np.ndarray, out_dir: Path, settings: P
         ax_top.scatter(bg[:, 0], bg[:, 1], s=0.6, c=CLOUD_COLOURS[c], alpha=0.3, lw=0, rasterized=True)
         ax_3d.scatter(*bg.T, s=0.3, c=CLOUD_COLOURS[c], alpha=0.15, lw=0, depthshade=False, rasterized=True)
     handles = [Line2D([], [], ls="", marker=".", color=CLOUD_COLOURS[c], label=f"cloud {c}") for c in (1, 2)]
-    for rank, (i, edges, colour) in enumerate(zip(top, frames, colours), start=1):
-        for e in edges:
-            ax_top.plot(e[:, 0], e[:, 1], color=colour, lw=1.2)
-            clipped = clip_to_box(e, limits)
-            ax_3d.plot(clipped[:, 0], clipped[:, 1], clipped[:, 2], color=colour, lw=1.0)
+    # one collection per view for all edges: hundreds of Line2D artists would dominate the time
+    edge_colours = [colour for edges, colour in zip(frames, colours) for _ in edges]
+    ax_top.add_collection(LineCollection([e[:, :2] for edges in frames for e in edges], colors=edge_colours, linewidths=1.2))
+    clipped = [clip_to_box(e, limits) for edges in frames for e in edges]
+    kept = [(c, col) for c, col in zip(clipped, edge_colours) if len(c) >= 2]
+    ax_3d.add_collection3d(Line3DCollection([c for c, _ in kept], colors=[col for _, col in kept], linewidths=1.0))
+    for rank, (i, colour) in enumerate(zip(top, colours), start=1):
         tail, tip = f.tails[i], f.tails[i] + settings.magnification * f.vectors[i]
         ax_top.annotate("", xy=tip[:2], xytext=tail[:2], arrowprops=dict(arrowstyle="-|>", color="k", lw=1.2))
         ax_top.text(*tail[:2], f" {rank}", fontsize=8, fontweight="bold", color=colour, va="bottom")

@@ -14,14 +14,18 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from .config import load_config
 from .errors import ConfigError, InputError
 from .field import discrepancy_field, field_meta, write_field
 from .field_stats import field_statistics, summary_json_safe
 from .grid import field_settings_from_config
+from .io import read_scan, write_scan
 from .io.atomic import atomic_path, write_text
 from .io.parquet_table import read_table, write_table
 from .pair import RegisteredPair, read_pair, write_pair
+from .registration import register_pair
 from .stack import Stage, apply_stack, initial_stage, next_stage
+from .stages import stage_ids
 
 log = logging.getLogger(__name__)
 
@@ -159,11 +163,6 @@ def run_pair(
     hypothesis) runs before the first file is written, so a failure leaves no stage output.
     Returns the summary rows of all stages (also in ``out_dir/summary.parquet`` and ``.csv``).
     """
-    from .config import load_config
-    from .io import read_scan, write_scan
-    from .registration import register_pair
-    from .stages import stage_ids
-
     out_dir = check_out_dir(out_dir)
     study = load_config(config_path)
     settings = registration_settings(register, transform)

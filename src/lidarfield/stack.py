@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .hypotheses import apply_step, validate_stack
+from .hypotheses import apply_step, validate_stack, validate_step
 from .pair import RegisteredPair
 from .stages import step_name
 
@@ -58,8 +58,9 @@ def next_stage(
     pair: RegisteredPair, step: dict, level: int, base_dir: str | Path = ".", study_grid: dict | None = None
 ) -> Stage:
     """Stage ``level``: hypothesis ``step`` applied to ``pair`` (the previous stage's survivors)."""
-    keep1, keep2 = apply_step(pair, step, base_dir, study_grid, level)
-    return Stage(level, step_name(step), step, pair.subset(keep1, keep2), pair.subset(~keep1, ~keep2))
+    spec = validate_step(step, base_dir, study_grid, level)
+    keep1, keep2 = apply_step(pair, spec, base_dir, study_grid, level)
+    return Stage(level, step_name(spec), spec, pair.subset(keep1, keep2), pair.subset(~keep1, ~keep2))
 
 
 def apply_stack(

@@ -105,15 +105,29 @@ def test_expd_ndt_agrees_with_the_authors_translation(expd_scans, authors_T_1_10
           f"difference {difference} = {np.linalg.norm(difference) * 100:.2f} cm; fitness {reg['fitness']:.3f}")
     assert reg["converged"] is True
     assert np.linalg.norm(pair.T_1_2[:3, 3] - guess[:3]) > 0.2
-    # Open3D's NDT, ICP and GICP land 2 to 8 cm from the authors' translation, mostly along
-    # the direction of travel (the parking lot constrains it weakly; fitness is flat there).
+    # Open3D's NDT, ICP and GICP land 2.7 to 7 cm from the authors' translation, mostly along
+    # the direction of travel, which the parking lot constrains weakly: the issue's 5 cm is not
+    # met (see the report). The estimate fits scan 1 at least as tightly as the authors' does.
     assert np.linalg.norm(difference) < 0.08
+    authors = register_pair(*expd_scans, {"transform": str(COMMITTED_T_1_10)}).registration
+    print(f"inlier RMSE: NDT {reg['inlier_rmse']:.4f} m, authors' translation {authors['inlier_rmse']:.4f} m")
+    assert reg["inlier_rmse"] <= authors["inlier_rmse"]
 
 
 def test_expd_wrong_direction_guess_is_a_poor_fit_not_a_crash(expd_scans):
     pair = register_pair(*expd_scans, {"method": "ndt", "guess": [0, -3, 0, 0, 0, 0]})
     assert pair.registration["converged"] is False
     assert pair.registration["fitness"] < 0.3
+
+
+def test_ndt_that_never_leaves_its_guess_is_not_converged(expd_scans):
+    # 12.5 cm cells (the authors' MATLAB grid step) hold too few VLP-16 points: Open3D's NDT
+    # returns the guess as it was, which here fits well; it must still not pass as converged.
+    pair = register_pair(*expd_scans, {"method": "ndt", "ndt_resolution_m": 0.125, "guess": [0, 3, 0, 0, 0, 0]})
+    reg = pair.registration
+    assert reg["fitness"] > reg["min_fitness"]
+    assert reg["converged"] is False and "guess unchanged" in reg["warning"]
+    np.testing.assert_array_equal(pair.T_1_2, reg["guess_T_1_2"])
 
 
 def test_committed_expd_transform_matches_the_data(expd, authors_T_1_10):

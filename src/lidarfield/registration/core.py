@@ -101,7 +101,11 @@ def _scan_match(s: RegistrationSettings, scan1, scan2, source, target, reference
         "parameters": dict(p),
     }
     if result.failure:
-        record["failure"] = result.failure
+        record["failure"] = f"Open3D refused the input: {result.failure}"
+    elif np.array_equal(result.T, guess):
+        # Open3D's NDT returns its guess untouched when too few residuals survive (cells
+        # too small for the data); a good guess would then pass the fitness check unnoticed.
+        record["failure"] = "Open3D returned the guess unchanged: no iteration took place"
     return result.T, record
 
 
@@ -114,7 +118,7 @@ def _judge(record: dict, T: np.ndarray, matched: bool) -> None:
     """
     problems = []
     if record.get("failure"):
-        problems.append(f"Open3D could not run: {record['failure']}; T_1_2 is the guess")
+        problems.append(f"{record['failure']}; T_1_2 is the guess")
     if not np.isfinite(T).all() or abs(np.linalg.det(T[:3, :3]) - 1) > 1e-6:
         problems.append("the estimate is not a finite rigid pose")
     if not record["fitness"] >= record["min_fitness"]:

@@ -71,16 +71,24 @@ def sensor_limits(model: SensorModel | None, params: Params, sensor: int) -> Lim
 
 
 def visible(xyz: np.ndarray, limits: Limits, margin_deg: float = 0.0) -> np.ndarray:
-    """Mask of the points (in the sensor's frame) inside its limits; boundaries are inside."""
+    """Mask of the points (in the sensor's frame) inside its limits; boundaries are inside.
+
+    The elevation test ``lo <= atan2(z, h) <= hi`` is done as ``tan(lo) h <= z <= tan(hi) h``
+    (h >= 0), and the range test on squared ranges: no trigonometry per point.
+    """
     x, y, z = xyz[:, 0], xyz[:, 1], xyz[:, 2]
-    horizontal = np.hypot(x, y)
-    elevation = np.degrees(np.arctan2(z, horizontal))
+    horizontal2 = x * x + y * y
+    horizontal = np.sqrt(horizontal2)
     lo, hi = limits.elevation_deg
-    keep = (elevation >= lo - margin_deg) & (elevation <= hi + margin_deg)
+    keep = np.ones(len(xyz), dtype=bool)
+    if lo - margin_deg > -90.0:
+        keep &= z >= math.tan(math.radians(lo - margin_deg)) * horizontal
+    if hi + margin_deg < 90.0:
+        keep &= z <= math.tan(math.radians(hi + margin_deg)) * horizontal
     r_min, r_max = limits.range_m
     if r_min > 0 or math.isfinite(r_max):
-        r = np.hypot(horizontal, z)
-        keep &= (r >= r_min) & (r <= r_max)
+        r2 = horizontal2 + z * z
+        keep &= (r2 >= r_min * r_min) & (r2 <= r_max * r_max)
     if limits.azimuth_deg is not None:
         start, end = limits.azimuth_deg
         width = (end - start) % 360.0 + 2 * margin_deg

@@ -1,0 +1,108 @@
+"""Benchmark: shadow and field_of_view on a pair of 1,000,000-point clouds (target < 1 s each,
+one core), each against a baseline measured in the same run.
+
+- shadow (origins [1, 2]: four binnings + first-cluster passes) vs the same work with the plain
+  per-cell loop reference of the kernel (``first_cluster_keep_loop``);
+- field_of_view vs a naive version (homogeneous 4x4 inverse, arcsin elevation, norm for the
+  range limits), the way the tests compute it independently.
+
+Run: ``python bench/hypotheses.py [n_points]``. Pin to one core with ``taskset -c 0``.
+"""
+
+from __future__ import annotations
+
+import os
+import platform
+import sys
+import time
+
+import numpy as np
+
+from lidarfield.hypotheses import parse_step
+from lidarfield.hypotheses.field_of_view import field_of_view
+from lidarfield.hypotheses.geometry import in_sensor_frame, ranges
+from lidarfield.hypotheses.shadow import first_cluster_keep, first_cluster_keep_loop, shadow
+from lidarfield.pair import RegisteredPair
+from lidarfield.poses import pose_from_xyzrpy
+from lidarfield.sensors import PRESETS
+
+
+def street_scan(n: int, pose: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """``n`` returns of a level sensor 2 m up in a street: ground, facades 8-14 m away and
+    poles; points in frame 1 (the sensor at ``pose``)."""
+    az = rng.uniform(-np.pi, np.pi, n)
+    el = np.radians(rng.uniform(-15.0, 15.0, n))
+    direction = np.column_stack([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)])
+    facade = (11.0 + 3.0 * np.sin(3 * az)) / np.cos(el)
+    ground = np.where(el < 0, 2.0 / np.maximum(np.sin(-el), 1e-9), np.inf)
+    pole = np.where(np.cos(7 * az) > 0.98, 5.0 / np.cos(el), np.inf)
+    r = np.minimum(np.minimum(facade, ground), pole) + rng.normal(0, 0.01, n)
+    local = direction * r[:, None]
+    return local @ pose[:3, :3].T + pose[:3, 3]
+
+
+def best_of(function, repeat: int = 3) -> float:
+    times = []
+    for _ in range(repeat):
+        start = time.perf_counter()
+        function()
+        times.append(time.perf_counter() - start)
+    return min(times)
+
+
+def shadow_with(kernel, pair: RegisteredPair, params) -> tuple[np.ndarray, np.ndarray]:
+    """``shadow`` with another first-cluster kernel (same binning, same union)."""
+    grid = params.angular_grid()
+    keeps = [np.ones(len(pair.xyz1), bool), np.ones(len(pair.xyz2), bool)]
+    for origin in params.origins:
+        for xyz, keep in zip((pair.xyz1, pair.xyz2), keeps):
+            local = xyz if origin == 1 else in_sensor_frame(xyz, pair.T_1_2)
+            keep &= kernel(grid.assign(local), ranges(local), params.jump_m, params.min_points)
+    return keeps[0], keeps[1]
+
+
+def naive_field_of_view(pair: RegisteredPair, lo: float, hi: float, r_min: float, r_max: float) -> tuple[np.ndarray, np.ndarray]:
+    def inside(xyz, pose):
+        local = (np.linalg.inv(pose) @ np.column_stack([xyz, np.ones(len(xyz))]).T).T[:, :3]
+        r = np.linalg.norm(local, axis=1)
+        el = np.degrees(np.arcsin(local[:, 2] / r))
+        return (el >= lo) & (el <= hi) & (r >= r_min) & (r <= r_max)
+
+    return inside(pair.xyz1, pair.T_1_2), inside(pair.xyz2, np.eye(4))
+
+
+def main(n: int) -> None:
+    rng = np.random.default_rng(0)
+    T_1_2 = pose_from_xyzrpy([0.3, 3.0, 0.0, 0.0, 0.01, 0.02])
+    pair = RegisteredPair(street_scan(n, np.eye(4), rng), street_scan(n, T_1_2, rng), T_1_2, PRESETS["vlp16"], PRESETS["vlp16"])
+    grid = {"azimuth_bins": 36, "elevation_deg": [-20, 20], "elevation_bins": 5}
+    _, shadow_params = parse_step({"shadow": {"origins": [1, 2], "grid": grid}})
+    _, fov_params = parse_step({"field_of_view": {}})
+
+    print(f"machine: {platform.platform()}, {platform.processor() or platform.machine()}, os.cpu_count() = {os.cpu_count()}")
+    print(f"pair: {n:,} + {n:,} points; shadow origins [1, 2], 36 x 5 cells; field_of_view VLP-16 limits")
+
+    fast = shadow(pair, shadow_params)
+    t_shadow = best_of(lambda: shadow(pair, shadow_params))
+    start = time.perf_counter()
+    reference = shadow_with(first_cluster_keep_loop, pair, shadow_params)
+    t_loop = time.perf_counter() - start
+    same = all(np.array_equal(a, b) for a, b in zip(fast, reference))
+    removed = sum(int((~k).sum()) for k in fast)
+    print(f"shadow          {t_shadow:7.3f} s   loop reference {t_loop:7.2f} s   speed-up {t_loop / t_shadow:6.1f}x   "
+          f"same masks: {same}   removed {removed:,}")  # fmt: skip
+
+    cells, r = shadow_params.angular_grid().assign(pair.xyz1), ranges(pair.xyz1)
+    t_kernel = best_of(lambda: first_cluster_keep(cells, r, 1.0, 30))
+    print(f"  kernel alone (one cloud, one origin) {t_kernel:.3f} s")
+
+    fov = field_of_view(pair, fov_params)
+    t_fov = best_of(lambda: field_of_view(pair, fov_params))
+    vlp16 = (-15.0, 15.0, PRESETS["vlp16"].min_range_m, PRESETS["vlp16"].max_range_m)
+    t_naive = best_of(lambda: naive_field_of_view(pair, *vlp16))
+    same = all(np.array_equal(a, b) for a, b in zip(fov, naive_field_of_view(pair, *vlp16)))
+    print(f"field_of_view   {t_fov:7.3f} s   naive          {t_naive:7.3f} s   speed-up {t_naive / t_fov:6.1f}x   same masks: {same}")
+
+
+if __name__ == "__main__":
+    main(int(sys.argv[1]) if len(sys.argv) > 1 else 1_000_000)

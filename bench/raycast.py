@@ -21,7 +21,7 @@ import numpy as np
 from lidarfield.scene import load_scene
 from lidarfield.sensors import PRESETS
 from lidarfield.simulate import azimuth_steps, beam_directions, first_hits, first_hits_reference, simulate_scan
-from lidarfield.trajectory import pose_from_values
+from lidarfield.poses import pose_from_xyzrpy as pose_from_values
 
 
 def best_time(function, repeat: int) -> tuple[float, object]:

@@ -9,7 +9,8 @@ import yaml
 
 from lidarfield.errors import ConfigError, InputError
 from lidarfield.scene import builtin_scenes, load_scene, scene_from_dict
-from lidarfield.trajectory import arc_trajectory, moved_pose, paper_turn_trajectory, pose_from_values, pose_matrix
+from lidarfield.poses import pose_from_xyzrpy as pose_from_values
+from lidarfield.trajectory import arc_trajectory, moved_pose, paper_turn_trajectory
 
 
 def _write_yaml(path, spec):
@@ -104,17 +105,6 @@ def test_mesh_file_that_does_not_load_names_the_file(tmp_path):
 def test_bad_scene_objects_say_what_is_wrong(obj, message):
     with pytest.raises(ConfigError, match=message):
         scene_from_dict({"objects": [obj]}, name="bad")
-
-
-def test_pose_convention():
-    pose = pose_from_values([1, 2, 3, 0, 0, np.pi / 2])
-    assert np.allclose(pose[:3, :3] @ [1, 0, 0], [0, 1, 0])  # yaw turns x into y
-    assert np.allclose(pose[:3, 3], [1, 2, 3])
-    rpy = pose_matrix((0, 0, 0), (0.1, 0.2, 0.3))[:3, :3]
-    rz, ry, rx = (pose_matrix((0, 0, 0), r)[:3, :3] for r in [(0, 0, 0.3), (0, 0.2, 0), (0.1, 0, 0)])
-    assert np.allclose(rpy, rz @ ry @ rx)
-    with pytest.raises(ValueError, match="6 values"):
-        pose_from_values([1, 2, 3])
 
 
 def test_moved_pose_is_constant_velocity_motion():

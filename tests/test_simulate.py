@@ -12,7 +12,7 @@ from lidarfield.io import write_scan
 from lidarfield.scene import load_scene, scene_from_dict
 from lidarfield.sensors import PRESETS, SensorModel
 from lidarfield.simulate import azimuth_steps, first_hits, first_hits_reference, simulate_scan
-from lidarfield.trajectory import pose_from_values
+from lidarfield.poses import pose_from_xyzrpy as pose_from_values
 
 SENSOR = PRESETS["paper-sim-80"]
 POSE1 = pose_from_values([0, 0, 3, 0, 0, 0])

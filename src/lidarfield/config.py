@@ -156,8 +156,15 @@ def _existing_file(path: str, key: str, base_dir: Path) -> str:
 
 
 def _register(setting, key: str, base_dir: Path):
+    """A pair's ``register`` setting, checked now so that a bad one fails before any job."""
+    from .registration.settings import parse_settings
+
     if isinstance(setting, dict) and "transform" in setting:
         _existing_file(setting["transform"], f"{key}.register.transform", base_dir)
+    try:
+        parse_settings(setting, base_dir)
+    except LidarfieldError as e:
+        raise ConfigError(f"{key}.{e}") from None
     return setting
 
 
@@ -179,7 +186,7 @@ def _pair(name: str, entry: dict, base_dir: Path) -> PairSpec:
                 **sim["options"],
             }
             scans.append(ScanSpec(f"{name}-{i + 1}", "simulated", spec))
-        return PairSpec(name, scans[0], scans[1], entry["register"])
+        return PairSpec(name, scans[0], scans[1], _register(entry["register"], key, base_dir))
     scans = []
     for i in (1, 2):
         path = _existing_file(entry[f"scan{i}"], f"{key}.scan{i}", base_dir)

@@ -29,7 +29,7 @@ import trimesh
 import yaml
 
 from .errors import ConfigError, InputError
-from .trajectory import pose_matrix
+from .poses import pose_from_xyzrpy
 
 _KEYS = {
     "box": {"size"},
@@ -172,7 +172,7 @@ def _placement(kind: str, spec: dict) -> np.ndarray:
     if "center" in spec and ("translation" in transform or kind == "mesh"):
         raise ValueError("give either center (primitives only) or transform.translation")
     translation = spec.get("center", transform.get("translation", (0.0, 0.0, 0.0)))
-    return pose_matrix(_vector(translation, 3, "translation"), _vector(transform.get("rpy", (0, 0, 0)), 3, "rpy"))
+    return pose_from_xyzrpy([*_vector(translation, 3, "translation"), *_vector(transform.get("rpy", (0, 0, 0)), 3, "rpy")])
 
 
 def _vector(values, n: int, what: str) -> np.ndarray:

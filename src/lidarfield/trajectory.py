@@ -1,7 +1,6 @@
-"""Poses: from x, y, z, roll, pitch, yaw, and along a path for a simulated drive.
+"""Poses along a path for a simulated drive, and constant-velocity motion during a sweep.
 
-Convention: a pose is a 4x4 world-from-sensor matrix; roll, pitch, yaw are radians about the
-world x, y, z axes applied in that order (R = Rz(yaw) Ry(pitch) Rx(roll)).
+A pose is a 4x4 world-from-sensor matrix (see :mod:`lidarfield.poses` for the conventions).
 """
 
 from __future__ import annotations
@@ -11,21 +10,7 @@ from typing import NamedTuple
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-
-def pose_matrix(xyz, rpy=(0.0, 0.0, 0.0)) -> np.ndarray:
-    """The 4x4 pose with translation ``xyz`` (m) and rotation ``rpy`` (rad, see module doc)."""
-    pose = np.eye(4)
-    pose[:3, :3] = Rotation.from_euler("xyz", np.asarray(rpy, dtype=float)).as_matrix()
-    pose[:3, 3] = np.asarray(xyz, dtype=float)
-    return pose
-
-
-def pose_from_values(values) -> np.ndarray:
-    """A pose from six values ``x, y, z, roll, pitch, yaw`` (m, rad)."""
-    values = np.asarray(values, dtype=float).ravel()
-    if values.size != 6:
-        raise ValueError(f"a pose needs 6 values x,y,z,roll,pitch,yaw; got {values.size}")
-    return pose_matrix(values[:3], values[3:])
+from .poses import pose_from_xyzrpy
 
 
 def moved_pose(pose: np.ndarray, dt_s, linear_velocity_mps, angular_velocity_rps) -> np.ndarray:
@@ -75,7 +60,7 @@ def arc_trajectory(
         position = (center_xy[0] + radius_m * np.cos(angle), center_xy[1] + radius_m * np.sin(angle), height_m)
         heading = angle + side * np.pi / 2
         velocity = (abs(speed_mps) * np.cos(heading), abs(speed_mps) * np.sin(heading), 0.0)
-        out.append(TrajectoryFrame(pose_matrix(position, (0.0, 0.0, heading)), velocity, (0.0, 0.0, yaw_rate)))
+        out.append(TrajectoryFrame(pose_from_xyzrpy([*position, 0.0, 0.0, heading]), velocity, (0.0, 0.0, yaw_rate)))
     return out
 
 

@@ -21,7 +21,7 @@ rule plot_stage:
         mem_mb=3000,
     shell:
         "lidarfield job plot-stage --stage-dir {params.stage:q}"
-        " --previous {params.previous:q} --plots {params.plots:q} --out {output:q} > {log:q} 2>&1"
+        " --previous={params.previous:q} --plots {params.plots:q} --out {output:q} > {log:q} 2>&1"
 
 
 rule plot_pair:

@@ -38,9 +38,9 @@ def run(args) -> int:
     from ..scene import load_scene
     from ..sensors import sensor_model
     from ..simulate import simulate_scan
-    from ..trajectory import pose_from_values
+    from ..poses import pose_from_xyzrpy
 
-    pose = pose_from_values(_numbers(args.pose, 6, "--pose"))
+    pose = pose_from_xyzrpy(_numbers(args.pose, 6, "--pose"))
     velocity = _numbers(args.velocity, 3, "--velocity")
     angular_velocity = _numbers(args.angular_velocity, 3, "--angular-velocity")
     moving = any(velocity) or any(angular_velocity)

@@ -101,8 +101,11 @@ def _check_schema(config: dict, source: str) -> None:
     raise ConfigError(f"config key {_error_location(error)}: {error.message}", source)
 
 
-def load_config(path: str | Path, base_dir: str | Path | None = None) -> Study:
-    """Read a study YAML file and validate it (paths relative to ``base_dir``, default: cwd)."""
+def load_config(path: str | Path, base_dir: str | Path | None = None, require_pairs: bool = True) -> Study:
+    """Read a study YAML file and validate it (paths relative to ``base_dir``, default: cwd).
+
+    ``require_pairs=False`` accepts a config without pairs (``lidarfield run`` takes its pair
+    from the command line and uses only the grid, the hypotheses and the plots)."""
     path = Path(path)
     if not path.is_file():
         raise ConfigError("config file not found", path)
@@ -112,10 +115,12 @@ def load_config(path: str | Path, base_dir: str | Path | None = None) -> Study:
         raise ConfigError(f"not valid YAML: {e}", path) from None
     if not isinstance(config, dict):
         raise ConfigError("a study config is a YAML mapping (pairs, grid, hypotheses, ...)", path)
-    return validate_config(config, base_dir, source=str(path))
+    return validate_config(config, base_dir, source=str(path), require_pairs=require_pairs)
 
 
-def validate_config(config: dict, base_dir: str | Path | None = None, source: str = "config") -> Study:
+def validate_config(
+    config: dict, base_dir: str | Path | None = None, source: str = "config", require_pairs: bool = True
+) -> Study:
     """Validate a config dict in place (defaults filled in) and resolve its pairs and stack."""
     from .grid import grid_from_config
     from .hypotheses import validate_stack
@@ -135,7 +140,7 @@ def validate_config(config: dict, base_dir: str | Path | None = None, source: st
                 pairs[pair.name] = pair
     except LidarfieldError as e:
         raise type(e)(str(e) if e.path else f"{source}: {e}") from None
-    if not pairs:
+    if require_pairs and not pairs:
         raise ConfigError("the study has no pairs: add entries under 'pairs' or 'sequences'", source)
     scans = {}
     for pair in pairs.values():

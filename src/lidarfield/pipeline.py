@@ -23,7 +23,6 @@ from .io import read_scan, write_scan
 from .io.atomic import atomic_path, write_text
 from .io.parquet_table import read_table, write_table
 from .pair import RegisteredPair, read_pair, write_pair
-from .registration import register_pair
 from .stack import Stage, apply_stack, initial_stage, next_stage
 from .stages import stage_ids
 
@@ -164,9 +163,11 @@ def run_pair(
     Returns the summary rows of all stages (also in ``out_dir/summary.parquet`` and ``.csv``).
     """
     out_dir = check_out_dir(out_dir)
-    study = load_config(config_path)
+    study = load_config(config_path, require_pairs=False)
     settings = registration_settings(register, transform)
     scans = [read_scan(path, sensor=sensor) for path in (scan1, scan2)]
+    from .registration import register_pair  # imports Open3D: only where a pair is registered
+
     pair = register_pair(scans[0], scans[1], settings)
     stages = list(apply_stack(pair, study.hypotheses, study.base_dir, study.grid))
 

@@ -5,7 +5,6 @@ from __future__ import annotations
 import argparse
 import math
 
-from ..pipeline import run_pair
 
 TABLE_COLUMNS = (
     "stage", "hypothesis", "n1", "n2", "removed1", "removed2", "voxels_valid", "max_magnitude", "paper_max_metric",
@@ -31,6 +30,8 @@ def add_parser(subparsers) -> None:
 
 
 def _run(args: argparse.Namespace) -> int:
+    from ..pipeline import run_pair
+
     rows = run_pair(args.scan1, args.scan2, args.config, args.out, args.register, args.transform, args.sensor)
     print(format_table(rows))
     print(f"wrote {args.out}/stages/*/ and {args.out}/summary.parquet, summary.csv")

@@ -9,7 +9,6 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-import open3d as o3d
 
 from ..pair import RegisteredPair
 from .params import doc
@@ -30,6 +29,8 @@ def statistical_inliers(xyz: np.ndarray, nb_neighbors: int, std_ratio: float) ->
     keep = np.zeros(len(xyz), dtype=bool)
     if len(xyz) <= nb_neighbors:
         return ~keep  # too few points for the statistic: nothing is an outlier
+    import open3d as o3d  # slow to import: only when this hypothesis runs
+
     cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(xyz))
     _, index = cloud.remove_statistical_outlier(nb_neighbors=nb_neighbors, std_ratio=std_ratio)
     keep[np.asarray(index, dtype=np.int64)] = True

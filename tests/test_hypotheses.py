@@ -155,6 +155,16 @@ def test_field_of_view_removes_exactly_the_points_outside_the_other_sensors_elev
     assert not np.array_equal(keep1, (el_translated >= lo) & (el_translated <= hi))
 
 
+def test_field_of_view_keeps_everything_when_the_sensors_share_their_origin():
+    # A pure turn on the spot: each sensor sees exactly what the other sees, including the
+    # points of the lowest and highest channels, which lie on the limits themselves.
+    scene, sensor = load_scene("paper-intersection"), PRESETS["paper-sim-80"]
+    poses = [pose_from_xyzrpy([0, 0, 3, 0, 0, 0]), pose_from_xyzrpy([0, 0, 3, 0, 0, 0.3])]
+    pair = register_pair(*(simulate_scan(scene, sensor, pose) for pose in poses), "truth")
+    keep1, keep2 = apply_step(pair, {"field_of_view": {}})
+    assert keep1.all() and keep2.all()
+
+
 def test_field_of_view_parameters_override_the_models_and_margin_widens(simulated_pair):
     pair = simulated_pair
     narrow1, narrow2 = apply_step(pair, {"field_of_view": {"elevation_deg": [-15, 5]}})

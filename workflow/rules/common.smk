@@ -66,7 +66,9 @@ def previous_stage_points(wildcards):
     level = stage_level(wildcards)
     if level == 0:
         return f"{RESULTS}/{wildcards.pair}/registered.parquet"
-    return f"{stage_dir(wildcards.pair, STAGES[wildcards.pair][level - 1])}/points.parquet"
+    return (
+        f"{stage_dir(wildcards.pair, STAGES[wildcards.pair][level - 1])}/points.parquet"
+    )
 
 
 def stage_step(wildcards):
@@ -90,15 +92,27 @@ def previous_stage_field(wildcards):
     level = stage_level(wildcards)
     if level == 0:
         return []
-    return f"{stage_dir(wildcards.pair, STAGES[wildcards.pair][level - 1])}/field.parquet"
+    return (
+        f"{stage_dir(wildcards.pair, STAGES[wildcards.pair][level - 1])}/field.parquet"
+    )
 
 
 def pair_stats(wildcards):
-    return [f"{stage_dir(wildcards.pair, stage)}/stats.json" for stage in STAGES[wildcards.pair]]
+    return [
+        f"{stage_dir(wildcards.pair, stage)}/stats.json"
+        for stage in STAGES[wildcards.pair]
+    ]
+
+
+def results_dir(wildcards, output):
+    """The study's results folder, from the report's path (results/report.html)."""
+    return str(Path(output[0]).parent)
 
 
 def all_stage_files(name):
-    return [f"{stage_dir(pair, stage)}/{name}" for pair in PAIRS for stage in STAGES[pair]]
+    return [
+        f"{stage_dir(pair, stage)}/{name}" for pair in PAIRS for stage in STAGES[pair]
+    ]
 
 
 GRID = canonical_json(STUDY.grid)

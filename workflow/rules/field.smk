@@ -9,13 +9,15 @@ rule field:
     output:
         field=f"{RESULTS}/{{pair}}/stages/{{stage}}/field.parquet",
         stats=f"{RESULTS}/{{pair}}/stages/{{stage}}/stats.json",
-    params:
-        grid=GRID,
     log:
         f"{RESULTS}/logs/field/{{pair}}/{{stage}}.log",
+    conda:
+        "../envs/lidarfield.yaml"
     threads: 1
     resources:
         mem_mb=4000,
+    params:
+        grid=GRID,
     shell:
         "lidarfield job field --points {input.points:q} --removed {input.removed:q}"
         " --grid {params.grid:q} --pair {wildcards.pair} --field-out {output.field:q}"

@@ -11,14 +11,16 @@ rule mitigate:
     output:
         points=f"{RESULTS}/{{pair}}/stages/{{stage}}/points.parquet",
         removed=f"{RESULTS}/{{pair}}/stages/{{stage}}/removed.parquet",
-    params:
-        step=stage_step,
-        level=stage_level,
     log:
         f"{RESULTS}/logs/mitigate/{{pair}}/{{stage}}.log",
+    conda:
+        "../envs/lidarfield.yaml"
     threads: 1
     resources:
         mem_mb=4000,
+    params:
+        step=stage_step,
+        level=stage_level,
     shell:
         "lidarfield job mitigate --points-in {input.points:q} --step {params.step:q}"
         " --stage {wildcards.stage} --level {params.level}"

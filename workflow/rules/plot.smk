@@ -9,16 +9,24 @@ rule plot_stage:
         removed=f"{RESULTS}/{{pair}}/stages/{{stage}}/removed.parquet",
         previous=previous_stage_field,
     output:
-        directory(f"{RESULTS}/{{pair}}/stages/{{stage}}/figures"),
+        report(
+            directory(f"{RESULTS}/{{pair}}/stages/{{stage}}/figures"),
+            patterns=["{figure}.png"],
+            category="Stage figures",
+            subcategory="{pair}",
+            labels={"pair": "{pair}", "stage": "{stage}", "figure": "{figure}"},
+        ),
+    log:
+        f"{RESULTS}/logs/plot_stage/{{pair}}/{{stage}}.log",
+    conda:
+        "../envs/lidarfield.yaml"
+    threads: 1
+    resources:
+        mem_mb=3000,
     params:
         stage=this_stage_dir,
         previous=previous_stage_dir,
         plots=PLOTS,
-    log:
-        f"{RESULTS}/logs/plot_stage/{{pair}}/{{stage}}.log",
-    threads: 1
-    resources:
-        mem_mb=3000,
     shell:
         "lidarfield job plot-stage --stage-dir {params.stage:q}"
         " --previous={params.previous:q} --plots {params.plots:q} --out {output:q} > {log:q} 2>&1"
@@ -28,9 +36,16 @@ rule plot_pair:
     input:
         pair_stats,
     output:
-        directory(f"{RESULTS}/{{pair}}/figures"),
+        report(
+            directory(f"{RESULTS}/{{pair}}/figures"),
+            patterns=["{figure}.png"],
+            category="Pairs",
+            labels={"pair": "{pair}", "figure": "{figure}"},
+        ),
     log:
         f"{RESULTS}/logs/plot_pair/{{pair}}.log",
+    conda:
+        "../envs/lidarfield.yaml"
     threads: 1
     resources:
         mem_mb=2000,

@@ -6,13 +6,15 @@ rule register:
         unpack(pair_scans),
     output:
         f"{RESULTS}/{{pair}}/registered.parquet",
-    params:
-        settings=registration,
     log:
         f"{RESULTS}/logs/register/{{pair}}.log",
+    conda:
+        "../envs/lidarfield.yaml"
     threads: 1
     resources:
         mem_mb=4000,
+    params:
+        settings=registration,
     shell:
         "lidarfield job register --scan1 {input.scan1:q} --scan2 {input.scan2:q}"
         " --settings {params.settings:q} --out {output:q} > {log:q} 2>&1"

@@ -6,9 +6,13 @@ rule summary:
         all_stage_files("stats.json"),
     output:
         parquet=f"{RESULTS}/summary.parquet",
-        csv=f"{RESULTS}/summary.csv",
+        csv=report(
+            f"{RESULTS}/summary.csv", category="Study", labels={"table": "summary"}
+        ),
     log:
         f"{RESULTS}/logs/summary.log",
+    conda:
+        "../envs/lidarfield.yaml"
     threads: 1
     resources:
         mem_mb=2000,
@@ -23,14 +27,20 @@ rule report:
         stage_figures=all_stage_files("figures"),
         pair_figures=expand(f"{RESULTS}/{{pair}}/figures", pair=PAIRS),
     output:
-        f"{RESULTS}/report.html",
-    params:
-        study=canonical_json({"config": config, "stages": STAGES}),
-        results=RESULTS,
+        report(
+            f"{RESULTS}/report.html",
+            category="Study",
+            labels={"report": "study report"},
+        ),
     log:
         f"{RESULTS}/logs/report.log",
+    conda:
+        "../envs/lidarfield.yaml"
     threads: 1
     resources:
         mem_mb=4000,
+    params:
+        study=canonical_json({"config": config, "stages": STAGES}),
+        results=results_dir,
     shell:
         "lidarfield job report --study {params.study:q} --results {params.results:q} --out {output:q} > {log:q} 2>&1"

@@ -4,13 +4,15 @@
 rule simulate:
     output:
         f"{RESULTS}/scans/simulated/{{scan}}.parquet",
-    params:
-        spec=scan_spec,
     log:
         f"{RESULTS}/logs/simulate/{{scan}}.log",
+    conda:
+        "../envs/lidarfield.yaml"
     threads: 1
     resources:
         mem_mb=2000,
+    params:
+        spec=scan_spec,
     shell:
         "lidarfield job simulate --spec {params.spec:q} --out {output:q} > {log:q} 2>&1"
 
@@ -18,12 +20,14 @@ rule simulate:
 rule ingest:
     output:
         f"{RESULTS}/scans/recorded/{{scan}}.parquet",
-    params:
-        spec=scan_spec,
     log:
         f"{RESULTS}/logs/ingest/{{scan}}.log",
+    conda:
+        "../envs/lidarfield.yaml"
     threads: 1
     resources:
         mem_mb=2000,
+    params:
+        spec=scan_spec,
     shell:
         "lidarfield job ingest --spec {params.spec:q} --out {output:q} > {log:q} 2>&1"

@@ -70,6 +70,11 @@ def sensor_limits(model: SensorModel | None, params: Params, sensor: int) -> Lim
     return Limits(tuple(elevation), tuple(range_m), azimuth)
 
 
+# A point on a limit is inside it. A simulated channel lies exactly on its sensor's limit, and
+# the rounding of a frame change (1e-15 rad) must not push half of that ring out.
+BOUNDARY_TOLERANCE_DEG = 1e-9
+
+
 def visible(xyz: np.ndarray, limits: Limits, margin_deg: float = 0.0) -> np.ndarray:
     """Mask of the points (in the sensor's frame) inside its limits; boundaries are inside.
 
@@ -77,6 +82,7 @@ def visible(xyz: np.ndarray, limits: Limits, margin_deg: float = 0.0) -> np.ndar
     (h >= 0), and the range test on squared ranges: no trigonometry per point.
     """
     x, y, z = xyz[:, 0], xyz[:, 1], xyz[:, 2]
+    margin_deg = margin_deg + BOUNDARY_TOLERANCE_DEG
     horizontal2 = x * x + y * y
     horizontal = np.sqrt(horizontal2)
     lo, hi = limits.elevation_deg

@@ -65,7 +65,7 @@ def test_report_flags_a_registration_that_did_not_converge(study, tmp_path):
     found, rows = discover(root)
     rows = [dict(r) for r in rows]
     rows[1]["registration_converged"] = False
-    rows[2]["warning"] = "fitness below 0.3"
+    rows[2]["registration_warning"] = "fitness below 0.3"
     html = write_report({}, found, rows, tmp_path / "r.html").read_text()
     assert html.count('<tr class="flag">') == 2
     assert "registration did not converge" in html and "fitness below 0.3" in html

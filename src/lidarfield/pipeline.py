@@ -103,6 +103,7 @@ def summary_row(pair_name: str, pair: RegisteredPair, meta: dict, removed_cloud:
     row["registration_method"] = registration.get("method")
     row["registration_fitness"] = registration.get("fitness")
     row["registration_converged"] = registration.get("converged")
+    row["registration_warning"] = registration.get("warning", "")  # a column in every summary
     return row
 
 

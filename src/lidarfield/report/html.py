@@ -7,12 +7,10 @@ path, so they open when the report sits in its results folder.
 
 from __future__ import annotations
 
-import json
 import os
 from pathlib import Path
 
 import numpy as np
-import pyarrow.parquet as pq
 import yaml
 
 from .. import __version__
@@ -42,28 +40,23 @@ OPEN_PAIRS = 3  # the first pairs' sections start expanded; the others are one c
 DPI = 110
 
 
-def registration_problem(row: dict, stage_dir: Path | None) -> str:
-    """Why a row's registration is suspect ('' when it is not): converged False or a warning,
-    from the row itself or from the registration metadata of the stage's points file."""
-    reg = {}
-    if stage_dir is not None and (stage_dir / "points.parquet").is_file():
-        raw = (pq.read_schema(stage_dir / "points.parquet").metadata or {}).get(b"lidarfield")
-        reg = (json.loads(raw) if raw else {}).get("registration") or {}
-    converged = row.get("registration_converged", row.get("converged", reg.get("converged")))
-    warning = row.get("registration_warning", row.get("warning", reg.get("warning")))
+def registration_problem(row: dict) -> str:
+    """Why a summary row's registration is suspect ('' when it is not)."""
+    converged = row.get("registration_converged")
+    warning = row.get("registration_warning")
     problems = []
     if converged is False or (isinstance(converged, str) and converged.lower() == "false"):
         problems.append("registration did not converge")
-    if warning and not (isinstance(warning, float) and np.isnan(warning)):
+    if isinstance(warning, str) and warning:
         problems.append(f"warning: {warning}")
     return "; ".join(problems)
 
 
-def overview_table(rows: list[dict], stage_dirs: dict[tuple[str, str], Path]) -> str:
+def overview_table(rows: list[dict]) -> str:
     headers = [c for c in SUMMARY_COLUMNS if any(c in r for r in rows)]
     body, classes = [], []
     for r in rows:
-        problem = registration_problem(r, stage_dirs.get((str(r.get("pair")), str(r.get("stage")))))
+        problem = registration_problem(r)
         body.append([r.get(c, "") for c in headers] + [problem])
         classes.append("flag" if problem else "")
     return table(headers + ["registration problem"], body, classes, text_columns=2)
@@ -128,7 +121,6 @@ def write_report(study: dict, pairs: dict[str, list[Path]], summary_rows: list[d
     """
     out_html = Path(out_html)
     pairs = {name: [Path(d) for d in dirs] for name, dirs in pairs.items()}
-    stage_dirs = {(name, d.name): d for name, dirs in pairs.items() for d in dirs}
     n_stages = sum(len(d) for d in pairs.values())
     body = [
         "<h1>lidarfield study report</h1>",
@@ -139,7 +131,7 @@ def write_report(study: dict, pairs: dict[str, list[Path]], summary_rows: list[d
         f"<pre>{esc(yaml.safe_dump(study or {}, sort_keys=False, default_flow_style=None))}</pre>",
         "<h2>Overview</h2>",
         '<p class="note">One row per pair and stage; rows in red: the registration did not converge or warned.</p>',
-        overview_table(summary_rows, stage_dirs),
+        overview_table(summary_rows),
     ]
     if summary_rows:
         body += ["<h2>Stage by stage, all pairs</h2>", image(png_bytes(all_pairs_figure(summary_rows), DPI), "largest vector per stage, one line per pair")]

@@ -82,6 +82,17 @@ def write_study(workdir: Path, study: dict) -> None:
     (workdir / "study.yaml").write_text(yaml.safe_dump(study, sort_keys=False))
 
 
+def planned_after(workdir: Path, edit) -> collections.Counter:
+    """The jobs a dry run plans after ``edit(study)``; the study is restored afterwards."""
+    study = tiny_study()
+    edit(study)
+    write_study(workdir, study)
+    try:
+        return planned_jobs(workdir)
+    finally:
+        write_study(workdir, tiny_study())
+
+
 @pytest.fixture(scope="module")
 def study_dir(tmp_path_factory) -> Path:
     """A workdir where the tiny study has run to completion once."""
@@ -120,35 +131,17 @@ def test_unchanged_config_plans_nothing(study_dir):
 
 
 def test_appending_a_hypothesis_plans_one_stage_per_pair(study_dir):
-    study = tiny_study()
-    study["hypotheses"].append({"crop": {"max_range_m": 40.0}})
-    write_study(study_dir, study)
-    try:
-        jobs = planned_jobs(study_dir)
-    finally:
-        write_study(study_dir, tiny_study())
+    jobs = planned_after(study_dir, lambda s: s["hypotheses"].append({"crop": {"max_range_m": 40.0}}))
     assert jobs == {"mitigate": 2, "field": 2, "plot_stage": 2, "plot_pair": 2, "summary": 1, "report": 1}
 
 
 def test_editing_hypothesis_two_replans_stage_two_only(study_dir):
-    study = tiny_study()
-    study["hypotheses"][1] = {"field_of_view": {"margin_deg": 1.0}}
-    write_study(study_dir, study)
-    try:
-        jobs = planned_jobs(study_dir)
-    finally:
-        write_study(study_dir, tiny_study())
+    jobs = planned_after(study_dir, lambda s: s["hypotheses"].__setitem__(1, {"field_of_view": {"margin_deg": 1.0}}))
     assert jobs == {"mitigate": 2, "field": 2, "plot_stage": 2, "plot_pair": 2, "summary": 1, "report": 1}
 
 
 def test_editing_the_grid_replans_only_fields_plots_and_report(study_dir):
-    study = tiny_study()
-    study["grid"]["azimuth_bins"] = 36
-    write_study(study_dir, study)
-    try:
-        jobs = planned_jobs(study_dir)
-    finally:
-        write_study(study_dir, tiny_study())
+    jobs = planned_after(study_dir, lambda s: s["grid"].update(azimuth_bins=36))
     assert jobs == {"field": 6, "plot_stage": 6, "plot_pair": 2, "summary": 1, "report": 1}
 
 

@@ -68,21 +68,43 @@ def schema() -> dict:
     return yaml.safe_load(SCHEMA_PATH.read_text())
 
 
-def _extend_with_defaults(validator_class):
-    """A validator that fills in schema defaults as it validates (jsonschema's FAQ recipe)."""
-    validate_properties = validator_class.VALIDATORS["properties"]
+def _fill_defaults(instance, subschema: dict, validator: jsonschema.Draft7Validator) -> None:
+    """Fill in the schema's defaults, in place, in a config that has validated.
 
-    def set_defaults(validator, properties, instance, schema):
-        if isinstance(instance, dict):
-            for name, subschema in properties.items():
-                if "default" in subschema and name not in instance:
-                    instance[name] = copy.deepcopy(subschema["default"])
-        yield from validate_properties(validator, properties, instance, schema)
+    Done after validation, not during it (jsonschema's FAQ recipe), because inside a
+    ``oneOf`` the branches that fail would leave their defaults behind.
+    """
+    if "$ref" in subschema:
+        subschema = {**_resolve(subschema["$ref"]), **{k: v for k, v in subschema.items() if k != "$ref"}}
+    for key in ("oneOf", "anyOf"):
+        if key in subschema:
+            for branch in subschema[key]:
+                if validator.evolve(schema=branch).is_valid(instance):
+                    _fill_defaults(instance, branch, validator)
+                    break
+    if isinstance(instance, dict):
+        properties = subschema.get("properties", {})
+        for name, prop in properties.items():
+            if name not in instance and "default" in prop:
+                instance[name] = copy.deepcopy(prop["default"])
+            if name in instance:
+                _fill_defaults(instance[name], prop, validator)
+        extra = subschema.get("additionalProperties")
+        if isinstance(extra, dict):
+            for name, value in instance.items():
+                if name not in properties:
+                    _fill_defaults(value, extra, validator)
+    elif isinstance(instance, list) and isinstance(subschema.get("items"), dict):
+        for item in instance:
+            _fill_defaults(item, subschema["items"], validator)
 
-    return jsonschema.validators.extend(validator_class, {"properties": set_defaults})
 
-
-_DefaultFillingValidator = _extend_with_defaults(jsonschema.Draft7Validator)
+def _resolve(ref: str) -> dict:
+    """A local ``#/definitions/...`` reference of the config schema."""
+    node = schema()
+    for part in ref.removeprefix("#/").split("/"):
+        node = node[part]
+    return node
 
 
 def _error_location(error: jsonschema.ValidationError) -> str:
@@ -90,9 +112,10 @@ def _error_location(error: jsonschema.ValidationError) -> str:
 
 
 def _check_schema(config: dict, source: str) -> None:
-    validator = _DefaultFillingValidator(schema())
+    validator = jsonschema.Draft7Validator(schema())
     errors = sorted(validator.iter_errors(config), key=lambda e: list(e.absolute_path))
     if not errors:
+        _fill_defaults(config, schema(), validator)
         return
     # oneOf failures bury the useful message: report the deepest one.
     error = errors[0]
@@ -173,31 +196,51 @@ def _register(setting, key: str, base_dir: Path):
     return setting
 
 
+def _rounded(values) -> list:
+    # Specs are hashed into stage ids: rounding keeps trigonometric last-bit noise out of them.
+    return np.asarray(values, dtype=float).round(12).tolist()
+
+
+def _simulated_scan(scan_id: str, sim: dict, pose, time_s: float, velocity, angular_velocity) -> ScanSpec:
+    spec = {
+        "scene": sim["scene"],
+        "sensor": sim["sensor"],
+        "pose": _rounded(pose),
+        "time_s": float(time_s),
+        "velocity_mps": _rounded(velocity),
+        "angular_velocity_rps": _rounded(angular_velocity),
+        **sim["options"],
+    }
+    return ScanSpec(scan_id, "simulated", spec)
+
+
+def _recorded_scan(scan_id: str, entry: dict, path: str, pose=None) -> ScanSpec:
+    spec = {"path": path, "format": entry.get("format"), "sensor": entry.get("sensor"), "pose": pose}
+    return ScanSpec(scan_id, "recorded", spec)
+
+
 def _pair(name: str, entry: dict, base_dir: Path) -> PairSpec:
     key = f"pairs.{name}"
     if "simulate" in entry:
         sim = entry["simulate"]
-        scans = []
-        for i in (0, 1):
-            spec = {
-                "scene": sim["scene"],
-                "sensor": sim["sensor"],
-                "pose": pose_from_xyzrpy(sim[f"pose{i + 1}"]).round(12).tolist(),
-                "time_s": float(sim["time_s"][i]),
-                "velocity_mps": sim["velocity_mps"][i] if "velocity_mps" in sim else [0.0, 0.0, 0.0],
-                "angular_velocity_rps": (
-                    sim["angular_velocity_rps"][i] if "angular_velocity_rps" in sim else [0.0, 0.0, 0.0]
-                ),
-                **sim["options"],
-            }
-            scans.append(ScanSpec(f"{name}-{i + 1}", "simulated", spec))
-        return PairSpec(name, scans[0], scans[1], _register(entry["register"], key, base_dir))
-    scans = []
-    for i in (1, 2):
-        path = _existing_file(entry[f"scan{i}"], f"{key}.scan{i}", base_dir)
-        spec = {"path": path, "format": entry.get("format"), "sensor": entry.get("sensor"), "pose": None}
-        scans.append(ScanSpec(f"{name}-{i}", "recorded", spec))
-    return PairSpec(name, scans[0], scans[1], _register(entry.get("register", "identity"), key, base_dir))
+        still = [[0.0, 0.0, 0.0]] * 2
+        scans = [
+            _simulated_scan(
+                f"{name}-{i + 1}",
+                sim,
+                pose_from_xyzrpy(sim[f"pose{i + 1}"]),
+                sim["time_s"][i],
+                sim.get("velocity_mps", still)[i],
+                sim.get("angular_velocity_rps", still)[i],
+            )
+            for i in (0, 1)
+        ]
+    else:
+        scans = [
+            _recorded_scan(f"{name}-{i}", entry, _existing_file(entry[f"scan{i}"], f"{key}.scan{i}", base_dir))
+            for i in (1, 2)
+        ]
+    return PairSpec(name, scans[0], scans[1], _register(entry["register"], key, base_dir))
 
 
 def _sequence_pairs(name: str, entry: dict, base_dir: Path) -> list[PairSpec]:
@@ -215,29 +258,12 @@ def _simulated_sequence(name: str, entry: dict) -> list[ScanSpec]:
     from .trajectory import arc_trajectory
 
     sim = entry["simulate"]
-    traj = sim["trajectory"]
-    steps = arc_trajectory(
-        center_xy=traj["center_xy"],
-        radius_m=traj["radius_m"],
-        start_angle_rad=traj["start_angle_rad"],
-        speed_mps=traj["speed_mps"],
-        rate_hz=traj["rate_hz"],
-        frames=traj["frames"],
-        height_m=traj["height_m"],
-    )
-    scans = []
-    for k, (pose, velocity, angular_velocity) in enumerate(steps):
-        spec = {
-            "scene": sim["scene"],
-            "sensor": sim["sensor"],
-            "pose": np.asarray(pose, dtype=float).round(12).tolist(),
-            "time_s": k / traj["rate_hz"],
-            "velocity_mps": np.asarray(velocity, dtype=float).round(12).tolist(),
-            "angular_velocity_rps": np.asarray(angular_velocity, dtype=float).round(12).tolist(),
-            **sim["options"],
-        }
-        scans.append(ScanSpec(f"{name}-s{k:03d}", "simulated", spec))
-    return scans
+    rate_hz = sim["trajectory"]["rate_hz"]
+    # The schema's trajectory keys are arc_trajectory's parameters.
+    return [
+        _simulated_scan(f"{name}-s{k:03d}", sim, pose, k / rate_hz, velocity, angular_velocity)
+        for k, (pose, velocity, angular_velocity) in enumerate(arc_trajectory(**sim["trajectory"]))
+    ]
 
 
 def _recorded_sequence(name: str, entry: dict, base_dir: Path) -> list[ScanSpec]:
@@ -263,15 +289,6 @@ def _recorded_sequence(name: str, entry: dict, base_dir: Path) -> list[ScanSpec]
         _existing_file(entry["poses"], f"sequences.{name}.poses", base_dir)
         poses = read_kitti_poses(base_dir / entry["poses"], expected=len(files))
     return [
-        ScanSpec(
-            f"{name}-s{k:03d}",
-            "recorded",
-            {
-                "path": files[k],
-                "format": entry.get("format"),
-                "sensor": entry.get("sensor"),
-                "pose": None if poses is None else poses[k].tolist(),
-            },
-        )
+        _recorded_scan(f"{name}-s{k:03d}", entry, files[k], None if poses is None else poses[k].tolist())
         for k in range(entry["first"], last + 1)
     ]

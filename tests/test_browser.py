@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from lidarfield.plots import plot_stage
+from lidarfield.plots import plot_stage, write_plotly_js
 from lidarfield.plots.synthetic import write_synthetic_study
 from lidarfield.report import discover, write_report
 
@@ -51,8 +51,11 @@ def study(tmp_path_factory):
     root = tmp_path_factory.mktemp("results")
     pairs = write_synthetic_study(root, n_pairs=1, levels=2, n=6000)
     dirs = pairs["pair-00"]
+    shared_js = write_plotly_js(root / "assets" / "plotly.min.js")
     for i, d in enumerate(dirs):
-        plot_stage(d, dirs[i - 1] if i else None, d / "figures", {"background_points": 4000, "dpi": 60})
+        # stage 0's 3-D view embeds plotly.js; the last one loads the study's shared copy
+        plotly_js = shared_js if i == len(dirs) - 1 else None
+        plot_stage(d, dirs[i - 1] if i else None, d / "figures", {"background_points": 4000, "dpi": 60}, plotly_js)
     found, rows = discover(root)
     report = write_report({"grid": {"kind": "spherical"}}, found, rows, root / "report.html")
     return root, report, dirs
@@ -66,9 +69,10 @@ def test_report_renders(study, tmp_path):
     assert console_errors(log) == []
 
 
-def test_3d_view_renders_without_console_errors(study, tmp_path):
+@pytest.mark.parametrize("stage", [0, -1], ids=["embedded-plotly", "shared-plotly"])
+def test_3d_view_renders_without_console_errors(study, tmp_path, stage):
     _, _, dirs = study
-    view = dirs[-1] / "figures" / "field_3d.html"
+    view = dirs[stage] / "figures" / "field_3d.html"
     shot = tmp_path / "view.png"
     log = chromium(view.as_uri(), shot, tmp_path / "profile")
     assert not_blank(shot) > 10.0

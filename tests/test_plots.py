@@ -171,3 +171,18 @@ def test_view_limits_ignore_stray_returns_but_keep_vectors():
 @pytest.mark.parametrize("x, expected", [(0.37, 0.2), (5.121, 5.0), (1.0, 1.0), (0.012, 0.01), (73.0, 50.0)])
 def test_nice_length(x, expected):
     assert nice_length(x) == pytest.approx(expected)
+
+
+def test_a_3d_view_can_share_one_plotly_js(tmp_path):
+    from lidarfield.plots import plot_stage, write_plotly_js
+    from lidarfield.plots.synthetic import write_synthetic_study
+
+    dirs = write_synthetic_study(tmp_path, n_pairs=1, levels=1, n=3000)["pair-00"]
+    shared = write_plotly_js(tmp_path / "assets" / "plotly.min.js")
+    plot_stage(dirs[0], None, dirs[0] / "embedded", {"background_points": 1000, "dpi": 50})
+    plot_stage(dirs[0], None, dirs[0] / "shared", {"background_points": 1000, "dpi": 50}, shared)
+    embedded = (dirs[0] / "embedded" / "field_3d.html").stat().st_size
+    html = (dirs[0] / "shared" / "field_3d.html").read_text()
+    src = html.split('<script charset="utf-8" src="', 1)[1].split('"', 1)[0]
+    assert (dirs[0] / "shared" / src).resolve() == shared.resolve()
+    assert len(html) < embedded - shared.stat().st_size // 2  # the bundle is not in the page

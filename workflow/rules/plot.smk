@@ -8,6 +8,7 @@ rule plot_stage:
         points=f"{RESULTS}/{{pair}}/stages/{{stage}}/points.parquet",
         removed=f"{RESULTS}/{{pair}}/stages/{{stage}}/removed.parquet",
         previous=previous_stage_field,
+        plotly=f"{RESULTS}/assets/plotly.min.js",
     output:
         report(
             directory(f"{RESULTS}/{{pair}}/stages/{{stage}}/figures"),
@@ -29,7 +30,23 @@ rule plot_stage:
         plots=PLOTS,
     shell:
         "lidarfield job plot-stage --stage-dir {params.stage:q}"
-        " --previous={params.previous:q} --plots {params.plots:q} --out {output:q} > {log:q} 2>&1"
+        " --previous={params.previous:q} --plots {params.plots:q} --plotly-js {input.plotly:q}"
+        " --out {output:q} > {log:q} 2>&1"
+
+
+# One plotly.js for the study's 3-D views, which load it by relative path.
+rule plotly_js:
+    output:
+        f"{RESULTS}/assets/plotly.min.js",
+    log:
+        f"{RESULTS}/logs/plotly_js.log",
+    conda:
+        "../envs/lidarfield.yaml"
+    threads: 1
+    resources:
+        mem_mb=500,
+    shell:
+        "lidarfield job plotly-js --out {output:q} > {log:q} 2>&1"
 
 
 rule plot_pair:

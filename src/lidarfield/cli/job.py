@@ -53,8 +53,13 @@ def add_parser(subparsers) -> None:
     p.add_argument("--stage-dir", required=True)
     p.add_argument("--previous", default="", help="the previous stage's folder ('' for stage 0)")
     p.add_argument("--plots", type=_json, required=True)
+    p.add_argument("--plotly-js", help="a shared plotly.js file for the 3-D view (embedded without it)")
     p.add_argument("--out", required=True)
     p.set_defaults(func=_plot_stage)
+
+    p = jobs.add_parser("plotly-js")
+    p.add_argument("--out", required=True)
+    p.set_defaults(func=_plotly_js)
 
     p = jobs.add_parser("plot-pair")
     p.add_argument("--stats", nargs="+", required=True)
@@ -101,7 +106,13 @@ def _field(args: argparse.Namespace) -> None:
 def _plot_stage(args: argparse.Namespace) -> None:
     from ..plots import plot_stage
 
-    plot_stage(args.stage_dir, args.previous or None, args.out, args.plots)
+    plot_stage(args.stage_dir, args.previous or None, args.out, args.plots, args.plotly_js)
+
+
+def _plotly_js(args: argparse.Namespace) -> None:
+    from ..plots import write_plotly_js
+
+    write_plotly_js(args.out)
 
 
 def _plot_pair(args: argparse.Namespace) -> None:

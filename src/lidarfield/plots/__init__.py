@@ -17,7 +17,7 @@ import numpy as np
 from .before_after import plot_before_after
 from .common import PlotSettings, background, load_stage, magnitude_norm, plot_settings, removed_xyz, view_limits
 from .field_views import magnified_tips, plot_field_perspective, plot_field_top
-from .interactive import plot_interactive
+from .interactive import plot_interactive, write_plotly_js
 from .pair_stats import plot_pair
 from .removed import plot_removed
 from .top_voxels import plot_top_voxels
@@ -27,12 +27,19 @@ __all__ = ["PlotSettings", "plot_pair", "plot_settings", "plot_stage"]
 log = logging.getLogger(__name__)
 
 
-def plot_stage(stage_dir: str | Path, prev_stage_dir: str | Path | None, out_dir: str | Path, settings: dict | None = None) -> list[Path]:
+def plot_stage(
+    stage_dir: str | Path,
+    prev_stage_dir: str | Path | None,
+    out_dir: str | Path,
+    settings: dict | None = None,
+    plotly_js: str | Path | None = None,
+) -> list[Path]:
     """Write every figure of one stage; returns the paths written.
 
     ``settings`` is the config's ``plots`` section. Axis limits come from the previous stage
     when given (its points are a superset of this stage's), so that both halves of
-    ``before_after`` and the figures of consecutive stages share their axes.
+    ``before_after`` and the figures of consecutive stages share their axes. ``plotly_js``:
+    a shared plotly.js file for the 3-D view (embedded when None).
     """
     start = time.perf_counter()
     s = plot_settings(settings)
@@ -55,6 +62,6 @@ def plot_stage(stage_dir: str | Path, prev_stage_dir: str | Path | None, out_dir
     if prev is not None:
         written += plot_before_after(prev, stage, limits, out_dir, s)
     if s.interactive:
-        written += plot_interactive(stage, out_dir, s)
+        written += plot_interactive(stage, out_dir, s, None if plotly_js is None else Path(plotly_js))
     log.info("plotted %s: %d files in %.2f s", stage.path, len(written), time.perf_counter() - start)
     return written

@@ -1,7 +1,13 @@
-"""A rotatable 3-D view of one stage (plotly, self-contained: works from file:// offline)."""
+"""A rotatable 3-D view of one stage (plotly; works from file:// offline).
+
+A view embeds plotly.js (3.5 MB) unless it is given a shared copy: the workflow writes one
+per study (:func:`write_plotly_js`) and each view loads it by relative path, so that a study
+of hundreds of stages does not store hundreds of copies.
+"""
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import numpy as np
@@ -59,7 +65,17 @@ def field_figure(stage: Stage, settings: PlotSettings) -> go.Figure:
     return fig
 
 
-def plot_interactive(stage: Stage, out_dir: Path, settings: PlotSettings) -> list[Path]:
+def plot_interactive(stage: Stage, out_dir: Path, settings: PlotSettings, plotly_js: Path | None = None) -> list[Path]:
+    """Write ``field_3d.html``: plotly.js embedded, or loaded from ``plotly_js`` by relative path."""
     path = out_dir / "field_3d.html"
-    write_text(path, field_figure(stage, settings).to_html(include_plotlyjs=True, full_html=True))
+    script = True if plotly_js is None else Path(os.path.relpath(plotly_js, out_dir)).as_posix()
+    write_text(path, field_figure(stage, settings).to_html(include_plotlyjs=script, full_html=True))
     return [path]
+
+
+def write_plotly_js(path: str | Path) -> Path:
+    """The plotly.js bundle the 3-D views of a study share."""
+    from plotly.offline import get_plotlyjs
+
+    write_text(path, get_plotlyjs())
+    return Path(path)

@@ -20,7 +20,11 @@ if not config:
 # Validated once against workflow/schemas/config.schema.yaml, with defaults filled in: the
 # same function validates the config of `lidarfield run`. Relative paths are relative to the
 # working directory.
-STUDY = lidarfield.config.validate_config(config, base_dir=Path.cwd())
+STUDY = lidarfield.config.validate_config(
+    config,
+    base_dir=Path.cwd(),
+    source=", ".join(map(str, workflow.configfiles)) or "config",
+)
 RESULTS = config["results"]
 PAIRS = sorted(STUDY.pairs)
 STAGES = {pair: STUDY.stage_ids(pair) for pair in PAIRS}

@@ -167,10 +167,17 @@ def run_pair(
     study = load_config(config_path, require_pairs=False)
     settings = registration_settings(register, transform)
     scans = [read_scan(path, sensor=sensor) for path in (scan1, scan2)]
+    for path, scan in zip((scan1, scan2), scans):
+        log.info("read %s: %d points (%d invalid rows dropped)", path, len(scan), scan.dropped_invalid)
     from .registration import register_pair  # imports Open3D: only where a pair is registered
 
     pair = register_pair(scans[0], scans[1], settings)
-    stages = list(apply_stack(pair, study.hypotheses, study.base_dir, study.grid))
+    reg = pair.registration
+    log.info("registered by %s: fitness %.3f, converged %s", reg.get("method"), reg.get("fitness", float("nan")), reg.get("converged"))
+    stages = []
+    for stage in apply_stack(pair, study.hypotheses, study.base_dir, study.grid):
+        log.info("stage %d (%s): removed %d + %d points", stage.level, stage.name, stage.removed1, stage.removed2)
+        stages.append(stage)
 
     # The same inputs as a config pair {scan1, scan2, sensor, register}: equal stage ids.
     inputs = {

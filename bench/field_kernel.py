@@ -53,7 +53,7 @@ def main() -> None:
         "spherical 36x5, 5 range shells": SphericalGrid(range_edges_m=(0.0, 5.0, 10.0, 20.0, 40.0, 80.0)),
         "cartesian 1 m": CartesianGrid(cell_m=1.0),
     }
-    print("end to end: binning (shared grid.assign code) + aggregation; aggregation: from voxel ids")
+    print("end to end: binning + aggregation (reference: plain binning in degrees); aggregation: from voxel ids")
     for name, grid in cases.items():
         settings = FieldSettings(grid)
         ids1, ids2 = grid.assign(xyz1), grid.assign(xyz2)

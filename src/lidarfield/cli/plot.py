@@ -22,7 +22,7 @@ def run(args) -> int:
     from ..config import load_config
     from ..plots import plot_stage
 
-    settings = load_config(args.config).plots if args.config else {}
+    settings = load_config(args.config, require_pairs=False).plots if args.config else {}
     for path in plot_stage(args.stage_dir, args.prev, args.out, settings):
         print(path)
     return 0

@@ -22,7 +22,7 @@ def run(args) -> int:
     from ..config import load_config
     from ..report import discover, write_report
 
-    study = load_config(args.config).config if args.config else {}
+    study = load_config(args.config, require_pairs=False).config if args.config else {}
     pairs, rows = discover(args.results_dir)
     print(write_report(study, pairs, rows, args.out))
     return 0

@@ -12,9 +12,7 @@ import logging
 from pathlib import Path
 
 import numpy as np
-import pandas as pd
 
-from .config import load_config
 from .errors import ConfigError, InputError
 from .field import discrepancy_field, field_meta, write_field
 from .field_stats import field_statistics, summary_json_safe
@@ -109,6 +107,8 @@ def summary_row(pair_name: str, pair: RegisteredPair, meta: dict, removed_cloud:
 
 def write_summary(stats_paths: list[str | Path], out_parquet: str | Path, out_csv: str | Path) -> None:
     """The summary table of the given ``stats.json`` rows, as Parquet and CSV (lists as JSON)."""
+    import pandas as pd  # half a second to import: only the summary job needs it
+
     rows = [json.loads(Path(p).read_text()) for p in stats_paths]
     table = pd.DataFrame(rows)
     with atomic_path(out_parquet) as tmp:
@@ -163,6 +163,8 @@ def run_pair(
     hypothesis) runs before the first file is written, so a failure leaves no stage output.
     Returns the summary rows of all stages (also in ``out_dir/summary.parquet`` and ``.csv``).
     """
+    from .config import load_config
+
     out_dir = check_out_dir(out_dir)
     study = load_config(config_path, require_pairs=False)
     settings = registration_settings(register, transform)

@@ -9,15 +9,14 @@ second of both implementations and their ratio. Targets: >= 20 M points/s on one
 from __future__ import annotations
 
 import argparse
-import os
-import platform
-import time
 
 import numpy as np
 
 from lidarfield.field import discrepancy_field, field_from_voxel_ids
 from lidarfield.field_reference import discrepancy_field_reference, field_from_voxel_ids_reference
 from lidarfield.grid import CartesianGrid, FieldSettings, SphericalGrid
+
+from timing import best_time, machine  # bench/timing.py
 
 
 def clouds(n: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
@@ -30,15 +29,6 @@ def clouds(n: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
     return xyz1, xyz2
 
 
-def best_time(function, repeat: int) -> float:
-    best = float("inf")
-    for _ in range(repeat):
-        start = time.perf_counter()
-        function()
-        best = min(best, time.perf_counter() - start)
-    return best
-
-
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--points", type=int, default=1_000_000, help="points per cloud")
@@ -46,7 +36,7 @@ def main() -> None:
     args = parser.parse_args()
     xyz1, xyz2 = clouds(args.points)
     total = 2 * args.points
-    print(f"machine: {platform.platform()}, {platform.processor() or platform.machine()}, os.cpu_count()={os.cpu_count()}")
+    print(machine())
     print(f"numpy {np.__version__}; two clouds of {args.points:,} points; best of {args.repeat}")
     cases = {
         "spherical 36x5": SphericalGrid(),
@@ -68,8 +58,8 @@ def main() -> None:
             ),
         }
         for what, (fast, reference) in runs.items():
-            kernel = best_time(fast, args.repeat)
-            baseline = best_time(reference, max(1, args.repeat // 2))
+            kernel, _ = best_time(fast, args.repeat)
+            baseline, _ = best_time(reference, max(1, args.repeat // 2))
             print(
                 f"{name:31s} {what:11s} kernel {kernel * 1e3:6.1f} ms = {total / kernel / 1e6:5.1f} M points/s | "
                 f"pandas groupby {baseline * 1e3:6.1f} ms = {total / baseline / 1e6:4.1f} M points/s | "

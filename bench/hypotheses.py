@@ -11,8 +11,6 @@ Run: ``python bench/hypotheses.py [n_points]``. Pin to one core with ``taskset -
 
 from __future__ import annotations
 
-import os
-import platform
 import sys
 import time
 
@@ -25,6 +23,8 @@ from lidarfield.hypotheses.shadow import first_cluster_keep, first_cluster_keep_
 from lidarfield.pair import RegisteredPair
 from lidarfield.poses import pose_from_xyzrpy
 from lidarfield.sensors import PRESETS
+
+from timing import best_time, machine  # bench/timing.py
 
 
 def street_scan(n: int, pose: np.ndarray, rng: np.random.Generator) -> np.ndarray:
@@ -39,15 +39,6 @@ def street_scan(n: int, pose: np.ndarray, rng: np.random.Generator) -> np.ndarra
     r = np.minimum(np.minimum(facade, ground), pole) + rng.normal(0, 0.01, n)
     local = direction * r[:, None]
     return local @ pose[:3, :3].T + pose[:3, 3]
-
-
-def best_of(function, repeat: int = 3) -> float:
-    times = []
-    for _ in range(repeat):
-        start = time.perf_counter()
-        function()
-        times.append(time.perf_counter() - start)
-    return min(times)
 
 
 def shadow_with(kernel, pair: RegisteredPair, params) -> tuple[np.ndarray, np.ndarray]:
@@ -79,11 +70,11 @@ def main(n: int) -> None:
     _, shadow_params = parse_step({"shadow": {"origins": [1, 2], "grid": grid}})
     _, fov_params = parse_step({"field_of_view": {}})
 
-    print(f"machine: {platform.platform()}, {platform.processor() or platform.machine()}, os.cpu_count() = {os.cpu_count()}")
+    print(machine())
     print(f"pair: {n:,} + {n:,} points; shadow origins [1, 2], 36 x 5 cells; field_of_view VLP-16 limits")
 
     fast = shadow(pair, shadow_params)
-    t_shadow = best_of(lambda: shadow(pair, shadow_params))
+    t_shadow = best_time(lambda: shadow(pair, shadow_params))[0]
     start = time.perf_counter()
     reference = shadow_with(first_cluster_keep_loop, pair, shadow_params)
     t_loop = time.perf_counter() - start
@@ -93,13 +84,13 @@ def main(n: int) -> None:
           f"same masks: {same}   removed {removed:,}")  # fmt: skip
 
     cells, r = shadow_params.angular_grid().assign(pair.xyz1), ranges(pair.xyz1)
-    t_kernel = best_of(lambda: first_cluster_keep(cells, r, 1.0, 30))
+    t_kernel = best_time(lambda: first_cluster_keep(cells, r, 1.0, 30))[0]
     print(f"  kernel alone (one cloud, one origin) {t_kernel:.3f} s")
 
     fov = field_of_view(pair, fov_params)
-    t_fov = best_of(lambda: field_of_view(pair, fov_params))
+    t_fov = best_time(lambda: field_of_view(pair, fov_params))[0]
     vlp16 = (-15.0, 15.0, PRESETS["vlp16"].min_range_m, PRESETS["vlp16"].max_range_m)
-    t_naive = best_of(lambda: naive_field_of_view(pair, *vlp16))
+    t_naive = best_time(lambda: naive_field_of_view(pair, *vlp16))[0]
     same = all(np.array_equal(a, b) for a, b in zip(fov, naive_field_of_view(pair, *vlp16)))
     print(f"field_of_view   {t_fov:7.3f} s   naive          {t_naive:7.3f} s   speed-up {t_naive / t_fov:6.1f}x   same masks: {same}")
 

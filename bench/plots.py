@@ -5,11 +5,8 @@ Run: python bench/plots.py [n_points_per_cloud]
 
 from __future__ import annotations
 
-import os
-import platform
 import sys
 import tempfile
-import time
 from pathlib import Path
 
 from lidarfield.field import discrepancy_field
@@ -17,25 +14,18 @@ from lidarfield.plots import plot_stage
 from lidarfield.plots.common import load_stage
 from lidarfield.plots.synthetic import SETTINGS, write_synthetic_pair
 
-
-def best_of(fn, repeat: int = 3) -> float:
-    times = []
-    for _ in range(repeat):
-        start = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - start)
-    return min(times)
+from timing import best_time, machine  # bench/timing.py
 
 
 def main() -> None:
     n = int(sys.argv[1]) if len(sys.argv) > 1 else 120_000
-    print(f"machine: {platform.platform()}, {platform.processor() or platform.machine()}, {os.cpu_count()} cpus")
+    print(machine())
     with tempfile.TemporaryDirectory() as tmp:
         dirs = write_synthetic_pair(Path(tmp) / "pair", "pair", levels=2, n=n)
         stage = load_stage(dirs[1])
-        field_s = best_of(lambda: discrepancy_field(stage.pair.xyz1, stage.pair.xyz2, SETTINGS))
+        field_s, _ = best_time(lambda: discrepancy_field(stage.pair.xyz1, stage.pair.xyz2, SETTINGS))
         for label, settings in (("png only, no 3-D view", {"interactive": False}), ("png + field_3d.html (default)", {})):
-            plot_s = best_of(lambda: plot_stage(dirs[1], dirs[0], Path(tmp) / "figures", settings), repeat=2)
+            plot_s, _ = best_time(lambda: plot_stage(dirs[1], dirs[0], Path(tmp) / "figures", settings), repeat=2)
             print(f"{n} points per cloud, {label}: plot_stage {plot_s:.2f} s; field {field_s * 1000:.1f} ms; ratio {plot_s / field_s:.0f}x")
 
 

@@ -12,9 +12,6 @@ Run: python bench/raycast.py [--repeat R]
 from __future__ import annotations
 
 import argparse
-import os
-import platform
-import time
 
 import numpy as np
 
@@ -23,14 +20,7 @@ from lidarfield.sensors import PRESETS
 from lidarfield.simulate import azimuth_steps, beam_directions, first_hits, first_hits_reference, simulate_scan
 from lidarfield.poses import pose_from_xyzrpy as pose_from_values
 
-
-def best_time(function, repeat: int) -> tuple[float, object]:
-    best, result = float("inf"), None
-    for _ in range(repeat):
-        start = time.perf_counter()
-        result = function()
-        best = min(best, time.perf_counter() - start)
-    return best, result
+from timing import best_time, machine  # bench/timing.py
 
 
 def main() -> None:
@@ -46,8 +36,7 @@ def main() -> None:
     mesh = scene.mesh_at(0.0)
     rays = len(directions)
 
-    print(f"machine: {platform.platform()}, {platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, "
-          f"Python {platform.python_version()}")
+    print(machine())
     print(f"scene: paper-intersection ({len(mesh.faces)} triangles), sensor paper-sim-80, {rays:,} rays")
     scan_s, scan = best_time(lambda: simulate_scan(scene, sensor, pose), args.repeat)
     rolling_s, _ = best_time(lambda: simulate_scan(scene, sensor, pose, rolling_shutter=True,

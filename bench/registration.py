@@ -8,10 +8,11 @@ from __future__ import annotations
 
 import argparse
 import os
-import platform
 import sys
-import time
+
 from pathlib import Path
+
+from timing import best_time, machine  # bench/timing.py
 
 ROOT = Path(__file__).resolve().parents[1]
 DATA = Path(os.environ.get("LIDARFIELD_DATA", ROOT.parent / "shared" / "data")) / "ouster-os1-128"
@@ -29,16 +30,11 @@ def main() -> int:
     scans = [read_scan(DATA / f"lb_n3_scan{k}_xyz_refl_float32.bin") for k in (0, 1)]
     for scan, pose in zip(scans, poses):
         scan.pose = pose
-    print(f"machine: {platform.platform()}, {platform.processor() or platform.machine()}, {os.cpu_count()} CPUs")
+    print(machine())
     print(f"scans: {len(scans[0])} and {len(scans[1])} points; best of {args.repeat} runs")
     baseline = None
     for method in ("icp", "icp_point_to_plane", "gicp", "ndt", "identity"):
-        seconds = []
-        for _ in range(args.repeat):
-            start = time.perf_counter()
-            pair = register_pair(*scans, {"method": method})
-            seconds.append(time.perf_counter() - start)
-        best = min(seconds)
+        best, pair = best_time(lambda: register_pair(*scans, {"method": method}), args.repeat)
         baseline = baseline or best
         reg = pair.registration
         print(f"{method:20s} {best:7.3f} s  x{best / baseline:5.2f} of icp   error {reg['translation_error_m'] * 100:5.2f} cm "

@@ -19,6 +19,8 @@ import math
 
 import numpy as np
 
+from .poses import rotation_angle
+
 STATISTIC_KEYS = (
     "voxels",
     "voxels_valid",
@@ -55,7 +57,7 @@ def field_statistics(columns: dict[str, np.ndarray]) -> dict:
             stats[key] = math.nan
     rotation, translation = weighted_rigid_transform(mean2, mean1, weight)
     stats["rigid_translation_m"] = [float(c) for c in translation]
-    stats["rigid_rotation_deg"] = rotation_angle_deg(rotation)
+    stats["rigid_rotation_deg"] = float(np.degrees(rotation_angle(rotation)))
     stats["rigid_energy_share"] = rigid_energy_share(mean2, mean1, weight, rotation, translation)
     stats["mean_resultant_length"] = mean_resultant_length(uvw, weight)
     return stats
@@ -77,17 +79,6 @@ def weighted_rigid_transform(source: np.ndarray, target: np.ndarray, weight: np.
     d = np.sign(np.linalg.det(vt.T @ u.T)) or 1.0
     rotation = vt.T @ np.diag([1.0, 1.0, d]) @ u.T
     return rotation, centroid_target - rotation @ centroid_source
-
-
-def rotation_angle_deg(rotation: np.ndarray) -> float:
-    """The angle of a rotation matrix, degrees in [0, 180] (NaN for a NaN matrix).
-
-    atan2(sin, cos) rather than arccos(cos): arccos loses all precision near zero angle.
-    """
-    cosine = (np.trace(rotation) - 1.0) / 2.0
-    skew = rotation - rotation.T
-    sine = np.linalg.norm([skew[2, 1], skew[0, 2], skew[1, 0]]) / 2.0
-    return float(np.degrees(np.arctan2(sine, cosine))) if np.isfinite(cosine) else math.nan
 
 
 def rigid_energy_share(

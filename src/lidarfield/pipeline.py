@@ -105,12 +105,22 @@ def summary_row(pair_name: str, pair: RegisteredPair, meta: dict, removed_cloud:
     return row
 
 
+def read_stats(stats_paths: list[str | Path]) -> list[dict]:
+    """The summary rows of the given ``stats.json`` files."""
+    rows = []
+    for path in stats_paths:
+        try:
+            rows.append(json.loads(Path(path).read_text()))
+        except ValueError as e:
+            raise InputError(f"not valid JSON ({e})", path) from None
+    return rows
+
+
 def write_summary(stats_paths: list[str | Path], out_parquet: str | Path, out_csv: str | Path) -> None:
     """The summary table of the given ``stats.json`` rows, as Parquet and CSV (lists as JSON)."""
     import pandas as pd  # half a second to import: only the summary job needs it
 
-    rows = [json.loads(Path(p).read_text()) for p in stats_paths]
-    table = pd.DataFrame(rows)
+    table = pd.DataFrame(read_stats(stats_paths))
     with atomic_path(out_parquet) as tmp:
         table.to_parquet(tmp, index=False)
     flat = table.copy()

@@ -116,9 +116,10 @@ def _plotly_js(args: argparse.Namespace) -> None:
 
 
 def _plot_pair(args: argparse.Namespace) -> None:
+    from ..pipeline import read_stats
     from ..plots import plot_pair
 
-    plot_pair([json.loads(open(p).read()) for p in args.stats], args.out)
+    plot_pair(read_stats(args.stats), args.out)
 
 
 def _summary(args: argparse.Namespace) -> None:
@@ -130,10 +131,11 @@ def _summary(args: argparse.Namespace) -> None:
 def _report(args: argparse.Namespace) -> None:
     from pathlib import Path
 
+    from ..pipeline import read_stats
     from ..report import write_report
 
     results = Path(args.results)
     stages = args.study["stages"]
     pairs = {pair: [results / pair / "stages" / stage for stage in ids] for pair, ids in stages.items()}
-    summary = [json.loads((d / "stats.json").read_text()) for dirs in pairs.values() for d in dirs]
+    summary = read_stats([d / "stats.json" for dirs in pairs.values() for d in dirs])
     write_report(args.study["config"], pairs, summary, args.out)

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..pair import RegisteredPair
+from ..poses import apply_pose, invert_pose
 
 
 def sensor_pose(pair: RegisteredPair, sensor: int) -> np.ndarray:
@@ -16,9 +17,7 @@ def sensor_pose(pair: RegisteredPair, sensor: int) -> np.ndarray:
 
 def in_sensor_frame(xyz: np.ndarray, pose: np.ndarray) -> np.ndarray:
     """Points given in frame 1 expressed in the frame of a sensor at ``pose`` (rotation included)."""
-    rotation, origin = pose[:3, :3], pose[:3, 3]
-    # p_s = R^T (p - t), written row-wise as (p - t) R.
-    return (xyz - origin) @ rotation
+    return apply_pose(invert_pose(pose), xyz)
 
 
 def own_frame_points(pair: RegisteredPair) -> tuple[np.ndarray, np.ndarray]:

@@ -14,6 +14,7 @@ from pathlib import Path
 import pandas as pd
 
 from ..errors import InputError
+from ..pipeline import read_stats
 
 LIST_COLUMNS = ("rigid_translation_m",)
 
@@ -47,18 +48,6 @@ def _clean_row(row: dict) -> dict:
     return out
 
 
-def _stage_rows(stage_dirs: list[Path]) -> list[dict]:
-    rows = []
-    for d in stage_dirs:
-        stats = d / "stats.json"
-        if stats.is_file():
-            try:
-                rows.append(json.loads(stats.read_text()))
-            except ValueError as e:
-                raise InputError(f"not valid JSON ({e})", stats) from None
-    return rows
-
-
 def _level(stage_dir: Path) -> int:
     prefix = stage_dir.name.split("-", 1)[0]
     return int(prefix) if prefix.isdigit() else -1
@@ -87,7 +76,7 @@ def discover(results_dir: str | Path) -> tuple[dict[str, list[Path]], list[dict]
             stages = [s for s in stages if s.is_dir()]
         else:
             stages = sorted((s for s in (pair_dir / "stages").iterdir() if s.is_dir()), key=lambda s: (_level(s), s.name))
-            pair_rows = _stage_rows(stages)
+            pair_rows = read_stats([d / "stats.json" for d in stages if (d / "stats.json").is_file()])
         for r in pair_rows:
             r.setdefault("pair", name)
         pairs[name] = stages

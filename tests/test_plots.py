@@ -17,7 +17,7 @@ FAST = {"background_points": 3000, "dpi": 60}
 # figure size (inches) x dpi -> pixels
 EXPECTED_SIZE_IN = {
     "field_top": (9.0, 7.5), "field_perspective": (9.0, 7.5), "removed_top": (9.0, 7.5),
-    "removed_perspective": (9.0, 7.5), "top_voxels": (14.0, 7.0), "before_after": (16.0, 7.5),
+    "removed_perspective": (9.0, 7.5), "top_voxels": (14.0, 6.2), "before_after": (16.0, 7.5),
 }
 
 
@@ -186,3 +186,35 @@ def test_a_3d_view_can_share_one_plotly_js(tmp_path):
     src = html.split('<script charset="utf-8" src="', 1)[1].split('"', 1)[0]
     assert (dirs[0] / "shared" / src).resolve() == shared.resolve()
     assert len(html) < embedded - shared.stat().st_size // 2  # the bundle is not in the page
+
+
+def test_fixed_layout_keeps_axes_legends_and_titles_apart(stages, tmp_path, monkeypatch):
+    """The figures use fixed margins (no layout engine): nothing may overlap or be cut off."""
+    import matplotlib.pyplot as plt
+
+    figures = []
+    monkeypatch.setattr(plt, "close", figures.append)  # keep each figure open after saving
+    plot_stage(stages[1], stages[0], tmp_path, {**FAST, "interactive": False})
+    plot_pair([{"pair": "pair-a", "stage": "s", "level": lv, "hypothesis": h, "max_magnitude": 1.0 / (lv + 1),
+                "rigid_translation_m": [0.1, 0.0, 0.0]} for lv, h in enumerate(["none", "ego_vehicle"])], tmp_path)
+    assert len(figures) == 8
+    for fig in figures:
+        renderer = fig.canvas.get_renderer()
+        # a twin axes (same position as another) is one panel with it
+        panels = {ax.get_position().bounds: ax for ax in fig.axes if ax.get_visible()}
+        boxes = [(f"axes {i}", ax.get_tightbbox(renderer)) for i, ax in enumerate(panels.values())]
+        boxes += [("legend", leg.get_window_extent(renderer)) for leg in fig.legends]
+        if fig._suptitle is not None:
+            boxes.append(("suptitle", fig._suptitle.get_window_extent(renderer)))
+        frame = fig.bbox
+        name = fig.axes[0].get_title() or (fig._suptitle.get_text() if fig._suptitle else "?")
+        for label, box in boxes:
+            assert box.x0 >= frame.x0 - 1 and box.x1 <= frame.x1 + 1 and box.y0 >= frame.y0 - 1 and box.y1 <= frame.y1 + 1, \
+                f"{name!r}: {label} leaves the figure"
+        for i, (la, a) in enumerate(boxes):
+            for lb, b in boxes[i + 1:]:
+                overlap_x = min(a.x1, b.x1) - max(a.x0, b.x0)
+                overlap_y = min(a.y1, b.y1) - max(a.y0, b.y0)
+                assert overlap_x <= 2 or overlap_y <= 2, f"{name!r}: {la} overlaps {lb}"
+    monkeypatch.undo()
+    plt.close("all")

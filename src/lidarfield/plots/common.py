@@ -30,6 +30,9 @@ KEPT_COLOUR = "0.55"
 BACKGROUND_COLOUR = "0.6"
 MAGNITUDE_CMAP = "viridis"
 SENSOR_STYLE = {1: dict(marker="^", color="#d62728", label="sensor 1"), 2: dict(marker="v", color="#1f77b4", label="sensor 2")}
+# 3-D point layers: flat colours, and nothing drawn outside the axes box (the view limits leave
+# out the farthest returns; mplot3d would draw them over the labels)
+POINTS_3D = dict(depthshade=False, axlim_clip=True)
 SVG_MAX_BYTES = 2_000_000  # "SVG where it stays small": above this only the PNG is kept
 SUBSAMPLE_SEED = 0
 
@@ -197,8 +200,39 @@ def format_length(metres: float) -> str:
     return f"{metres * 1000:g} mm"
 
 
-def figure(width_in: float, height_in: float, dpi: int):
-    return plt.figure(figsize=(width_in, height_in), dpi=dpi, layout="constrained")
+@dataclass(frozen=True)
+class Margins:
+    """The space around a figure's subplots, in inches; ``wspace``/``hspace`` between subplots
+    as a fraction of their width/height (matplotlib's convention)."""
+
+    left: float = 0.85
+    right: float = 0.3
+    bottom: float = 0.65
+    top: float = 0.7
+    wspace: float = 0.2
+    hspace: float = 0.2
+
+
+def figure(width_in: float, height_in: float, dpi: int, margins: Margins = Margins()):
+    """A figure whose subplots sit within fixed margins. A fixed layout because a layout engine
+    (constrained, tight) draws the whole figure once more at save time to measure it: that
+    was a third of the time of a stage's figures."""
+    fig = plt.figure(figsize=(width_in, height_in), dpi=dpi)
+    fig.subplots_adjust(
+        left=margins.left / width_in, right=1 - margins.right / width_in,
+        bottom=margins.bottom / height_in, top=1 - margins.top / height_in,
+        wspace=margins.wspace, hspace=margins.hspace,
+    )
+    return fig
+
+
+def legend_at_right(fig, handles: list, gap_in: float = 0.25, **kwargs):
+    """A figure legend along the right edge, with the subplots moved out of its way: its width
+    is measured from its text (no draw), so no layout engine is needed."""
+    box = fig.legend(handles=handles, loc="center right", **kwargs)
+    width_in = box.get_window_extent(fig.canvas.get_renderer()).width / fig.dpi
+    fig.subplots_adjust(right=1 - (width_in + gap_in) / fig.get_figwidth())
+    return box
 
 
 def mark_sensors(ax, origins: dict[int, np.ndarray], three_d: bool = False) -> None:

@@ -9,6 +9,7 @@ from matplotlib.cm import ScalarMappable
 from matplotlib.colors import Normalize
 
 from .common import (
+    POINTS_3D,
     BACKGROUND_COLOUR,
     MAGNITUDE_CMAP,
     PlotSettings,
@@ -56,7 +57,7 @@ def draw_field_top(ax, stage: Stage, bg: np.ndarray, norm: Normalize, limits: np
 
 def draw_field_3d(ax, stage: Stage, bg: np.ndarray, norm: Normalize, limits: np.ndarray, settings: PlotSettings) -> None:
     f = stage.field
-    ax.scatter(bg[:, 0], bg[:, 1], bg[:, 2], s=0.3, c=BACKGROUND_COLOUR, alpha=0.25, lw=0, depthshade=False, rasterized=True)
+    ax.scatter(bg[:, 0], bg[:, 1], bg[:, 2], s=0.3, c=BACKGROUND_COLOUR, alpha=0.25, lw=0, rasterized=True, **POINTS_3D)
     if len(f.magnitude):
         cmap = ScalarMappable(norm, MAGNITUDE_CMAP)
         colours = cmap.to_rgba(f.magnitude)
@@ -81,7 +82,9 @@ def stage_title(stage: Stage, what: str) -> str:
 
 
 def colour_bar(fig, ax, norm: Normalize) -> None:
-    fig.colorbar(ScalarMappable(norm, MAGNITUDE_CMAP), ax=ax, shrink=0.8, label="vector magnitude |mean2 − mean1| (m)")
+    three_d = getattr(ax, "name", "") == "3d"  # its z tick labels stand out to the right of its box
+    fig.colorbar(ScalarMappable(norm, MAGNITUDE_CMAP), ax=ax, shrink=0.8, pad=0.12 if three_d else 0.05,
+                 label="vector magnitude |mean2 − mean1| (m)")
 
 
 def plot_field_top(stage: Stage, bg: np.ndarray, norm: Normalize, limits: np.ndarray, out_dir: Path, settings: PlotSettings) -> list[Path]:

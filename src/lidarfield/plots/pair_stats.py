@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .common import PlotSettings, figure, plot_settings, png_bytes, save
+from .common import Margins, PlotSettings, figure, plot_settings, png_bytes, save
 
 MAGNITUDE_SERIES = (
     ("max_magnitude", "max", "o-"),
@@ -14,6 +14,9 @@ MAGNITUDE_SERIES = (
     ("mean_magnitude", "mean", "^-"),
     ("paper_max_metric", "paper metric ‖max |u|,|v|,|w|‖", "D--"),
 )
+
+
+STAGE_AXIS_MARGINS = Margins(bottom=0.8, top=0.45)  # the stage ticks are two lines: level, hypothesis
 
 
 def column(rows: list[dict], key: str) -> np.ndarray:
@@ -52,7 +55,7 @@ def sorted_rows(rows: list[dict]) -> list[dict]:
 
 def stages_figure(rows: list[dict], dpi: int):
     rows = sorted_rows(rows)
-    fig = figure(8.0, 5.0, dpi)
+    fig = figure(8.0, 5.0, dpi, STAGE_AXIS_MARGINS)
     ax = fig.add_subplot()
     x = column(rows, "level")
     for key, label, style in MAGNITUDE_SERIES:
@@ -67,7 +70,7 @@ def stages_figure(rows: list[dict], dpi: int):
 
 def rigid_randomness_figure(rows: list[dict], dpi: int):
     rows = sorted_rows(rows)
-    fig = figure(8.0, 6.5, dpi)
+    fig = figure(8.0, 6.5, dpi, Margins(right=0.85, bottom=0.8, top=0.45, hspace=0.12))
     ax_share, ax_rigid = fig.subplots(2, 1, sharex=True)
     x = column(rows, "level")
     ax_share.plot(x, column(rows, "rigid_energy_share"), "o-", label="rigid energy share")

@@ -7,6 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from .common import (
+    POINTS_3D,
     CLOUD_COLOURS,
     KEPT_COLOUR,
     PlotSettings,
@@ -58,7 +59,7 @@ def plot_removed(stage: Stage, limits: np.ndarray, out_dir: Path, settings: Plot
         three_d = view == "perspective"
         ax = fig.add_subplot(projection="3d") if three_d else fig.add_subplot()
         axes = slice(0, 3) if three_d else slice(0, 2)
-        extra = dict(depthshade=False) if three_d else {}
+        extra = POINTS_3D if three_d else {}
         ax.scatter(*kept[:, axes].T, s=0.5, c=KEPT_COLOUR, alpha=0.35, lw=0, rasterized=True, label="kept (both clouds)", **extra)
         for c, xyz in removed.items():
             if len(xyz):

@@ -16,7 +16,7 @@ from mpl_toolkits.mplot3d.art3d import Line3DCollection
 
 from ..errors import InputError
 from ..grid import CartesianGrid, Grid, SphericalGrid, grid_from_config
-from .common import CLOUD_COLOURS, PlotSettings, Stage, figure, mark_sensors, save, sensor_origins, set_equal_3d, set_top_axes, subsample
+from .common import CLOUD_COLOURS, POINTS_3D, Margins, PlotSettings, Stage, figure, legend_at_right, mark_sensors, save, sensor_origins, set_equal_3d, set_top_axes, subsample
 from .field_views import PERSPECTIVE_VIEW
 
 ARC_SAMPLES = 16
@@ -106,14 +106,14 @@ def plot_top_voxels(stage: Stage, limits: np.ndarray, out_dir: Path, settings: P
     colours = plt.get_cmap("tab10" if k <= 10 else "turbo")(np.linspace(0, 1, max(k, 1)) if k > 10 else np.arange(max(k, 1)))
     frames = [voxel_wireframe(grid, int(f.columns["voxel"][i]), point_ids, points) for i in top]
 
-    fig = figure(14.0, 7.0, settings.dpi)
+    fig = figure(14.0, 6.2, settings.dpi, Margins(top=0.5, bottom=0.55))
     ax_top = fig.add_subplot(1, 2, 1)
     ax_3d = fig.add_subplot(1, 2, 2, projection="3d")
     n_bg = settings.background_points // 2
     for c, xyz in ((1, stage.pair.xyz1), (2, stage.pair.xyz2)):
         bg = subsample(xyz, n_bg, seed=c)
         ax_top.scatter(bg[:, 0], bg[:, 1], s=0.6, c=CLOUD_COLOURS[c], alpha=0.3, lw=0, rasterized=True)
-        ax_3d.scatter(*bg.T, s=0.3, c=CLOUD_COLOURS[c], alpha=0.15, lw=0, depthshade=False, rasterized=True)
+        ax_3d.scatter(*bg.T, s=0.3, c=CLOUD_COLOURS[c], alpha=0.15, lw=0, rasterized=True, **POINTS_3D)
     handles = [Line2D([], [], ls="", marker=".", color=CLOUD_COLOURS[c], label=f"cloud {c}") for c in (1, 2)]
     # one collection per view for all edges: hundreds of Line2D artists would dominate the time
     edge_colours = [colour for edges, colour in zip(frames, colours) for _ in edges]
@@ -134,7 +134,7 @@ def plot_top_voxels(stage: Stage, limits: np.ndarray, out_dir: Path, settings: P
     set_top_axes(ax_top, limits)
     set_equal_3d(ax_3d, limits)
     ax_3d.view_init(**PERSPECTIVE_VIEW)
-    fig.legend(handles=handles, loc="outside right center", fontsize=8, title=f"top {k} voxels (arrow ×{settings.magnification:g})")
+    legend_at_right(fig, handles, gap_in=0.9, fontsize=8, title=f"top {k} voxels (arrow ×{settings.magnification:g})")
     pair_name = stage.path.parent.parent.name
     fig.suptitle(f"{pair_name} · {stage.label} · the {k} voxels with the largest vectors", fontsize=11)
     return save(fig, out_dir, "top_voxels", settings)

@@ -11,6 +11,8 @@ rule field:
         stats=f"{RESULTS}/{{pair}}/stages/{{stage}}/stats.json",
     log:
         f"{RESULTS}/logs/field/{{pair}}/{{stage}}.log",
+    benchmark:
+        f"{RESULTS}/benchmarks/field/{{pair}}/{{stage}}.tsv"
     conda:
         "../envs/lidarfield.yaml"
     threads: 1

@@ -13,6 +13,8 @@ rule mitigate:
         removed=f"{RESULTS}/{{pair}}/stages/{{stage}}/removed.parquet",
     log:
         f"{RESULTS}/logs/mitigate/{{pair}}/{{stage}}.log",
+    benchmark:
+        f"{RESULTS}/benchmarks/mitigate/{{pair}}/{{stage}}.tsv"
     conda:
         "../envs/lidarfield.yaml"
     threads: 1

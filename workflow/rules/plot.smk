@@ -19,6 +19,8 @@ rule plot_stage:
         ),
     log:
         f"{RESULTS}/logs/plot_stage/{{pair}}/{{stage}}.log",
+    benchmark:
+        f"{RESULTS}/benchmarks/plot_stage/{{pair}}/{{stage}}.tsv"
     conda:
         "../envs/lidarfield.yaml"
     threads: 1
@@ -40,6 +42,8 @@ rule plotly_js:
         f"{RESULTS}/assets/plotly.min.js",
     log:
         f"{RESULTS}/logs/plotly_js.log",
+    benchmark:
+        f"{RESULTS}/benchmarks/plotly_js.tsv"
     conda:
         "../envs/lidarfield.yaml"
     threads: 1
@@ -61,6 +65,8 @@ rule plot_pair:
         ),
     log:
         f"{RESULTS}/logs/plot_pair/{{pair}}.log",
+    benchmark:
+        f"{RESULTS}/benchmarks/plot_pair/{{pair}}.tsv"
     conda:
         "../envs/lidarfield.yaml"
     threads: 1

@@ -8,6 +8,8 @@ rule register:
         f"{RESULTS}/{{pair}}/registered.parquet",
     log:
         f"{RESULTS}/logs/register/{{pair}}.log",
+    benchmark:
+        f"{RESULTS}/benchmarks/register/{{pair}}.tsv"
     conda:
         "../envs/lidarfield.yaml"
     threads: 1

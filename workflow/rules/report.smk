@@ -11,6 +11,8 @@ rule summary:
         ),
     log:
         f"{RESULTS}/logs/summary.log",
+    benchmark:
+        f"{RESULTS}/benchmarks/summary.tsv"
     conda:
         "../envs/lidarfield.yaml"
     threads: 1
@@ -34,6 +36,8 @@ rule report:
         ),
     log:
         f"{RESULTS}/logs/report.log",
+    benchmark:
+        f"{RESULTS}/benchmarks/report.tsv"
     conda:
         "../envs/lidarfield.yaml"
     threads: 1

@@ -6,6 +6,8 @@ rule simulate:
         f"{RESULTS}/scans/simulated/{{scan}}.parquet",
     log:
         f"{RESULTS}/logs/simulate/{{scan}}.log",
+    benchmark:
+        f"{RESULTS}/benchmarks/simulate/{{scan}}.tsv"
     conda:
         "../envs/lidarfield.yaml"
     threads: 1
@@ -22,6 +24,8 @@ rule ingest:
         f"{RESULTS}/scans/recorded/{{scan}}.parquet",
     log:
         f"{RESULTS}/logs/ingest/{{scan}}.log",
+    benchmark:
+        f"{RESULTS}/benchmarks/ingest/{{scan}}.tsv"
     conda:
         "../envs/lidarfield.yaml"
     threads: 1

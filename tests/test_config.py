@@ -22,7 +22,7 @@ def test_defaults_follow_the_kind_of_pair(expd):
     assert study.pairs["real"].register == "identity"
     assert study.pairs["sim"].register == "truth"
     assert study.grid["azimuth_bins"] == 36 and study.grid["min_points"] == 30
-    assert study.hypotheses == [] and study.plots["magnification"] == 1.0
+    assert study.hypotheses == [] and study.plots["magnification"] == "auto"
 
 
 def test_a_mat_sequence_becomes_consecutive_pairs(expd, tmp_path):

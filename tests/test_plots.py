@@ -9,7 +9,7 @@ from PIL import Image
 from lidarfield.errors import ConfigError, InputError
 from lidarfield.grid import CartesianGrid, SphericalGrid
 from lidarfield.plots import plot_pair, plot_settings, plot_stage
-from lidarfield.plots.common import SVG_MAX_BYTES, nice_length, subsample, view_limits
+from lidarfield.plots.common import SVG_MAX_BYTES, nice_length, resolve_magnification, subsample, view_limits
 from lidarfield.plots.synthetic import write_synthetic_pair
 from lidarfield.plots.top_voxels import box_wireframe, spherical_voxel_wireframe, voxel_wireframe
 
@@ -89,6 +89,8 @@ def test_missing_field_file_is_one_clear_error(tmp_path, stages):
 
 
 def test_settings_are_validated():
+    with pytest.raises(ConfigError, match="magnification"):
+        plot_settings({"magnification": "big"})
     assert plot_settings({}).top_k == 10
     with pytest.raises(ConfigError, match="magnifcation"):
         plot_settings({"magnifcation": 2})
@@ -171,6 +173,18 @@ def test_view_limits_ignore_stray_returns_but_keep_vectors():
 @pytest.mark.parametrize("x, expected", [(0.37, 0.2), (5.121, 5.0), (1.0, 1.0), (0.012, 0.01), (73.0, 50.0)])
 def test_nice_length(x, expected):
     assert nice_length(x) == pytest.approx(expected)
+
+
+@pytest.mark.parametrize("max_m, span_m, expected", [
+    (0.162, 26.0, 10.0),  # 26/16/0.162 = 10.03: a 16 cm field on a 26 m scene is drawn x10
+    (0.665, 26.0, 2.0),  # 2.44 rounds down to 2
+    (44.0, 110.0, 1.0),  # a large field is never shrunk
+    (0.0, 26.0, 1.0),  # no vectors
+])
+def test_auto_magnification(max_m, span_m, expected):
+    assert resolve_magnification("auto", max_m, span_m) == expected
+    assert max_m * expected <= span_m / 16 or expected == 1.0  # the largest arrow stays within 1/16
+    assert resolve_magnification(3.0, max_m, span_m) == 3.0  # a number is taken as it is
 
 
 def test_a_3d_view_can_share_one_plotly_js(tmp_path):

@@ -10,12 +10,13 @@ from __future__ import annotations
 
 import logging
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
 from .before_after import plot_before_after
-from .common import PlotSettings, background, load_stage, magnitude_norm, plot_settings, removed_xyz, view_limits
+from .common import PlotSettings, background, load_stage, magnitude_norm, plot_settings, removed_xyz, resolve_magnification, view_limits
 from .field_views import magnified_tips, plot_field_perspective, plot_field_top
 from .interactive import plot_interactive, write_plotly_js
 from .pair_stats import plot_pair
@@ -39,7 +40,8 @@ def plot_stage(
     ``settings`` is the config's ``plots`` section. Axis limits come from the previous stage
     when given (its points are a superset of this stage's), so that both halves of
     ``before_after`` and the figures of consecutive stages share their axes. ``plotly_js``:
-    a shared plotly.js file for the 3-D view (embedded when None).
+    a shared plotly.js file for the 3-D view (embedded when None). Magnification "auto" fits
+    the stage's figures to its own largest vector and ``before_after`` to the larger of both.
     """
     start = time.perf_counter()
     s = plot_settings(settings)
@@ -49,19 +51,24 @@ def plot_stage(
 
     reference = prev if prev is not None else stage
     scene = np.vstack([background(reference.pair, s.background_points), removed_xyz(stage.removed, 1), removed_xyz(stage.removed, 2)])
-    drawn = [magnified_tips(st, s.magnification) for st in (stage, prev) if st is not None]
-    drawn += [st.field.tails for st in (stage, prev) if st is not None]
-    limits = view_limits(scene, np.vstack(drawn + [stage.pair.origin2[None, :], np.zeros((1, 3))]))
+    shown = [st for st in (stage, prev) if st is not None]
+    anchors = np.vstack([st.field.tails for st in shown] + [stage.pair.origin2[None, :], np.zeros((1, 3))])
+    span = float(np.max(np.diff(view_limits(scene, anchors)[:2], axis=1)))
+    # the stage's own figures fit its own vectors; before/after shares one factor for both
+    own = replace(s, magnification=resolve_magnification(s.magnification, stage.field.max_magnitude, span))
+    both = replace(s, magnification=resolve_magnification(s.magnification, max(st.field.max_magnitude for st in shown), span))
+    tips = [magnified_tips(stage, own.magnification)] + [magnified_tips(st, both.magnification) for st in shown]
+    limits = view_limits(scene, np.vstack([anchors, *tips]))
 
     bg = background(stage.pair, s.background_points)
     norm = magnitude_norm(stage.field)
-    written = plot_field_top(stage, bg, norm, limits, out_dir, s)
-    written += plot_field_perspective(stage, bg, norm, limits, out_dir, s)
-    written += plot_removed(stage, limits, out_dir, s)
-    written += plot_top_voxels(stage, limits, out_dir, s)
+    written = plot_field_top(stage, bg, norm, limits, out_dir, own)
+    written += plot_field_perspective(stage, bg, norm, limits, out_dir, own)
+    written += plot_removed(stage, limits, out_dir, own)
+    written += plot_top_voxels(stage, limits, out_dir, own)
     if prev is not None:
-        written += plot_before_after(prev, stage, limits, out_dir, s)
+        written += plot_before_after(prev, stage, limits, out_dir, both)
     if s.interactive:
-        written += plot_interactive(stage, out_dir, s, None if plotly_js is None else Path(plotly_js))
+        written += plot_interactive(stage, out_dir, own, None if plotly_js is None else Path(plotly_js))
     log.info("plotted %s: %d files in %.2f s", stage.path, len(written), time.perf_counter() - start)
     return written

@@ -41,7 +41,7 @@ SUBSAMPLE_SEED = 0
 class PlotSettings:
     """The ``plots`` section of the config."""
 
-    magnification: float = 1.0  # vectors are drawn this many times their length
+    magnification: float | str = "auto"  # vectors drawn this many times their length, or "auto"
     top_k: int = 10  # voxels drawn as wireframes in top_voxels.png
     background_points: int = 20000  # max points drawn faint behind the vectors, per figure
     formats: tuple[str, ...] = ("png",)  # "svg" adds an SVG where it stays small
@@ -63,8 +63,8 @@ def plot_settings(settings: dict | None) -> PlotSettings:
             raise ConfigError(f"plots.formats: must list 'png' and optionally 'svg', got {list(formats)!r}")
         settings["formats"] = formats
     s = PlotSettings(**settings)
-    if not s.magnification > 0:
-        raise ConfigError(f"plots.magnification: must be > 0, got {s.magnification!r}")
+    if s.magnification != "auto" and not (isinstance(s.magnification, (int, float)) and s.magnification > 0):
+        raise ConfigError(f"plots.magnification: must be a number > 0 or 'auto', got {s.magnification!r}")
     if s.top_k < 0 or s.background_points < 0 or s.dpi < 50:
         raise ConfigError("plots: top_k and background_points must be >= 0 and dpi >= 50")
     return s
@@ -179,6 +179,20 @@ def magnitude_norm(*fields_: VectorField) -> Normalize:
     """One colour scale (0 .. largest magnitude) shared by every field given."""
     vmax = max((f.max_magnitude for f in fields_), default=0.0)
     return Normalize(vmin=0.0, vmax=vmax if vmax > 0 else 1.0)
+
+
+AUTO_ARROW_SHARE = 1 / 16  # "auto": the largest vector is drawn about this share of the view's width
+
+
+def resolve_magnification(setting: float | str, max_magnitude: float, view_span_m: float) -> float:
+    """The factor the vectors are drawn with. "auto" draws the largest vector at about 1/16 of
+    the view (a centimetre field on a 50 m scene is otherwise invisible), rounded down to 1, 2
+    or 5 times a power of ten so the scale reads easily, and never shrinks vectors (>= 1)."""
+    if setting != "auto":
+        return float(setting)
+    if not max_magnitude > 0:
+        return 1.0
+    return max(1.0, nice_length(AUTO_ARROW_SHARE * view_span_m / max_magnitude))
 
 
 def nice_length(x: float) -> float:

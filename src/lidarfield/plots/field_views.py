@@ -44,7 +44,7 @@ def draw_field_top(ax, stage: Stage, bg: np.ndarray, norm: Normalize, limits: np
         width=0.004, headwidth=3.5, headlength=4.5, minlength=0.5, zorder=3,
     )
     mark_sensors(ax, sensor_origins(stage.pair))
-    scale = nice_length(f.max_magnitude / 2)
+    scale = nice_length(norm.vmax / 2)  # from the shared colour scale: one arrow in both halves of before/after
     ax.quiverkey(
         q, X=0.84, Y=0.04, U=m * scale, coordinates="axes", labelpos="N", color="k",
         label=f"scale: {format_length(scale)}" + (f" (drawn ×{m:g})" if m != 1 else ""),

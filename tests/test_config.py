@@ -58,8 +58,16 @@ def test_a_simulated_drive_expands_along_its_arc():
         ({"pairs": {"a": {"scan1": "nowhere.pcd", "scan2": "nowhere.pcd"}}}, "pairs.a.scan1: file not found"),
         ({"pairs": {}}, "the study has no pairs"),
         ({"pairs": {}, "hypotheses": [{"astrology": {}}]}, "astrology"),
+        ({"pairs": {}, "report": {"max_mb": 0}}, r"config key report\.max_mb: 0 is less than or equal to the minimum of 0"),
+        ({"pairs": {}, "report": {"max_mb": "x"}}, r"config key report\.max_mb: 'x' is not of type 'number'"),
+        ({"pairs": {}, "report": {"max_kb": 5}}, r"config key report: Additional properties are not allowed \('max_kb' was unexpected\)"),
     ],
 )
 def test_bad_configs_say_what_is_wrong(config, message):
     with pytest.raises(LidarfieldError, match=message):
         validate_config(config)
+
+
+def test_the_report_budget_is_read_or_defaults_to_20_mb():
+    assert validate_config({"report": {"max_mb": 5}}, require_pairs=False).config["report"] == {"max_mb": 5}
+    assert validate_config({}, require_pairs=False).config["report"] == {"max_mb": 20}

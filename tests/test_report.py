@@ -10,27 +10,59 @@ import pytest
 
 from lidarfield.cli import main
 from lidarfield.errors import InputError
-from lidarfield.plots import plot_stage
+from lidarfield.plots import plot_pair, plot_stage
 from lidarfield.plots.synthetic import write_summary, write_synthetic_study
 from lidarfield.report import compare_studies, discover, write_report
+from lidarfield.report.html import STAGE_FIGURES
 
 FAST = {"background_points": 2000, "dpi": 50}
 
 
 @pytest.fixture(scope="module")
 def study(tmp_path_factory):
-    """Two pairs of two stages each, plotted (the 3-D view only for pair-00's last stage)."""
+    """Two pairs of two stages each, plotted (the 3-D view only for pair-00's last stage), with
+    their pair figures."""
     root = tmp_path_factory.mktemp("results")
     pairs = write_synthetic_study(root, n_pairs=2, levels=2, n=6000)
     for name, dirs in pairs.items():
         for i, d in enumerate(dirs):
             interactive = name == "pair-00" and i == len(dirs) - 1
             plot_stage(d, dirs[i - 1] if i else None, d / "figures", {**FAST, "interactive": interactive})
+        plot_pair([json.loads((d / "stats.json").read_text()) for d in dirs], root / name / "figures", FAST)
     return root, pairs
 
 
 def image_count(html: str) -> int:
     return len(re.findall(r'src="data:image/png;base64,', html))
+
+
+def figure_links(html: str) -> list[str]:
+    """The targets of the figures linked instead of embedded."""
+    return re.findall(r'<figure class="linked">.*?<a href="([^"]+)">open figure</a></figure>', html)
+
+
+def budget_counts(html: str) -> tuple[int, int, int] | None:
+    """(embedded, all, linked) figures as the page's size-budget note says them; None without a note."""
+    m = re.search(r'<p class="budget">.*?(\d+) of its (\d+) pair and stage figures are embedded .*? the other (\d+) are linked', html)
+    return tuple(int(g) for g in m.groups()) if m else None
+
+
+def report_bytes(path) -> int:
+    return path.stat().st_size
+
+
+def embedded_elements(html: str, caption_end: str) -> list[str]:
+    """The embedded figure elements whose caption ends with ``caption_end``."""
+    return re.findall(rf'<figure[^>]*><img [^>]*alt="[^"]*{re.escape(caption_end)}"[^>]*>.*?</figure>', html)
+
+
+N_PAIR_FIGURES = 2 * 2  # two pairs, two pair figures each
+
+
+def stage_figure_files(pairs) -> set:
+    """The stage figures drawn for the study (which ones is plot_stage's business)."""
+    files = {d / "figures" / f"{stem}.png" for dirs in pairs.values() for d in dirs for stem, _ in STAGE_FIGURES}
+    return {f for f in files if f.is_file()}
 
 
 def test_report_names_every_pair_and_stage_and_embeds_the_figures(study, tmp_path):
@@ -43,8 +75,8 @@ def test_report_names_every_pair_and_stage_and_embeds_the_figures(study, tmp_pat
         assert f"pair {name}" in html
         for d in dirs:
             assert d.name in html
-    # all-pairs plot + per pair (2 pair figures + 5 figures of stage 0 + 6 of stage 1)
-    assert image_count(html) == 1 + 2 * (2 + 5 + 6)
+    # the all-pairs plot, 2 pair figures per pair and every stage figure drawn
+    assert image_count(html) == 1 + N_PAIR_FIGURES + len(stage_figure_files(pairs))
     assert "<script>alert(1)</script>" not in html and "&lt;script&gt;alert(1)&lt;/script&gt;" in html
     assert "<script" not in html  # one static page: no script at all
     link = re.findall(r'href="([^"#]+field_3d\.html)"', html)
@@ -124,3 +156,88 @@ def test_cli_report_compare_and_plot(study, tmp_path, capsys):
     assert main(["plot", str(empty), "--out", str(tmp_path / "figs")]) == 2
     err = capsys.readouterr().err
     assert "field.parquet: file not found" in err and len(err.strip().splitlines()) == 1
+
+
+def test_a_large_budget_embeds_every_figure(study, tmp_path):
+    root, pairs = study
+    found, rows = discover(root)
+    html = write_report({}, found, rows, tmp_path / "r.html", max_mb=100).read_text()
+    assert image_count(html) == 1 + N_PAIR_FIGURES + len(stage_figure_files(pairs))
+    assert figure_links(html) == [] and budget_counts(html) is None
+
+
+def test_a_small_budget_embeds_the_pair_figures_and_links_the_stage_figures(study, caplog):
+    root, pairs = study
+    stage_files = stage_figure_files(pairs)
+    found, rows = discover(root)
+    full = write_report({}, found, rows, root / "full.html", max_mb=100)
+    bare = write_report({}, found, rows, root / "bare.html", max_mb=1e-6)
+    # Just above the page with only the pair figures: the bare page plus their embedded elements.
+    pair_figures = embedded_elements(full.read_text(), "stage by stage")
+    assert len(pair_figures) == N_PAIR_FIGURES
+    budget = report_bytes(bare) + sum(len(f.encode()) for f in pair_figures)
+    assert budget < report_bytes(full)
+    with caplog.at_level("INFO", logger="lidarfield.report.html"):
+        out = write_report({}, found, rows, root / "report.html", max_mb=budget / 1e6)
+    html = out.read_text()
+    assert report_bytes(out) <= budget
+    assert image_count(html) == 1 + N_PAIR_FIGURES  # the all-pairs figure is always embedded
+    links = figure_links(html)
+    assert not any(link.startswith("/") for link in links)
+    assert len(links) == len(stage_files) and {(root / link).resolve() for link in links} == {f.resolve() for f in stage_files}
+    assert budget_counts(html) == (N_PAIR_FIGURES, N_PAIR_FIGURES + len(stage_files), len(stage_files))
+    assert f"size budget of {budget / 1e6:g} MB" in html and "report.max_mb" in html and "inside its results folder" in html
+    assert f"{report_bytes(out) / 1e6:.2f} MB" in caplog.text and f"{N_PAIR_FIGURES} figures embedded, {len(stage_files)} linked" in caplog.text
+
+
+def test_the_next_tier_is_embedded_in_every_stage_when_it_fits_too(study):
+    root, pairs = study
+    found, rows = discover(root)
+    full = write_report({}, found, rows, root / "full.html", max_mb=100).read_text()
+    bare = write_report({}, found, rows, root / "bare.html", max_mb=1e-6)
+    field_top = embedded_elements(full, ": field from above")
+    assert len(field_top) == 4  # 2 pairs x 2 stages
+    budget = report_bytes(bare) + sum(len(f.encode()) for f in embedded_elements(full, "stage by stage") + field_top)
+    html = write_report({}, found, rows, root / "report.html", max_mb=budget / 1e6).read_text()
+    assert image_count(html) == 1 + N_PAIR_FIGURES + len(field_top)
+    assert embedded_elements(html, ": field from above") == field_top
+    linked = {(root / link).resolve() for link in figure_links(html)}
+    assert linked == {f.resolve() for f in stage_figure_files(pairs) if f.name != "field_top.png"}
+
+
+def test_a_budget_too_small_for_any_figure_still_writes_the_page_with_every_figure_linked(study, caplog):
+    root, pairs = study
+    found, rows = discover(root)
+    with caplog.at_level("WARNING", logger="lidarfield.report.html"):
+        out = write_report({"grid": {"kind": "spherical"}}, found, rows, root / "tiny.html", max_mb=0.001)
+    html = out.read_text()
+    assert report_bytes(out) > 1000 and "over its 0.001 MB budget" in caplog.text
+    assert html.rstrip().endswith("</html>") and "<table>" in html and "kind: spherical" in html
+    assert image_count(html) == 1
+    links = figure_links(html)
+    assert len(links) == N_PAIR_FIGURES + len(stage_figure_files(pairs)) and all((root / link).is_file() for link in links)
+    assert budget_counts(html) == (0, len(links), len(links))
+
+
+def test_a_pair_figure_without_a_file_says_it_is_left_out(study, tmp_path):
+    root, _ = study
+    found, rows = discover(root)
+    bare_pair = tmp_path / "pair-00"
+    shutil.copytree(root / "pair-00" / "stages", bare_pair / "stages")  # no pair figures on disk
+    html = write_report({}, {"pair-00": [bare_pair / "stages" / d.name for d in found["pair-00"]]}, [r for r in rows if r["pair"] == "pair-00"], tmp_path / "r.html", max_mb=0.001).read_text()
+    assert html.count("not embedded (size budget) and not on disk to link") == 2
+
+
+def test_cli_report_takes_its_budget_from_max_mb_or_else_the_config(study, tmp_path, capsys):
+    root, _ = study
+    config = tmp_path / "study.yaml"
+    config.write_text("report: {max_mb: 0.001}\n")
+    out = tmp_path / "r.html"
+    assert main(["report", str(root), "--out", str(out), "--config", str(config)]) == 0
+    assert budget_counts(out.read_text())[0] == 0
+    assert main(["report", str(root), "--out", str(out), "--config", str(config), "--max-mb", "100"]) == 0
+    assert budget_counts(out.read_text()) is None
+    for bad in ("0", "-1", "x", "nan"):
+        with pytest.raises(SystemExit):
+            main(["report", str(root), "--out", str(out), "--max-mb", bad])
+    assert "--max-mb: a size in MB greater than 0, not 'x'" in capsys.readouterr().err

@@ -1,13 +1,19 @@
 """The study report: one self-contained HTML page (figures embedded as data URIs) comparing
 every stage of every pair, so that a team can read it offline or receive it by mail.
 
+A large study's figures would make the page too large to mail: it has a size budget
+(``report.max_mb``), and the figures that do not fit, whole tiers at a time (``TIERS``), are
+links to their PNG files instead (see ``budget``).
+
 The interactive 3-D views are separate files (a few MB each): the page links them by relative
 path, so they open when the report sits in its results folder.
 """
 
 from __future__ import annotations
 
+import logging
 import os
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -17,7 +23,10 @@ from .. import __version__
 from ..io.atomic import write_text
 from ..plots.common import figure, png_bytes
 from ..plots.pair_stats import column, pair_figure_png, sorted_rows
-from .page import esc, image, image_file, page, table
+from .budget import MB, Figure, Note, budget_mb, budget_note, embed_tiers, render, utf8_len
+from .page import esc, image, missing_image, page, table
+
+log = logging.getLogger(__name__)
 
 SUMMARY_COLUMNS = (
     "pair", "stage", "level", "hypothesis", "n1", "n2", "removed1", "removed2", "voxels_valid",
@@ -34,6 +43,11 @@ STAGE_FIGURES = (
     ("removed_perspective", "removed points in perspective"),
 )
 PAIR_FIGURES = (("stages", "magnitude stage by stage"), ("rigid_randomness", "rigid part and randomness stage by stage"))
+PAIR_TIER = "pair figures"
+# The order in which figures are embedded while the page fits its budget: a pair's summary
+# first, then the stage figures that say most about a stage.
+TIERS = (PAIR_TIER, *(caption for _, caption in STAGE_FIGURES))
+TITLE = "lidarfield study report"
 WIDE = {"before_after": 1130, "top_voxels": 1130}  # two-panel figures take a whole row
 MAX_LEGEND_PAIRS = 12
 OPEN_PAIRS = 3  # the first pairs' sections start expanded; the others are one click away
@@ -89,44 +103,62 @@ def all_pairs_figure(rows: list[dict], key: str = "max_magnitude", title: str = 
     return fig
 
 
-def pair_section(name: str, stage_dirs: list[Path], rows: list[dict], out_dir: Path, open_: bool) -> str:
-    parts = [f'<details id="pair-{esc(name)}"{" open" if open_ else ""}><summary>pair {esc(name)}</summary>']
-    pair_dir = stage_dirs[0].parent.parent if stage_dirs else None
-    figs = []
+def relative_href(path: Path, out_dir: Path) -> str:
+    """A link to ``path`` from a page in ``out_dir``: it works wherever the results folder is moved."""
+    return Path(os.path.relpath(path, out_dir)).as_posix()
+
+
+def file_figure(tier: str, path: Path, caption: str, width_px: int, out_dir: Path) -> Figure | str:
+    """A figure drawn to a PNG file, or the note that it was not drawn."""
+    if not path.is_file():
+        return missing_image(caption, path)
+    return Figure(tier, caption, width_px, relative_href(path, out_dir), path.read_bytes)
+
+
+def pair_figures(name: str, pair_dir: Path | None, rows: list[dict], out_dir: Path) -> list[Figure | str]:
+    """The pair's stage-by-stage figures: its files, or drawn from its rows when there are none."""
+    figures = []
     for stem, caption in PAIR_FIGURES:
         path = pair_dir / "figures" / f"{stem}.png" if pair_dir else None
         if path is not None and path.is_file():
-            figs.append(image_file(path, f"{name}: {caption}", 640))
+            figures.append(file_figure(PAIR_TIER, path, f"{name}: {caption}", 640, out_dir))
         elif rows:
-            figs.append(image(pair_figure_png(stem, rows, DPI), f"{name}: {caption}", 640))
-    parts.append('<div class="figures">' + "".join(figs) + "</div>")
+            figures.append(Figure(PAIR_TIER, f"{name}: {caption}", 640, None, partial(pair_figure_png, stem, rows, DPI)))
+    return figures
+
+
+def stage_parts(name: str, stage_dir: Path, out_dir: Path) -> list[Figure | str]:
+    """A stage's heading, the link to its 3-D view and its figures."""
+    fig_dir = stage_dir / "figures"
+    parts = [f"<h3>{esc(name)} · stage {esc(stage_dir.name)}</h3>"]
+    view = fig_dir / "field_3d.html"
+    if view.is_file():
+        parts.append(f'<p><a href="{esc(relative_href(view, out_dir))}">interactive 3-D view of this stage</a></p>')
+    stems = [(s, c) for s, c in STAGE_FIGURES if s != "before_after" or (fig_dir / "before_after.png").is_file()]
+    figures = [file_figure(c, fig_dir / f"{s}.png", f"{stage_dir.name}: {c}", WIDE.get(s, 560), out_dir) for s, c in stems]
+    return parts + ['<div class="figures">', *figures, "</div>"]
+
+
+def pair_section(name: str, stage_dirs: list[Path], rows: list[dict], out_dir: Path, open_: bool) -> list[Figure | str]:
+    """The pair's collapsible section, as page parts (its figures still to be embedded or linked)."""
+    parts = [f'<details id="pair-{esc(name)}"{" open" if open_ else ""}><summary>pair {esc(name)}</summary>']
+    pair_dir = stage_dirs[0].parent.parent if stage_dirs else None
+    parts += ['<div class="figures">', *pair_figures(name, pair_dir, rows, out_dir), "</div>"]
     for stage_dir in stage_dirs:
-        fig_dir = stage_dir / "figures"
-        parts.append(f"<h3>{esc(name)} · stage {esc(stage_dir.name)}</h3>")
-        view = fig_dir / "field_3d.html"
-        if view.is_file():
-            rel = Path(os.path.relpath(view, out_dir)).as_posix()
-            parts.append(f'<p><a href="{esc(rel)}">interactive 3-D view of this stage</a></p>')
-        stems = [(s, c) for s, c in STAGE_FIGURES if s != "before_after" or (fig_dir / "before_after.png").is_file()]
-        parts.append('<div class="figures">' + "".join(image_file(fig_dir / f"{s}.png", f"{stage_dir.name}: {c}", WIDE.get(s, 560)) for s, c in stems) + "</div>")
-    parts.append("</details>")
-    return "\n".join(parts)
+        parts += stage_parts(name, stage_dir, out_dir)
+    return parts + ["</details>"]
 
 
-def write_report(study: dict, pairs: dict[str, list[Path]], summary_rows: list[dict], out_html: str | Path) -> Path:
-    """Write the study report; returns its path.
-
-    ``study`` is the config (shown as YAML), ``pairs`` maps each pair to its stage folders in
-    order, ``summary_rows`` are the summary table's rows (one per pair and stage).
-    """
-    out_html = Path(out_html)
-    pairs = {name: [Path(d) for d in dirs] for name, dirs in pairs.items()}
+def report_parts(study: dict, pairs: dict[str, list[Path]], summary_rows: list[dict], out_dir: Path) -> list:
+    """The page as parts: HTML text, the figures whose tier decides how they appear, and the
+    place of the note on what the size budget left out."""
     n_stages = sum(len(d) for d in pairs.values())
-    body = [
+    parts = [
         "<h1>lidarfield study report</h1>",
         f'<p class="note">lidarfield {esc(__version__)} · {len(pairs)} pair(s) · {n_stages} stage(s). '
         "Vectors run from the mean of cloud 1 to the mean of cloud 2 in each voxel; a hypothesis that "
         "explains part of the discrepancy shrinks the field and breaks its pattern.</p>",
+        Note(),
         "<h2>Study configuration</h2>",
         f"<pre>{esc(yaml.safe_dump(study or {}, sort_keys=False, default_flow_style=None))}</pre>",
         "<h2>Overview</h2>",
@@ -134,10 +166,35 @@ def write_report(study: dict, pairs: dict[str, list[Path]], summary_rows: list[d
         overview_table(summary_rows),
     ]
     if summary_rows:
-        body += ["<h2>Stage by stage, all pairs</h2>", image(png_bytes(all_pairs_figure(summary_rows), DPI), "largest vector per stage, one line per pair")]
-    body += ["<h2>Pairs</h2>", "<ul>" + "".join(f'<li><a href="#pair-{esc(n)}">{esc(n)}</a>: ' + ", ".join(esc(d.name) for d in dirs) + "</li>" for n, dirs in pairs.items()) + "</ul>"]
+        parts += ["<h2>Stage by stage, all pairs</h2>", image(png_bytes(all_pairs_figure(summary_rows), DPI), "largest vector per stage, one line per pair")]
+    parts += ["<h2>Pairs</h2>", "<ul>" + "".join(f'<li><a href="#pair-{esc(n)}">{esc(n)}</a>: ' + ", ".join(esc(d.name) for d in dirs) + "</li>" for n, dirs in pairs.items()) + "</ul>"]
     for i, (name, dirs) in enumerate(pairs.items()):
         rows = [r for r in summary_rows if str(r.get("pair")) == name]
-        body.append(pair_section(name, dirs, rows, out_html.parent, i < OPEN_PAIRS))
-    write_text(out_html, page("lidarfield study report", body))
+        parts += pair_section(name, dirs, rows, out_dir, i < OPEN_PAIRS)
+    return parts
+
+
+def write_report(study: dict, pairs: dict[str, list[Path]], summary_rows: list[dict], out_html: str | Path, max_mb: float | None = None) -> Path:
+    """Write the study report; returns its path.
+
+    ``study`` is the config (shown as YAML), ``pairs`` maps each pair to its stage folders in
+    order, ``summary_rows`` are the summary table's rows (one per pair and stage). ``max_mb``
+    is the page's size budget (default: the study's ``report.max_mb``): the figures that do not
+    fit, whole tiers at a time, are linked instead of embedded.
+    """
+    out_html = Path(out_html)
+    pairs = {name: [Path(d) for d in dirs] for name, dirs in pairs.items()}
+    max_mb = budget_mb(study, max_mb)
+    parts = report_parts(study, pairs, summary_rows, out_html.parent)
+    figures = [p for p in parts if isinstance(p, Figure)]
+    tiers = [[f for f in figures if f.tier == tier] for tier in TIERS]
+    note = partial(budget_note, figures, max_mb=max_mb)
+    budget_bytes = int(max_mb * MB)
+    embedded = embed_tiers(tiers, utf8_len(page(TITLE, render(parts, {}, ""))), budget_bytes, note)
+    html = page(TITLE, render(parts, embedded, note(embedded)))
+    write_text(out_html, html)
+    size = utf8_len(html)
+    log.info("%s: %.2f MB (budget %g MB), %d figures embedded, %d linked", out_html, size / MB, max_mb, len(embedded), len(figures) - len(embedded))
+    if size > budget_bytes:
+        log.warning("%s is over its %g MB budget even with every pair and stage figure linked", out_html, max_mb)
     return out_html

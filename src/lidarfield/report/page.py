@@ -24,7 +24,9 @@ pre { background: #f7f7f7; border: 1px solid #ddd; padding: 0.8em; overflow-x: a
 .figures { display: flex; flex-wrap: wrap; gap: 10px; align-items: flex-start; }
 figure { margin: 0; } figure img { max-width: 100%; height: auto; border: 1px solid #ddd; }
 figcaption { font-size: 0.8em; color: #555; }
+figure.linked { border: 1px dashed #bbb; padding: 4px 8px; font-size: 0.9em; }
 details > summary { cursor: pointer; font-size: 1.15em; font-weight: 600; margin: 0.6em 0; }
+.budget { background: #fff6d5; border: 1px solid #e0c96a; padding: 0.5em 0.8em; }
 .note { color: #666; font-size: 0.9em; } .missing { color: #a00; font-size: 0.85em; }
 """
 
@@ -56,15 +58,30 @@ def data_uri(png: bytes) -> str:
     return "data:image/png;base64," + base64.b64encode(png).decode("ascii")
 
 
-def image(png: bytes, caption: str, width_px: int | None = None) -> str:
+def embedded_image(compact: bytes, caption: str, width_px: int | None = None) -> str:
+    """A figure element holding an already compacted PNG (see ``compact_png``)."""
     width = f' style="width:{width_px}px"' if width_px else ""
-    return f'<figure{width}><img src="{data_uri(compact_png(png))}" alt="{esc(caption)}"><figcaption>{esc(caption)}</figcaption></figure>'
+    return f'<figure{width}><img src="{data_uri(compact)}" alt="{esc(caption)}"><figcaption>{esc(caption)}</figcaption></figure>'
+
+
+def image(png: bytes, caption: str, width_px: int | None = None) -> str:
+    return embedded_image(compact_png(png), caption, width_px)
+
+
+def linked_image(href: str, caption: str) -> str:
+    """A figure element that links its PNG file (relative to the page) instead of embedding it."""
+    return f'<figure class="linked"><figcaption>{esc(caption)}</figcaption><a href="{esc(href)}">open figure</a></figure>'
+
+
+def missing_image(caption: str, path: Path) -> str:
+    """The visible note in place of a figure that was not drawn."""
+    return f'<p class="missing">{esc(caption)}: not drawn ({esc(path.name)} missing)</p>'
 
 
 def image_file(path: Path, caption: str, width_px: int | None = None) -> str:
     """An embedded PNG file, or a visible note when the figure was not drawn."""
     if not path.is_file():
-        return f'<p class="missing">{esc(caption)}: not drawn ({esc(path.name)} missing)</p>'
+        return missing_image(caption, path)
     return image(path.read_bytes(), caption, width_px)
 
 

@@ -53,8 +53,14 @@ def test_every_stage_figure_is_a_real_image_of_its_size(plotted):
         assert f"{stem}.png" in names1
         assert_real_image(next(p for p in written1 if p.name == f"{stem}.png"), size, FAST["dpi"])
     assert "field_3d.html" in names1
-    # stage 0: no previous stage, so no before/after; interactive off, so no 3-D view
-    assert {p.name for p in written0} == {f"{s}.png" for s in EXPECTED_SIZE_IN if s != "before_after"}
+    # stage 0: it removes nothing and has no previous stage; interactive off, so no 3-D view
+    assert {p.name for p in written0} == {"field_top.png", "field_perspective.png", "top_voxels.png"}
+
+
+def test_only_the_selected_figures_are_drawn(stages, tmp_path):
+    written = plot_stage(stages[2], stages[1], tmp_path, {**FAST, "figures": ["field_top", "before_after"], "interactive": False})
+    assert sorted(p.name for p in written) == ["before_after.png", "field_top.png"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["before_after.png", "field_top.png"]
 
 
 def test_svg_is_written_only_when_small(plotted):
@@ -94,6 +100,8 @@ def test_settings_are_validated():
     assert plot_settings({}).top_k == 10
     with pytest.raises(ConfigError, match="magnifcation"):
         plot_settings({"magnifcation": 2})
+    with pytest.raises(ConfigError, match="unknown figure"):
+        plot_settings({"figures": ["field_top", "histogram"]})
     with pytest.raises(ConfigError, match="formats"):
         plot_settings({"formats": ["jpg"]})
 

@@ -77,11 +77,27 @@ def test_report_names_every_pair_and_stage_and_embeds_the_figures(study, tmp_pat
             assert d.name in html
     # the all-pairs plot, 2 pair figures per pair and every stage figure drawn
     assert image_count(html) == 1 + N_PAIR_FIGURES + len(stage_figure_files(pairs))
+    # stage 0 has no removed_* nor before_after, stage 1 has all six: none is reported missing
+    assert len(stage_figure_files(pairs)) == 2 * (3 + 6) and 'class="missing"' not in html
     assert "<script>alert(1)</script>" not in html and "&lt;script&gt;alert(1)&lt;/script&gt;" in html
     assert "<script" not in html  # one static page: no script at all
     link = re.findall(r'href="([^"#]+field_3d\.html)"', html)
     assert len(link) == 1 and (out.parent / link[0]).is_file()
     assert 'class="flag"' not in html
+
+
+def test_report_shows_only_the_figures_the_config_draws_and_flags_a_lost_one(study, tmp_path):
+    root, pairs = study
+    found, rows = discover(root)
+    html = write_report({"plots": {"figures": ["field_top", "before_after"]}}, found, rows, tmp_path / "r.html").read_text()
+    assert image_count(html) == 1 + N_PAIR_FIGURES + 2 * (1 + 2)  # stage 0: field_top; stage 1: both
+    assert 'class="missing"' not in html
+    lost = tmp_path / "lost"
+    shutil.copytree(root, lost)
+    (lost / "pair-01" / "stages" / pairs["pair-01"][1].name / "figures" / "field_top.png").unlink()
+    found, rows = discover(lost)
+    html = write_report({}, found, rows, tmp_path / "lost.html").read_text()
+    assert len(re.findall('class="missing"', html)) == 1 and "field_top.png missing" in html
 
 
 def test_report_links_3d_views_relative_to_itself(study):
@@ -163,6 +179,8 @@ def test_a_large_budget_embeds_every_figure(study, tmp_path):
     found, rows = discover(root)
     html = write_report({}, found, rows, tmp_path / "r.html", max_mb=100).read_text()
     assert image_count(html) == 1 + N_PAIR_FIGURES + len(stage_figure_files(pairs))
+    # stage 0 has no removed_* nor before_after, stage 1 has all six: none is reported missing
+    assert len(stage_figure_files(pairs)) == 2 * (3 + 6) and 'class="missing"' not in html
     assert figure_links(html) == [] and budget_counts(html) is None
 
 

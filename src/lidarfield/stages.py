@@ -21,6 +21,12 @@ def canonical_json(obj) -> str:
     return json.dumps(obj, sort_keys=True, separators=(",", ":"), allow_nan=False)
 
 
+def level_of(stage_id: str) -> int | None:
+    """The level k of a stage id ``{k:02d}-...`` (its folder name); None for another name."""
+    prefix = stage_id.split("-", 1)[0]
+    return int(prefix) if prefix.isdigit() else None
+
+
 def _sha256(text: str) -> str:
     return hashlib.sha256(text.encode()).hexdigest()
 

@@ -1,8 +1,9 @@
 """Figures of a stage and of a pair (matplotlib, Agg) and the interactive 3-D view (plotly).
 
-``plot_stage`` writes, into ``out_dir``: ``field_top``, ``field_perspective``, ``removed_top``,
-``removed_perspective``, ``top_voxels``, ``before_after`` (when the previous stage is given),
-as PNG (+ SVG when asked and small), and ``field_3d.html``. ``plot_pair`` writes
+``plot_stage`` writes, into ``out_dir``, the figures selected in the settings (default: all):
+``field_top``, ``field_perspective``, ``removed_top`` and ``removed_perspective`` (not for
+stage 0, which removes nothing), ``top_voxels``, ``before_after`` (when the previous stage is
+given), as PNG (+ SVG when asked and small), and ``field_3d.html``. ``plot_pair`` writes
 ``stages.png`` and ``rigid_randomness.png`` from a pair's summary rows.
 """
 
@@ -16,16 +17,24 @@ from pathlib import Path
 import numpy as np
 
 from .before_after import plot_before_after
-from .common import PlotSettings, background, load_stage, magnitude_norm, plot_settings, removed_xyz, resolve_magnification, view_limits
+from .common import STAGE_FIGURES, PlotSettings, background, load_stage, magnitude_norm, plot_settings, removed_xyz, resolve_magnification, view_limits
 from .field_views import magnified_tips, plot_field_perspective, plot_field_top
 from .interactive import plot_interactive, write_plotly_js
 from .pair_stats import plot_pair
 from .removed import plot_removed
 from .top_voxels import plot_top_voxels
 
-__all__ = ["PlotSettings", "plot_pair", "plot_settings", "plot_stage"]
+__all__ = ["STAGE_FIGURES", "PlotSettings", "plot_pair", "plot_settings", "plot_stage", "stage_figures"]
 
 log = logging.getLogger(__name__)
+
+
+def stage_figures(settings: PlotSettings, level: int, has_previous: bool) -> list[str]:
+    """The figures drawn for a stage: the selected ones that show something at this level."""
+    return [
+        name for name in settings.figures
+        if not (name.startswith("removed_") and level == 0) and not (name == "before_after" and not has_previous)
+    ]
 
 
 def plot_stage(
@@ -62,12 +71,15 @@ def plot_stage(
 
     bg = background(stage.pair, s.background_points)
     norm = magnitude_norm(stage.field)
-    written = plot_field_top(stage, bg, norm, limits, out_dir, own)
-    written += plot_field_perspective(stage, bg, norm, limits, out_dir, own)
-    written += plot_removed(stage, limits, out_dir, own)
-    written += plot_top_voxels(stage, limits, out_dir, own)
-    if prev is not None:
-        written += plot_before_after(prev, stage, limits, out_dir, both)
+    draw = {
+        "field_top": lambda: plot_field_top(stage, bg, norm, limits, out_dir, own),
+        "field_perspective": lambda: plot_field_perspective(stage, bg, norm, limits, out_dir, own),
+        "removed_top": lambda: plot_removed(stage, "top", limits, out_dir, own),
+        "removed_perspective": lambda: plot_removed(stage, "perspective", limits, out_dir, own),
+        "top_voxels": lambda: plot_top_voxels(stage, limits, out_dir, own),
+        "before_after": lambda: plot_before_after(prev, stage, limits, out_dir, both),
+    }
+    written = [path for name in stage_figures(s, stage.level, prev is not None) for path in draw[name]()]
     if s.interactive:
         written += plot_interactive(stage, out_dir, own, None if plotly_js is None else Path(plotly_js))
     log.info("plotted %s: %d files in %.2f s", stage.path, len(written), time.perf_counter() - start)

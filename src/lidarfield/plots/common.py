@@ -23,6 +23,7 @@ from ..errors import ConfigError, InputError  # noqa: E402
 from ..io.atomic import atomic_path  # noqa: E402
 from ..io.parquet_table import read_table  # noqa: E402
 from ..pair import RegisteredPair, read_pair  # noqa: E402
+from ..stages import level_of  # noqa: E402
 
 FIELD_COLUMNS = ("voxel", "n1", "n2", "x1", "y1", "z1", "x2", "y2", "z2", "u", "v", "w", "magnitude", "valid")
 CLOUD_COLOURS = {1: "#d62728", 2: "#1f77b4"}  # red = cloud 1, blue = cloud 2 (removed figures)
@@ -37,6 +38,11 @@ SVG_MAX_BYTES = 2_000_000  # "SVG where it stays small": above this only the PNG
 SUBSAMPLE_SEED = 0
 
 
+# A stage's figures. Stage 0 removes nothing and has no previous stage: it gets neither the
+# removed_* figures nor before_after.
+STAGE_FIGURES = ("field_top", "field_perspective", "removed_top", "removed_perspective", "top_voxels", "before_after")
+
+
 @dataclass(frozen=True)
 class PlotSettings:
     """The ``plots`` section of the config."""
@@ -44,6 +50,7 @@ class PlotSettings:
     magnification: float | str = "auto"  # vectors drawn this many times their length, or "auto"
     top_k: int = 10  # voxels drawn as wireframes in top_voxels.png
     background_points: int = 20000  # max points drawn faint behind the vectors, per figure
+    figures: tuple[str, ...] = STAGE_FIGURES  # which of a stage's figures to draw
     formats: tuple[str, ...] = ("png",)  # "svg" adds an SVG where it stays small
     dpi: int = 120
     interactive: bool = True  # write field_3d.html
@@ -56,6 +63,12 @@ def plot_settings(settings: dict | None) -> PlotSettings:
     unknown = set(settings) - known
     if unknown:
         raise ConfigError(f"plots: unknown key(s) {sorted(unknown)}; known: {sorted(known)}")
+    if "figures" in settings:
+        figures = tuple(settings["figures"])
+        unknown_figures = [f for f in figures if f not in STAGE_FIGURES]
+        if unknown_figures:
+            raise ConfigError(f"plots.figures: unknown figure(s) {unknown_figures}; known: {list(STAGE_FIGURES)}")
+        settings["figures"] = figures
     if "formats" in settings:
         formats = tuple(settings["formats"])
         bad = [f for f in formats if f not in ("png", "svg")]
@@ -103,8 +116,7 @@ class Stage:
     def level(self) -> int:
         level = self.points_meta.get("level")
         if level is None:
-            prefix = self.stage_id.split("-", 1)[0]
-            level = int(prefix) if prefix.isdigit() else 0
+            level = level_of(self.stage_id) or 0
         return int(level)
 
     @property

@@ -27,8 +27,6 @@ from .field_views import PERSPECTIVE_VIEW
 
 def removed_title(stage: Stage, view: str) -> str:
     pair_name = stage.path.parent.parent.name
-    if stage.level == 0:
-        return f"{pair_name} · {stage.label} · {view}\nno mitigation: nothing removed, kept points in grey"
     n1 = int(np.count_nonzero(stage.removed["cloud"] == 1))
     n2 = int(np.count_nonzero(stage.removed["cloud"] == 2))
     return (
@@ -49,29 +47,26 @@ def _label(cloud: int, full: int, drawn: int) -> str:
     return f"removed from cloud {cloud} ({full}{shown})"
 
 
-def plot_removed(stage: Stage, limits: np.ndarray, out_dir: Path, settings: PlotSettings) -> list[Path]:
-    """``removed_top`` and ``removed_perspective``."""
+def plot_removed(stage: Stage, view: str, limits: np.ndarray, out_dir: Path, settings: PlotSettings) -> list[Path]:
+    """``removed_top`` (view "top") or ``removed_perspective`` (view "perspective")."""
     kept, removed = _layers(stage, settings.background_points)
     counts = {c: int(np.count_nonzero(stage.removed["cloud"] == c)) for c in (1, 2)}
-    written = []
-    for view in ("top", "perspective"):
-        fig = figure(9.0, 7.5, settings.dpi)
-        three_d = view == "perspective"
-        ax = fig.add_subplot(projection="3d") if three_d else fig.add_subplot()
-        axes = slice(0, 3) if three_d else slice(0, 2)
-        extra = POINTS_3D if three_d else {}
-        ax.scatter(*kept[:, axes].T, s=0.5, c=KEPT_COLOUR, alpha=0.35, lw=0, rasterized=True, label="kept (both clouds)", **extra)
-        for c, xyz in removed.items():
-            if len(xyz):
-                ax.scatter(*xyz[:, axes].T, s=3, c=CLOUD_COLOURS[c], alpha=0.8, lw=0, rasterized=True,
-                           label=_label(c, counts[c], len(xyz)), **extra)
-        mark_sensors(ax, sensor_origins(stage.pair), three_d=three_d)
-        if three_d:
-            set_equal_3d(ax, limits)
-            ax.view_init(**PERSPECTIVE_VIEW)
-        else:
-            set_top_axes(ax, limits)
-        legend(ax, loc="upper left")
-        ax.set_title(removed_title(stage, "from above" if view == "top" else "in perspective"), fontsize=10)
-        written += save(fig, out_dir, f"removed_{view}", settings)
-    return written
+    fig = figure(9.0, 7.5, settings.dpi)
+    three_d = view == "perspective"
+    ax = fig.add_subplot(projection="3d") if three_d else fig.add_subplot()
+    axes = slice(0, 3) if three_d else slice(0, 2)
+    extra = POINTS_3D if three_d else {}
+    ax.scatter(*kept[:, axes].T, s=0.5, c=KEPT_COLOUR, alpha=0.35, lw=0, rasterized=True, label="kept (both clouds)", **extra)
+    for c, xyz in removed.items():
+        if len(xyz):
+            ax.scatter(*xyz[:, axes].T, s=3, c=CLOUD_COLOURS[c], alpha=0.8, lw=0, rasterized=True,
+                       label=_label(c, counts[c], len(xyz)), **extra)
+    mark_sensors(ax, sensor_origins(stage.pair), three_d=three_d)
+    if three_d:
+        set_equal_3d(ax, limits)
+        ax.view_init(**PERSPECTIVE_VIEW)
+    else:
+        set_top_axes(ax, limits)
+    legend(ax, loc="upper left")
+    ax.set_title(removed_title(stage, "from above" if view == "top" else "in perspective"), fontsize=10)
+    return save(fig, out_dir, f"removed_{view}", settings)

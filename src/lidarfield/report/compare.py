@@ -14,6 +14,7 @@ import numpy as np
 from ..io.atomic import write_text
 from ..plots.common import figure, png_bytes
 from ..plots.pair_stats import column, sorted_rows, stage_ticks
+from ..stages import level_of
 from .discover import discover
 from .page import esc, image, image_file, page, table
 
@@ -75,12 +76,7 @@ def comparison_figure(name: str, rows_a: list[dict], rows_b: list[dict]):
 
 
 def _stage_dir_by_level(stage_dirs: list[Path]) -> dict[int, Path]:
-    out = {}
-    for d in stage_dirs:
-        prefix = d.name.split("-", 1)[0]
-        if prefix.isdigit():
-            out[int(prefix)] = d
-    return out
+    return {level_of(d.name): d for d in stage_dirs if level_of(d.name) is not None}
 
 
 def compare_studies(results_a: str | Path, results_b: str | Path, out_html: str | Path) -> Path:

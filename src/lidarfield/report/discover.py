@@ -15,6 +15,7 @@ import pandas as pd
 
 from ..errors import InputError
 from ..pipeline import read_stats
+from ..stages import level_of
 
 LIST_COLUMNS = ("rigid_translation_m",)
 
@@ -48,9 +49,9 @@ def _clean_row(row: dict) -> dict:
     return out
 
 
-def _level(stage_dir: Path) -> int:
-    prefix = stage_dir.name.split("-", 1)[0]
-    return int(prefix) if prefix.isdigit() else -1
+def _by_level(stage_dir: Path) -> tuple[int, str]:
+    level = level_of(stage_dir.name)
+    return (-1 if level is None else level, stage_dir.name)
 
 
 def discover(results_dir: str | Path) -> tuple[dict[str, list[Path]], list[dict]]:
@@ -75,7 +76,7 @@ def discover(results_dir: str | Path) -> tuple[dict[str, list[Path]], list[dict]
             stages = [pair_dir / "stages" / str(r["stage"]) for r in pair_rows]
             stages = [s for s in stages if s.is_dir()]
         else:
-            stages = sorted((s for s in (pair_dir / "stages").iterdir() if s.is_dir()), key=lambda s: (_level(s), s.name))
+            stages = sorted((s for s in (pair_dir / "stages").iterdir() if s.is_dir()), key=_by_level)
             pair_rows = read_stats([d / "stats.json" for d in stages if (d / "stats.json").is_file()])
         for r in pair_rows:
             r.setdefault("pair", name)

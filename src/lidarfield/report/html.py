@@ -21,8 +21,10 @@ import yaml
 
 from .. import __version__
 from ..io.atomic import write_text
-from ..plots.common import figure, png_bytes
+from ..plots import stage_figures
+from ..plots.common import PlotSettings, figure, plot_settings, png_bytes
 from ..plots.pair_stats import column, pair_figure_png, sorted_rows
+from ..stages import level_of
 from .budget import MB, Figure, Note, budget_mb, budget_note, embed_tiers, render, utf8_len
 from .page import esc, image, missing_image, page, table
 
@@ -127,25 +129,27 @@ def pair_figures(name: str, pair_dir: Path | None, rows: list[dict], out_dir: Pa
     return figures
 
 
-def stage_parts(name: str, stage_dir: Path, out_dir: Path) -> list[Figure | str]:
-    """A stage's heading, the link to its 3-D view and its figures."""
+def stage_parts(name: str, stage_dir: Path, out_dir: Path, settings: PlotSettings) -> list[Figure | str]:
+    """A stage's heading, the link to its 3-D view and the figures the settings draw for it."""
     fig_dir = stage_dir / "figures"
     parts = [f"<h3>{esc(name)} · stage {esc(stage_dir.name)}</h3>"]
     view = fig_dir / "field_3d.html"
     if view.is_file():
         parts.append(f'<p><a href="{esc(relative_href(view, out_dir))}">interactive 3-D view of this stage</a></p>')
-    stems = [(s, c) for s, c in STAGE_FIGURES if s != "before_after" or (fig_dir / "before_after.png").is_file()]
+    level = level_of(stage_dir.name) or 0
+    drawn = stage_figures(settings, level, has_previous=level > 0)
+    stems = [(s, c) for s, c in STAGE_FIGURES if s in drawn]
     figures = [file_figure(c, fig_dir / f"{s}.png", f"{stage_dir.name}: {c}", WIDE.get(s, 560), out_dir) for s, c in stems]
     return parts + ['<div class="figures">', *figures, "</div>"]
 
 
-def pair_section(name: str, stage_dirs: list[Path], rows: list[dict], out_dir: Path, open_: bool) -> list[Figure | str]:
+def pair_section(name: str, stage_dirs: list[Path], rows: list[dict], out_dir: Path, open_: bool, settings: PlotSettings) -> list[Figure | str]:
     """The pair's collapsible section, as page parts (its figures still to be embedded or linked)."""
     parts = [f'<details id="pair-{esc(name)}"{" open" if open_ else ""}><summary>pair {esc(name)}</summary>']
     pair_dir = stage_dirs[0].parent.parent if stage_dirs else None
     parts += ['<div class="figures">', *pair_figures(name, pair_dir, rows, out_dir), "</div>"]
     for stage_dir in stage_dirs:
-        parts += stage_parts(name, stage_dir, out_dir)
+        parts += stage_parts(name, stage_dir, out_dir, settings)
     return parts + ["</details>"]
 
 
@@ -153,6 +157,7 @@ def report_parts(study: dict, pairs: dict[str, list[Path]], summary_rows: list[d
     """The page as parts: HTML text, the figures whose tier decides how they appear, and the
     place of the note on what the size budget left out."""
     n_stages = sum(len(d) for d in pairs.values())
+    settings = plot_settings((study or {}).get("plots"))
     parts = [
         "<h1>lidarfield study report</h1>",
         f'<p class="note">lidarfield {esc(__version__)} · {len(pairs)} pair(s) · {n_stages} stage(s). '
@@ -170,7 +175,7 @@ def report_parts(study: dict, pairs: dict[str, list[Path]], summary_rows: list[d
     parts += ["<h2>Pairs</h2>", "<ul>" + "".join(f'<li><a href="#pair-{esc(n)}">{esc(n)}</a>: ' + ", ".join(esc(d.name) for d in dirs) + "</li>" for n, dirs in pairs.items()) + "</ul>"]
     for i, (name, dirs) in enumerate(pairs.items()):
         rows = [r for r in summary_rows if str(r.get("pair")) == name]
-        parts += pair_section(name, dirs, rows, out_dir, i < OPEN_PAIRS)
+        parts += pair_section(name, dirs, rows, out_dir, i < OPEN_PAIRS, settings)
     return parts
 
 

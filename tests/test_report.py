@@ -259,3 +259,9 @@ def test_cli_report_takes_its_budget_from_max_mb_or_else_the_config(study, tmp_p
         with pytest.raises(SystemExit):
             main(["report", str(root), "--out", str(out), "--max-mb", bad])
     assert "--max-mb: a size in MB greater than 0, not 'x'" in capsys.readouterr().err
+
+
+def test_the_report_knows_every_figure_a_stage_can_have():
+    from lidarfield.plots import STAGE_FIGURES as DRAWN
+
+    assert sorted(stem for stem, _ in STAGE_FIGURES) == sorted(DRAWN)

@@ -9,9 +9,9 @@ from matplotlib.cm import ScalarMappable
 from matplotlib.colors import Normalize
 
 from .common import (
-    POINTS_3D,
     BACKGROUND_COLOUR,
     MAGNITUDE_CMAP,
+    POINTS_3D,
     PlotSettings,
     Stage,
     figure,

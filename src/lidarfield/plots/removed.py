@@ -7,9 +7,9 @@ from pathlib import Path
 import numpy as np
 
 from .common import (
-    POINTS_3D,
     CLOUD_COLOURS,
     KEPT_COLOUR,
+    POINTS_3D,
     PlotSettings,
     Stage,
     figure,

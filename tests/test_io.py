@@ -149,11 +149,13 @@ def test_explicit_format_overrides_extension(tmp_path, scan):
 
 
 def test_split_reference(tmp_path):
-    assert split_reference("a/b.mat#3") == (Path("a/b.mat"), 3)
+    assert split_reference("a/b.mat#3") == (Path("a/b.mat"), 3, None)
+    assert split_reference("d.bag#/points#2") == (Path("d.bag"), 2, "/points")
+    assert split_reference("d#/ns/points") == (Path("d"), None, "/ns/points")
     assert split_reference("a/b.mat")[1] is None
     odd = tmp_path / "odd#2"
     odd.write_text("")
-    assert split_reference(odd) == (odd, None)  # an existing name is taken as it is
+    assert split_reference(odd) == (odd, None, None)  # an existing name is taken as it is
 
 
 # --- real files ------------------------------------------------------------------------------

@@ -176,10 +176,12 @@ def validate_config(
 
 
 def _existing_file(path: str, key: str, base_dir: Path) -> str:
-    """A scan reference ``file`` or ``file#k`` whose file exists."""
-    file = path.split("#", 1)[0]
-    if not (base_dir / file).is_file():
-        raise ConfigError(f"{key}: file not found: {base_dir / file}")
+    """A scan reference ``file``, ``file#k`` or ``bag#/topic#k`` whose file (or bag folder) exists."""
+    from .io.rosbag import is_bag_folder
+
+    file = base_dir / path.split("#", 1)[0]
+    if not (file.is_file() or is_bag_folder(file)):
+        raise ConfigError(f"{key}: file not found: {file}")
     return path
 
 
@@ -216,6 +218,8 @@ def _simulated_scan(scan_id: str, sim: dict, pose, time_s: float, velocity, angu
 
 def _recorded_scan(scan_id: str, entry: dict, path: str, pose=None) -> ScanSpec:
     spec = {"path": path, "format": entry.get("format"), "sensor": entry.get("sensor"), "pose": pose}
+    if isinstance(entry.get("poses"), dict):  # from a topic of the bag, when the scan is read
+        spec["poses"] = entry["poses"]
     return ScanSpec(scan_id, "recorded", spec)
 
 
@@ -280,12 +284,13 @@ def _recorded_sequence(name: str, entry: dict, base_dir: Path) -> list[ScanSpec]
             raise ConfigError(f"{key}: no file matches {scans!r} (relative to {base_dir})")
     else:
         _existing_file(scans, key, base_dir)
-        files = [f"{scans}#{k}" for k in range(scan_count(base_dir / scans))]
+        container = scans if entry.get("topic") is None else f"{scans}#{entry['topic']}"
+        files = [f"{container}#{k}" for k in range(scan_count(base_dir / container))]
     last = len(files) - 1 if entry["last"] is None else entry["last"]
     if not entry["first"] <= last < len(files):
         raise ConfigError(f"sequences.{name}: first/last ({entry['first']}, {last}) outside the {len(files)} scans")
     poses = None
-    if "poses" in entry:
+    if isinstance(entry.get("poses"), str):
         _existing_file(entry["poses"], f"sequences.{name}.poses", base_dir)
         poses = read_kitti_poses(base_dir / entry["poses"], expected=len(files))
     return [

@@ -42,7 +42,7 @@ def simulated_scan(spec: dict) -> Scan:
 
 def recorded_scan(spec: dict) -> Scan:
     """Read one recorded scan as a :class:`ScanSpec` of kind ``recorded`` describes it."""
-    scan = read_scan(spec["path"], format=spec["format"], sensor=spec["sensor"])
+    scan = read_scan(spec["path"], format=spec["format"], sensor=spec["sensor"], poses=spec.get("poses"))
     if spec["pose"] is not None:
         scan.pose = np.asarray(spec["pose"], dtype=float)
     return scan

@@ -166,8 +166,11 @@ def run_pair(
     register: str | None = None,
     transform: str | Path | None = None,
     sensor: str | None = None,
+    poses: dict | None = None,
 ) -> list[dict]:
     """One pair through the whole stack of a study config, without Snakemake.
+
+    ``poses`` ({"topic", "frame"}) takes both scans' poses from a topic of their ROS bag.
 
     Everything that can fail on the user's input (config, scans, registration, every
     hypothesis) runs before the first file is written, so a failure leaves no stage output.
@@ -178,7 +181,7 @@ def run_pair(
     out_dir = check_out_dir(out_dir)
     study = load_config(config_path, require_pairs=False)
     settings = registration_settings(register, transform)
-    scans = [read_scan(path, sensor=sensor) for path in (scan1, scan2)]
+    scans = [read_scan(path, sensor=sensor, poses=poses) for path in (scan1, scan2)]
     for path, scan in zip((scan1, scan2), scans):
         log.info("read %s: %d points (%d invalid rows dropped)", path, len(scan), scan.dropped_invalid)
     from .registration import register_pair  # imports Open3D: only where a pair is registered
@@ -192,13 +195,16 @@ def run_pair(
         stages.append(stage)
 
     # The same inputs as a config pair {scan1, scan2, sensor, register}: equal stage ids.
-    inputs = {
-        **{f"scan{i}": {"path": str(p), "format": None, "sensor": sensor, "pose": None} for i, p in ((1, scan1), (2, scan2))},
-        "register": settings,
-    }
+    scan_specs = [{"path": str(p), "format": None, "sensor": sensor, "pose": None} for p in (scan1, scan2)]
+    if poses is not None:
+        scan_specs = [{**spec, "poses": poses} for spec in scan_specs]
+    inputs = {"scan1": scan_specs[0], "scan2": scan_specs[1], "register": settings}
     ids = stage_ids(inputs, study.hypotheses, study.base_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    run = {"scan1": str(scan1), "scan2": str(scan2), "config": str(config_path), "register": settings, "sensor": sensor}
+    run = {
+        "scan1": str(scan1), "scan2": str(scan2), "config": str(config_path), "register": settings, "sensor": sensor,
+        "poses": poses,
+    }  # fmt: skip
     write_text(out_dir / RUN_MARKER, json.dumps({**run, "stages": ids}, indent=1) + "\n")
     write_scan(scans[0], out_dir / "scan1.parquet")
     write_scan(scans[1], out_dir / "scan2.parquet")

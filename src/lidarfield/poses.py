@@ -175,3 +175,23 @@ def pose_error(T_est: np.ndarray, T_ref: np.ndarray) -> tuple[float, float]:
     the translation and angle of ``inv(T_ref) @ T_est``."""
     E = relative_pose(T_ref, T_est)
     return float(np.linalg.norm(E[:3, 3])), float(np.degrees(rotation_angle(E)))
+
+
+def interpolate_pose(stamps_s: np.ndarray, poses: np.ndarray, at_s: float) -> np.ndarray | None:
+    """The pose at ``at_s`` between timed poses (stamps ascending): translation linear, rotation
+    by slerp. None when ``at_s`` lies outside [first stamp, last stamp]."""
+    from scipy.spatial.transform import Rotation, Slerp
+
+    stamps_s = np.asarray(stamps_s, dtype=np.float64)
+    if len(stamps_s) == 0 or not stamps_s[0] <= at_s <= stamps_s[-1]:
+        return None
+    k = int(np.clip(np.searchsorted(stamps_s, at_s, side="right") - 1, 0, len(stamps_s) - 1))
+    if stamps_s[k] == at_s or k == len(stamps_s) - 1:
+        return np.asarray(poses[k], dtype=np.float64).copy()
+    t0, t1 = stamps_s[k], stamps_s[k + 1]
+    fraction = (at_s - t0) / (t1 - t0)
+    rotation = Slerp([0.0, 1.0], Rotation.from_matrix(np.asarray(poses[k : k + 2])[:, :3, :3]))(fraction)
+    T = np.eye(4)
+    T[:3, :3] = rotation.as_matrix()
+    T[:3, 3] = (1 - fraction) * poses[k][:3, 3] + fraction * poses[k + 1][:3, 3]
+    return T

@@ -20,6 +20,7 @@ class Scan:
     pose: np.ndarray | None = None  # 4x4 world-from-sensor, when known
     source: str | None = None  # where the scan came from (file path or simulation spec)
     dropped_invalid: int = 0  # rows dropped by the reader for NaN / infinite coordinates
+    stamp_s: float | None = None  # when the scan was taken (s since the epoch; a bag's header stamp)
 
     def __post_init__(self):
         self.xyz = np.ascontiguousarray(self.xyz, dtype=np.float64).reshape(-1, 3)
@@ -40,4 +41,5 @@ class Scan:
             self.pose,
             self.source,
             self.dropped_invalid,
+            self.stamp_s,
         )

@@ -26,13 +26,18 @@ def add_parser(subparsers) -> None:
     how.add_argument("--register", metavar="METHOD", help="identity (default), truth, icp, icp_point_to_plane, gicp or ndt")
     how.add_argument("--transform", metavar="FILE", help="file holding the pose of sensor 2 in frame 1")
     parser.add_argument("--sensor", metavar="NAME", help="sensor preset or YAML file of both scans (e.g. vlp16)")
+    parser.add_argument(
+        "--poses", metavar="TOPIC", help="ROS bag scans: take their poses from this topic (Odometry, PoseStamped, TF) for --register truth"
+    )
+    parser.add_argument("--pose-frame", metavar="FRAME", help="with --poses on a TF topic: the sensor's child frame")
     parser.set_defaults(func=_run)
 
 
 def _run(args: argparse.Namespace) -> int:
     from ..pipeline import run_pair
 
-    rows = run_pair(args.scan1, args.scan2, args.config, args.out, args.register, args.transform, args.sensor)
+    poses = None if args.poses is None else {"topic": args.poses, **({"frame": args.pose_frame} if args.pose_frame else {})}
+    rows = run_pair(args.scan1, args.scan2, args.config, args.out, args.register, args.transform, args.sensor, poses)
     print(format_table(rows))
     print(f"wrote {args.out}/stages/*/ and {args.out}/summary.parquet, summary.csv")
     return 0

@@ -2,9 +2,10 @@
 
 ``read_scan(path)`` picks the format from the extension (or ``format=``), and returns a
 :class:`~lidarfield.scan.Scan` in the sensor frame with rows of NaN or infinite coordinates
-dropped and counted. Container formats (MATLAB cell arrays, Ouster recordings) hold several
-scans: the reference ``path#k`` (0-based) selects scan k and ``scan_count(path)`` says how many
-there are.
+dropped and counted. Container formats (MATLAB cell arrays, Ouster recordings, ROS bags) hold
+several scans: the reference ``path#k`` (0-based) selects scan k and ``scan_count(path)`` says
+how many there are. A ROS bag with several PointCloud2 topics needs the topic:
+``path#/topic#k``. A ROS 2 bag is a folder (holding ``metadata.yaml``).
 """
 
 from __future__ import annotations
@@ -13,10 +14,12 @@ import importlib
 import re
 from dataclasses import dataclass
 from pathlib import Path
+from typing import NamedTuple
 
 from ..errors import InputError
 from ..scan import Scan
 from ..sensors import SensorModel, sensor_model
+from .rosbag import is_bag_folder
 
 
 @dataclass(frozen=True)
@@ -25,6 +28,7 @@ class ScanFormat:
 
     The module provides ``read_<name>(path, index, sensor) -> Scan``, optionally
     ``write_<name>(scan, path)`` and, for container formats, ``count_<name>(path) -> int``.
+    Formats with ``topics`` (ROS bags) take the topic as a last argument of both.
     """
 
     name: str
@@ -32,6 +36,7 @@ class ScanFormat:
     module: str
     writable: bool = True
     container: bool = False
+    topics: bool = False
 
     def function(self, verb: str):
         module = importlib.import_module(f"{__name__}.{self.module}")
@@ -51,10 +56,19 @@ FORMATS: dict[str, ScanFormat] = {
         ScanFormat("las", (".las", ".laz"), "las"),
         ScanFormat("mat", (".mat",), "mat", writable=False, container=True),
         ScanFormat("ouster", (".pcap", ".osf"), "ouster", writable=False, container=True),
+        ScanFormat("rosbag", (".bag", ".mcap", ".db3"), "rosbag", writable=False, container=True, topics=True),
     )
 }
 
-_REFERENCE = re.compile(r"^(?P<path>.+)#(?P<index>\d+)$")
+_REFERENCE = re.compile(r"^(?P<path>.+?)(?:#(?P<topic>/[^#]*))?(?:#(?P<index>\d+))?$")
+
+
+class ScanReference(NamedTuple):
+    """A scan of a file: ``path``, ``path#k`` or (ROS bags) ``path#/topic#k`` / ``path#/topic``."""
+
+    path: Path
+    index: int | None = None
+    topic: str | None = None
 
 
 def known_formats() -> str:
@@ -62,20 +76,23 @@ def known_formats() -> str:
     return ", ".join(f"{f.name} ({' '.join(f.extensions)})" for f in FORMATS.values())
 
 
-def split_reference(reference: str | Path) -> tuple[Path, int | None]:
-    """``'scans.mat#3'`` -> (Path('scans.mat'), 3); a plain path -> (path, None).
+def split_reference(reference: str | Path) -> ScanReference:
+    """``'scans.mat#3'`` -> (Path('scans.mat'), 3, None); ``'drive.bag#/points#2'`` ->
+    (Path('drive.bag'), 2, '/points'); a plain path -> (path, None, None).
 
     A file whose real name ends in ``#digits`` is taken as it is.
     """
     text = str(reference)
     match = _REFERENCE.match(text)
-    if match is None or Path(text).exists():
-        return Path(text), None
-    return Path(match["path"]), int(match["index"])
+    if match is None or Path(text).exists() or not (match["index"] or match["topic"]):
+        return ScanReference(Path(text))
+    index = None if match["index"] is None else int(match["index"])
+    return ScanReference(Path(match["path"]), index, match["topic"])
 
 
 def scan_format(path: str | Path, format: str | None = None) -> ScanFormat:
-    """The format named by ``format``, or the one of ``path``'s extension."""
+    """The format named by ``format``, or the one of ``path``'s extension (a folder holding
+    ``metadata.yaml`` is a ROS 2 bag)."""
     if format is not None:
         found = FORMATS.get(format.lower().lstrip("."))
         if found is None:
@@ -83,6 +100,8 @@ def scan_format(path: str | Path, format: str | None = None) -> ScanFormat:
         if found is None:
             raise InputError(f"unknown scan format {format!r}; known formats: {known_formats()}", path)
         return found
+    if is_bag_folder(Path(path)):
+        return FORMATS["rosbag"]
     suffix = Path(path).suffix.lower()
     for f in FORMATS.values():
         if suffix in f.extensions:
@@ -95,33 +114,60 @@ def scan_format(path: str | Path, format: str | None = None) -> ScanFormat:
 
 
 def scan_count(reference: str | Path, format: str | None = None) -> int:
-    """How many scans the file holds (1 for single-scan formats)."""
-    path, _ = split_reference(reference)
-    fmt = scan_format(path, format)
-    _require_file(path)
-    return fmt.function("count")(path) if fmt.container else 1
+    """How many scans the file holds (1 for single-scan formats; a bag's topic: its messages)."""
+    reference = split_reference(reference)
+    fmt = _checked_format(reference, format)
+    return _count(fmt, reference)
 
 
-def read_scan(reference: str | Path, format: str | None = None, sensor: str | dict | SensorModel | None = None) -> Scan:
-    """Read one scan from ``path`` or ``path#k`` (scan k of a container file, 0-based).
+def read_scan(
+    reference: str | Path,
+    format: str | None = None,
+    sensor: str | dict | SensorModel | None = None,
+    poses: dict | None = None,
+) -> Scan:
+    """Read one scan from ``path``, ``path#k`` (scan k of a container file, 0-based) or, for a
+    ROS bag, ``path#/topic#k``.
 
     ``sensor`` (a preset name, a YAML file, a dict or a model) is attached to the scan and
-    overrides a model stored in the file. Raises ``InputError`` naming the file and the problem.
+    overrides a model stored in the file. ``poses`` (ROS bags only: ``{"topic": ..., "frame":
+    ...}``) gives the scan the pose of that topic at its header stamp. Raises ``InputError``
+    naming the file and the problem.
     """
-    path, index = split_reference(reference)
-    fmt = scan_format(path, format)
-    _require_file(path)
+    reference = split_reference(reference)
+    path = reference.path
+    fmt = _checked_format(reference, format)
     model = sensor_model(sensor)
-    count = fmt.function("count")(path) if fmt.container else 1
-    if index is None and count > 1:
+    count = _count(fmt, reference)
+    if reference.index is None and count > 1:
         raise InputError(f"holds {count} scans: select one by appending #k to the path, k = 0..{count - 1}", path)
-    index = 0 if index is None else index
+    index = 0 if reference.index is None else reference.index
     if index >= count:
         raise InputError(f"scan #{index} requested but the file holds {count} scan(s) (#0..#{count - 1})", path)
-    scan = fmt.function("read")(path, index, model)
+    if poses is not None and not fmt.topics:
+        raise InputError(f"poses from a topic need a ROS bag, not a {fmt.name} file", path)
+    bag = (reference.topic, poses) if fmt.topics else ()
+    scan = fmt.function("read")(path, index, model, *bag)
     if model is not None:
         scan.sensor = model
     return scan
+
+
+def _checked_format(reference: ScanReference, format: str | None) -> ScanFormat:
+    """The reference's format, once its file (or bag folder) is known to exist."""
+    fmt = scan_format(reference.path, format)
+    if not (reference.path.is_file() or fmt.topics and is_bag_folder(reference.path)):
+        raise InputError("file not found" if not reference.path.exists() else "not a file", reference.path)
+    if reference.topic is not None and not fmt.topics:
+        raise InputError(f"a {fmt.name} file has no topics (#{reference.topic} given)", reference.path)
+    return fmt
+
+
+def _count(fmt: ScanFormat, reference: ScanReference) -> int:
+    if not fmt.container:
+        return 1
+    topic = (reference.topic,) if fmt.topics else ()
+    return fmt.function("count")(reference.path, *topic)
 
 
 def write_scan(scan: Scan, path: str | Path, format: str | None = None) -> None:
@@ -134,9 +180,6 @@ def write_scan(scan: Scan, path: str | Path, format: str | None = None) -> None:
     fmt.function("write")(scan, path)
 
 
-def _require_file(path: Path) -> None:
-    if not path.is_file():
-        raise InputError("file not found" if not path.exists() else "not a file", path)
-
-
-__all__ = ["FORMATS", "ScanFormat", "known_formats", "read_scan", "scan_count", "split_reference", "write_scan"]
+__all__ = [
+    "FORMATS", "ScanFormat", "ScanReference", "known_formats", "read_scan", "scan_count", "split_reference", "write_scan",
+]  # fmt: skip

@@ -1,5 +1,5 @@
 """The scan Parquet contract: columns x, y, z (float64) plus attributes; metadata key
-``lidarfield`` = {"sensor", "pose", "source", "dropped_invalid"}."""
+``lidarfield`` = {"sensor", "pose", "source", "dropped_invalid", "stamp_s"}."""
 
 from __future__ import annotations
 
@@ -26,6 +26,7 @@ def scan_metadata(scan: Scan) -> dict:
         "pose": None if scan.pose is None else np.asarray(scan.pose).tolist(),
         "source": scan.source,
         "dropped_invalid": int(scan.dropped_invalid),
+        "stamp_s": scan.stamp_s,
     }
 
 
@@ -47,4 +48,5 @@ def read_parquet(path: Path, index: int = 0, sensor: SensorModel | None = None) 
     )
     if meta.get("source"):
         scan.source = meta["source"]
+    scan.stamp_s = meta.get("stamp_s")
     return scan

@@ -1,0 +1,202 @@
+"""ROS bags as scan containers, through ``rosbags`` (no ROS install): ROS 1 ``.bag`` files, ROS 2
+bag folders (``metadata.yaml`` with sqlite3 or MCAP storage) and plain ``.mcap`` / ``.db3`` files.
+
+Every message of a ``sensor_msgs/PointCloud2`` topic is one scan: ``bag#k`` selects the k-th
+(0-based, in recording order), ``bag#/topic#k`` names the topic when the bag has several. The
+header stamp becomes the scan's ``stamp_s``.
+
+Reading is lazy: the bag's index gives each message's recording time without reading any
+message data (the ROS 1 index, the sqlite3 ``timestamp`` column, the MCAP message indexes),
+and only the chunk holding the wanted message is then read.
+"""
+
+from __future__ import annotations
+
+import struct
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Iterator, NamedTuple
+
+import numpy as np
+
+from ..errors import InputError
+from ..scan import Scan
+from ..sensors import SensorModel
+from .pointcloud2 import CloudLayoutError, PointField, decode_cloud
+from .rows import scan_from_rows
+
+POINTCLOUD2 = "sensor_msgs/msg/PointCloud2"
+_INSTALL = "reading ROS bags needs the rosbags package: pip install rosbags"
+
+
+class TopicInfo(NamedTuple):
+    name: str
+    msgtype: str
+    count: int
+
+
+def is_bag_folder(path: Path) -> bool:
+    """A ROS 2 bag folder: a directory holding ``metadata.yaml``."""
+    return path.is_dir() and (path / "metadata.yaml").is_file()
+
+
+@contextmanager
+def open_bag(path: Path) -> Iterator:
+    """An open ``rosbags`` AnyReader; any failure to open is an ``InputError`` naming the bag."""
+    try:
+        from rosbags.highlevel import AnyReader
+        from rosbags.typesys import Stores, get_typestore
+    except ImportError:
+        raise InputError(_INSTALL) from None
+    try:
+        reader = AnyReader([Path(path)], default_typestore=get_typestore(Stores.LATEST))
+        reader.open()
+    except Exception as e:  # rosbags raises its own error types, struct and decompression errors
+        raise InputError(f"not a readable ROS bag: {_detail(e)}", path) from None
+    try:
+        yield reader
+    finally:
+        reader.close()
+
+
+def bag_topics(reader) -> list[TopicInfo]:
+    """The bag's topics with their message type and count, by name."""
+    counts: dict[str, list] = {}
+    for c in reader.connections:
+        entry = counts.setdefault(c.topic, [c.msgtype, 0])
+        entry[1] += c.msgcount
+    return [TopicInfo(name, msgtype, count) for name, (msgtype, count) in sorted(counts.items())]
+
+
+def cloud_topic(reader, path: Path, topic: str | None) -> str:
+    """The PointCloud2 topic the scans come from: ``topic``, or the bag's only one."""
+    topics = bag_topics(reader)
+    clouds = [t.name for t in topics if t.msgtype == POINTCLOUD2]
+    listing = ", ".join(f"{t.name} ({t.msgtype.replace('/msg/', '/')}, {t.count})" for t in topics) or "none"
+    if topic is None:
+        if len(clouds) == 1:
+            return clouds[0]
+        if not clouds:
+            raise InputError(f"the bag holds no sensor_msgs/PointCloud2 topic; its topics: {listing}", path)
+        raise InputError(f"the bag holds {len(clouds)} PointCloud2 topics: name one as {path}#TOPIC#k; topics: {listing}", path)
+    if topic not in clouds:
+        problem = "is not a PointCloud2 topic" if topic in {t.name for t in topics} else "is not in the bag"
+        raise InputError(f"topic {topic} {problem}; its topics: {listing}", path)
+    return topic
+
+
+def topic_connections(reader, topic: str) -> list:
+    return [c for c in reader.connections if c.topic == topic]
+
+
+def message_times(reader, connections: list) -> np.ndarray:
+    """Recording times (ns, sorted) of the connections' messages, from the bag's indexes."""
+    from rosbags.rosbag1 import Reader as Reader1
+
+    times: list[int] = []
+    topics = {c.topic for c in connections}
+    for owner in {id(c.owner): c.owner for c in connections}.values():
+        if isinstance(owner, Reader1):
+            times += [entry.time for c in connections if c.owner is owner for entry in owner.indexes[c.id]]
+            continue
+        storage = getattr(owner, "storage", owner)  # a folder's reader holds one storage per file
+        for part in getattr(storage, "storages", [storage]):
+            ids = [c.id for c in part.connections if c.topic in topics]
+            times += _storage_times(part, ids)
+    return np.sort(np.asarray(times, dtype=np.int64))
+
+
+def _storage_times(storage, ids: list[int]) -> list[int]:
+    """Recording times of a ROS 2 storage file's messages on the given connection ids."""
+    if not ids:
+        return []
+    if hasattr(storage, "dbconn"):  # sqlite3: the timestamp column, no message data
+        marks = ",".join("?" * len(ids))
+        query = f"SELECT timestamp FROM messages WHERE topic_id IN ({marks})"
+        return [row[0] for row in storage.dbconn.execute(query, ids)]
+    if getattr(storage, "chunks", None):  # MCAP: the message index record of each chunk
+        times = []
+        for chunk in storage.chunks:
+            for cid in ids:
+                if cid in chunk.message_index_offsets:
+                    times += _mcap_index_times(storage.bio, chunk.message_index_offsets[cid])
+        return times
+    connections = [c for c in storage.connections if c.id in ids]  # unindexed: read it through
+    return [t for _, t, _ in storage.messages(connections)]
+
+
+def _mcap_index_times(bio, offset: int) -> list[int]:
+    """The log times of one MCAP Message Index record (op 0x07: channel, then (time, offset) pairs)."""
+    bio.seek(offset)
+    op, _length, _channel, size = struct.unpack("<BQHI", bio.read(15))
+    if op != 0x07:
+        raise ValueError(f"no MCAP message index at offset {offset}")
+    return np.frombuffer(bio.read(size), dtype="<u8")[0::2].astype(np.int64).tolist()
+
+
+def nth_message(reader, connections: list, times: np.ndarray, index: int):
+    """(connection, recording time, raw data) of message ``index`` of the connections, reading
+    only the chunk that holds it."""
+    time = int(times[index])
+    rank = index - int(np.searchsorted(times, time, side="left"))  # messages sharing its time
+    for k, message in enumerate(reader.messages(connections=connections, start=time, stop=time + 1)):
+        if k == rank:
+            return message
+    raise InputError(f"message #{index} listed in the index is missing from the data")
+
+
+def stamp_seconds(header) -> float:
+    return header.stamp.sec + header.stamp.nanosec * 1e-9
+
+
+def cloud_of(msg, path: Path, where: str) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    """Decode a deserialised PointCloud2 message."""
+    fields = [PointField(f.name, f.offset, f.datatype, f.count) for f in msg.fields]
+    try:
+        return decode_cloud(fields, msg.height, msg.width, msg.point_step, msg.row_step, msg.is_bigendian, msg.data)
+    except CloudLayoutError as e:
+        raise InputError(f"{where}: unreadable PointCloud2: {e}", path) from None
+
+
+def count_rosbag(path: Path, topic: str | None = None) -> int:
+    with open_bag(path) as reader:
+        return sum(c.msgcount for c in topic_connections(reader, cloud_topic(reader, path, topic)))
+
+
+def read_rosbag(
+    path: Path, index: int = 0, sensor: SensorModel | None = None, topic: str | None = None, poses: dict | None = None
+) -> Scan:
+    """Scan ``index`` of the bag's PointCloud2 ``topic``; with ``poses`` ({topic, frame}) its
+    pose interpolated at its header stamp (see :mod:`lidarfield.io.bag_poses`)."""
+    from .bag_poses import pose_from_bag
+
+    with open_bag(path) as reader:
+        topic = cloud_topic(reader, path, topic)
+        connections = topic_connections(reader, topic)
+        times = message_times(reader, connections)
+        where = f"{topic} message #{index}"
+        try:
+            connection, _, raw = nth_message(reader, connections, times, index)
+            msg = reader.deserialize(raw, connection.msgtype)
+            xyz, attributes = cloud_of(msg, path, where)
+            stamp_s = stamp_seconds(msg.header)
+            pose = None if poses is None else pose_from_bag(reader, path, poses, stamp_s, int(times[index]))
+        except InputError as e:
+            raise InputError(f"{where}: {e}" if e.path is None else str(e)) from None
+        except Exception as e:  # truncated or corrupt data: rosbags, lz4, zstd and struct errors
+            raise InputError(f"{where} cannot be read: {_detail(e)}", path) from None
+    scan = scan_from_rows(xyz, attributes, path, sensor=sensor, pose=pose)
+    scan.source = f"{path}#{topic}#{index}"
+    scan.stamp_s = stamp_seconds(msg.header)
+    return scan
+
+
+def read_messages(reader, connections: list, start: int | None = None, stop: int | None = None):
+    """Deserialised messages of the connections with their recording time (ns), in time order."""
+    for connection, time, raw in reader.messages(connections=connections, start=start, stop=stop):
+        yield time, reader.deserialize(raw, connection.msgtype)
+
+
+def _detail(e: Exception) -> str:
+    text = " ".join(str(e).split()) or type(e).__name__
+    return text if len(text) < 200 else text[:197] + "..."

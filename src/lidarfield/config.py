@@ -285,7 +285,7 @@ def _recorded_sequence(name: str, entry: dict, base_dir: Path) -> list[ScanSpec]
     else:
         _existing_file(scans, key, base_dir)
         container = scans if entry.get("topic") is None else f"{scans}#{entry['topic']}"
-        files = [f"{container}#{k}" for k in range(scan_count(base_dir / container))]
+        files = [f"{container}#{k}" for k in range(scan_count(base_dir / container, sensor=entry.get("sensor")))]
     last = len(files) - 1 if entry["last"] is None else entry["last"]
     if not entry["first"] <= last < len(files):
         raise ConfigError(f"sequences.{name}: first/last ({entry['first']}, {last}) outside the {len(files)} scans")

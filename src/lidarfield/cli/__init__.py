@@ -13,7 +13,7 @@ import sys
 
 from ..errors import LidarfieldError
 
-SUBCOMMANDS = ("field", "simulate", "register", "run", "plot", "report", "compare", "job")
+SUBCOMMANDS = ("field", "simulate", "register", "run", "plot", "report", "compare", "info", "job")
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -28,7 +28,8 @@ class ScanFormat:
 
     The module provides ``read_<name>(path, index, sensor) -> Scan``, optionally
     ``write_<name>(scan, path)`` and, for container formats, ``count_<name>(path) -> int``.
-    Formats with ``topics`` (ROS bags) take the topic as a last argument of both.
+    Formats with ``topics`` (ROS bags) take the topic as a last argument of both; formats whose
+    decoding depends on the sensor (``sensor_decodes``: raw captures) get it in ``count`` too.
     """
 
     name: str
@@ -37,6 +38,7 @@ class ScanFormat:
     writable: bool = True
     container: bool = False
     topics: bool = False
+    sensor_decodes: bool = False
 
     def function(self, verb: str):
         module = importlib.import_module(f"{__name__}.{self.module}")
@@ -55,7 +57,9 @@ FORMATS: dict[str, ScanFormat] = {
         ScanFormat("parquet", (".parquet", ".pq"), "scan_parquet"),
         ScanFormat("las", (".las", ".laz"), "las"),
         ScanFormat("mat", (".mat",), "mat", writable=False, container=True),
-        ScanFormat("ouster", (".pcap", ".osf"), "ouster", writable=False, container=True),
+        ScanFormat("pcap", (".pcap",), "pcap", writable=False, container=True, sensor_decodes=True),
+        ScanFormat("ouster", (".osf",), "ouster", writable=False, container=True),
+        ScanFormat("velodyne", (), "velodyne", writable=False, container=True, sensor_decodes=True),
         ScanFormat("rosbag", (".bag", ".mcap", ".db3"), "rosbag", writable=False, container=True, topics=True),
     )
 }
@@ -113,11 +117,12 @@ def scan_format(path: str | Path, format: str | None = None) -> ScanFormat:
     )
 
 
-def scan_count(reference: str | Path, format: str | None = None) -> int:
-    """How many scans the file holds (1 for single-scan formats; a bag's topic: its messages)."""
+def scan_count(reference: str | Path, format: str | None = None, sensor: str | dict | SensorModel | None = None) -> int:
+    """How many scans the file holds (1 for single-scan formats; a bag's topic: its messages; a
+    Velodyne capture: its whole rotations, decoded as ``sensor`` when given)."""
     reference = split_reference(reference)
     fmt = _checked_format(reference, format)
-    return _count(fmt, reference)
+    return _count(fmt, reference, sensor_model(sensor))
 
 
 def read_scan(
@@ -138,7 +143,7 @@ def read_scan(
     path = reference.path
     fmt = _checked_format(reference, format)
     model = sensor_model(sensor)
-    count = _count(fmt, reference)
+    count = _count(fmt, reference, model)
     if reference.index is None and count > 1:
         raise InputError(f"holds {count} scans: select one by appending #k to the path, k = 0..{count - 1}", path)
     index = 0 if reference.index is None else reference.index
@@ -163,11 +168,11 @@ def _checked_format(reference: ScanReference, format: str | None) -> ScanFormat:
     return fmt
 
 
-def _count(fmt: ScanFormat, reference: ScanReference) -> int:
+def _count(fmt: ScanFormat, reference: ScanReference, sensor: SensorModel | None) -> int:
     if not fmt.container:
         return 1
-    topic = (reference.topic,) if fmt.topics else ()
-    return fmt.function("count")(reference.path, *topic)
+    extra = (reference.topic,) if fmt.topics else (sensor,) if fmt.sensor_decodes else ()
+    return fmt.function("count")(reference.path, *extra)
 
 
 def write_scan(scan: Scan, path: str | Path, format: str | None = None) -> None:

@@ -46,6 +46,7 @@ class CloudMessage:
     stamp_s: float
     shape: tuple[int, int] | None = None  # (height, width) of an organised cloud
     topic: str | None = None  # default: write_bag's topic
+    layout: str | None = None  # default: write_bag's layout
 
 
 def layout_dtype(layout: str, big_endian: bool = False) -> np.dtype:
@@ -81,14 +82,21 @@ def write_bag(
 
         store.register(get_types_from_msg("geometry_msgs/TransformStamped[] transforms", "tf2_msgs/msg/TFMessage"))
     serialize = store.serialize_ros1 if ros1 else store.serialize_cdr
-    dtype = layout_dtype(layout, big_endian)
-    messages = [(c.stamp_s, c.topic or topic, _cloud_message(store, c, dtype, big_endian, frame_id)) for c in clouds]
-    messages += [(stamp, pose_topic, _pose_message(store, pose_type, stamp, pose, frame_id)) for stamp, pose in poses]
+    dtypes = {name: layout_dtype(name, big_endian) for name in LAYOUTS}
+    # Each message is built only when it is written: a bag of gigabytes never sits in memory.
+    messages = [
+        (c.stamp_s, c.topic or topic, lambda c=c: _cloud_message(store, c, dtypes[c.layout or layout], big_endian, frame_id))
+        for c in clouds
+    ]
+    messages += [
+        (stamp, pose_topic, lambda stamp=stamp, pose=pose: _pose_message(store, pose_type, stamp, pose, frame_id))
+        for stamp, pose in poses
+    ]
     types = {name: pose_type if name == pose_topic else "sensor_msgs/msg/PointCloud2" for _, name, _ in messages}
     with _writer(path, storage) as writer:
         connections = {name: writer.add_connection(name, msgtype, typestore=store) for name, msgtype in types.items()}
-        for stamp, name, msg in sorted(messages, key=lambda m: m[0]):
-            writer.write(connections[name], _ns(stamp), serialize(msg, types[name]))
+        for stamp, name, build in sorted(messages, key=lambda m: m[0]):
+            writer.write(connections[name], _ns(stamp), serialize(build(), types[name]))
     return path
 
 

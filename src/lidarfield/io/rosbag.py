@@ -13,9 +13,9 @@ and only the chunk holding the wanted message is then read.
 from __future__ import annotations
 
 import struct
-from contextlib import contextmanager
+from functools import lru_cache
 from pathlib import Path
-from typing import Iterator, NamedTuple
+from typing import NamedTuple
 
 import numpy as np
 
@@ -23,7 +23,7 @@ from ..errors import InputError
 from ..scan import Scan
 from ..sensors import SensorModel
 from .pointcloud2 import CloudLayoutError, PointField, decode_cloud
-from .rows import scan_from_rows
+from .rows import file_key, scan_from_rows
 
 POINTCLOUD2 = "sensor_msgs/msg/PointCloud2"
 _INSTALL = "reading ROS bags needs the rosbags package: pip install rosbags"
@@ -40,9 +40,18 @@ def is_bag_folder(path: Path) -> bool:
     return path.is_dir() and (path / "metadata.yaml").is_file()
 
 
-@contextmanager
-def open_bag(path: Path) -> Iterator:
-    """An open ``rosbags`` AnyReader; any failure to open is an ``InputError`` naming the bag."""
+def open_bag(path: Path):
+    """An open ``rosbags`` AnyReader of the bag; any failure to open is an ``InputError`` naming
+    it. Kept open for the next call on the same unchanged file (opening parses every message
+    definition: a tenth of a second or more, whatever the bag's size)."""
+    path = Path(path)
+    files = sorted(path.iterdir()) if path.is_dir() else [path]
+    return _open_reader(tuple(file_key(f) for f in files if f.is_file()), str(path))
+
+
+@lru_cache(maxsize=2)
+def _open_reader(_state: tuple, path: str):
+    """The reader of ``path``, cached while its files' state (path, size, time) is unchanged."""
     try:
         from rosbags.highlevel import AnyReader
         from rosbags.typesys import Stores, get_typestore
@@ -53,10 +62,7 @@ def open_bag(path: Path) -> Iterator:
         reader.open()
     except Exception as e:  # rosbags raises its own error types, struct and decompression errors
         raise InputError(f"not a readable ROS bag: {_detail(e)}", path) from None
-    try:
-        yield reader
-    finally:
-        reader.close()
+    return reader
 
 
 def bag_topics(reader) -> list[TopicInfo]:
@@ -159,8 +165,8 @@ def cloud_of(msg, path: Path, where: str) -> tuple[np.ndarray, dict[str, np.ndar
 
 
 def count_rosbag(path: Path, topic: str | None = None) -> int:
-    with open_bag(path) as reader:
-        return sum(c.msgcount for c in topic_connections(reader, cloud_topic(reader, path, topic)))
+    reader = open_bag(path)
+    return sum(c.msgcount for c in topic_connections(reader, cloud_topic(reader, path, topic)))
 
 
 def read_rosbag(
@@ -170,21 +176,21 @@ def read_rosbag(
     pose interpolated at its header stamp (see :mod:`lidarfield.io.bag_poses`)."""
     from .bag_poses import pose_from_bag
 
-    with open_bag(path) as reader:
-        topic = cloud_topic(reader, path, topic)
-        connections = topic_connections(reader, topic)
-        times = message_times(reader, connections)
-        where = f"{topic} message #{index}"
-        try:
-            connection, _, raw = nth_message(reader, connections, times, index)
-            msg = reader.deserialize(raw, connection.msgtype)
-            xyz, attributes = cloud_of(msg, path, where)
-            stamp_s = stamp_seconds(msg.header)
-            pose = None if poses is None else pose_from_bag(reader, path, poses, stamp_s, int(times[index]))
-        except InputError as e:
-            raise InputError(f"{where}: {e}" if e.path is None else str(e)) from None
-        except Exception as e:  # truncated or corrupt data: rosbags, lz4, zstd and struct errors
-            raise InputError(f"{where} cannot be read: {_detail(e)}", path) from None
+    reader = open_bag(path)
+    topic = cloud_topic(reader, path, topic)
+    connections = topic_connections(reader, topic)
+    times = message_times(reader, connections)
+    where = f"{topic} message #{index}"
+    try:
+        connection, _, raw = nth_message(reader, connections, times, index)
+        msg = reader.deserialize(raw, connection.msgtype)
+        xyz, attributes = cloud_of(msg, path, where)
+        stamp_s = stamp_seconds(msg.header)
+        pose = None if poses is None else pose_from_bag(reader, path, poses, stamp_s, int(times[index]))
+    except InputError as e:
+        raise InputError(f"{where}: {e}" if e.path is None else str(e)) from None
+    except Exception as e:  # truncated or corrupt data: rosbags, lz4, zstd and struct errors
+        raise InputError(f"{where} cannot be read: {_detail(e)}", path) from None
     scan = scan_from_rows(xyz, attributes, path, sensor=sensor, pose=pose)
     scan.source = f"{path}#{topic}#{index}"
     scan.stamp_s = stamp_seconds(msg.header)

@@ -8,6 +8,7 @@ include: "workflow/rules/scans.smk"
 include: "workflow/rules/register.smk"
 include: "workflow/rules/mitigate.smk"
 include: "workflow/rules/field.smk"
+include: "workflow/rules/suggest.smk"
 include: "workflow/rules/plot.smk"
 include: "workflow/rules/report.smk"
 

@@ -122,6 +122,12 @@ def test_kernel_matches_reference(name):
     reference = discrepancy_field_reference(xyz1, xyz2, settings, origin)
     assert list(fast) == list(reference) == list(field_columns(settings.grid))
     assert len(fast["voxel"]) > 50 and 0 < fast["valid"].sum() < len(fast["voxel"])
+    # se and z are compared too: finite wherever a valid voxel has a spread to estimate (a
+    # cloud with 5 points), NaN where neither has (every voxel of the 0.2 m grid).
+    spread = fast["valid"] & ((fast["n1"] >= 5) | (fast["n2"] >= 5))
+    assert spread.any() or name == "cartesian-sparse"
+    assert np.isfinite(fast["se"][spread]).all() and (fast["se"][spread] > 0).all()
+    assert np.isnan(fast["se"][fast["valid"] & ~spread]).all()
     assert_same_field(fast, reference)
     # From precomputed ids (one binning, several subsets): the same field, both implementations.
     grid = settings.grid

@@ -34,6 +34,8 @@ def columns_from_vectors(uvw: np.ndarray, weight=None, valid=None) -> dict[str, 
     u = np.where(valid[:, None], uvw, np.nan)
     columns["u"], columns["v"], columns["w"] = u.T
     columns["magnitude"] = np.linalg.norm(u, axis=1)
+    columns["se"] = np.where(valid, 0.01, np.nan)
+    columns["z"] = columns["magnitude"] / columns["se"]
     columns["valid"] = valid
     return columns
 

@@ -9,7 +9,16 @@ from PIL import Image
 from lidarfield.errors import ConfigError, InputError
 from lidarfield.grid import CartesianGrid, SphericalGrid
 from lidarfield.plots import plot_pair, plot_settings, plot_stage
-from lidarfield.plots.common import SVG_MAX_BYTES, nice_length, resolve_magnification, subsample, view_limits
+from lidarfield.plots.common import (
+    FADED_ALPHA,
+    SVG_MAX_BYTES,
+    magnitude_norm,
+    nice_length,
+    read_vector_field,
+    resolve_magnification,
+    subsample,
+    view_limits,
+)
 from lidarfield.plots.synthetic import write_synthetic_pair
 from lidarfield.plots.top_voxels import box_wireframe, spherical_voxel_wireframe, voxel_wireframe
 
@@ -111,9 +120,18 @@ def test_pair_figures(stages, tmp_path):
 
     rows = [json.loads((d / "stats.json").read_text()) for d in stages]
     written = plot_pair(rows, tmp_path, {"dpi": 60})
-    assert [p.name for p in written] == ["stages.png", "rigid_randomness.png"]
+    assert [p.name for p in written] == ["stages.png", "rigid_randomness.png", "tags.png"]
     assert_real_image(written[0], (8.0, 5.0), 60)
     assert_real_image(written[1], (8.0, 6.5), 60)
+    assert_real_image(written[2], (8.0, 5.0), 60)
+
+
+def test_vectors_within_their_noise_are_drawn_faint(stages):
+    field = read_vector_field(stages[0] / "field.parquet")
+    z = np.abs(field.columns["z"])
+    assert field.z_min == 3.0 and 0 < np.count_nonzero(z < 3) < len(z)  # both kinds in this field
+    alpha = field.colours(magnitude_norm(field))[:, 3]
+    np.testing.assert_array_equal(alpha, np.where(z >= 3, 1.0, FADED_ALPHA))
 
 
 def test_spherical_wireframe_lies_on_the_voxel_bounds():
@@ -219,7 +237,7 @@ def test_fixed_layout_keeps_axes_legends_and_titles_apart(stages, tmp_path, monk
     plot_stage(stages[1], stages[0], tmp_path, {**FAST, "interactive": False})
     plot_pair([{"pair": "pair-a", "stage": "s", "level": lv, "hypothesis": h, "max_magnitude": 1.0 / (lv + 1),
                 "rigid_translation_m": [0.1, 0.0, 0.0]} for lv, h in enumerate(["none", "ego_vehicle"])], tmp_path)
-    assert len(figures) == 8
+    assert len(figures) == 9
     for fig in figures:
         renderer = fig.canvas.get_renderer()
         # a twin axes (same position as another) is one panel with it

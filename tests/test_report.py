@@ -6,6 +6,7 @@ import json
 import re
 import shutil
 
+import pandas as pd
 import pytest
 
 from lidarfield.cli import main
@@ -56,7 +57,7 @@ def embedded_elements(html: str, caption_end: str) -> list[str]:
     return re.findall(rf'<figure[^>]*><img [^>]*alt="[^"]*{re.escape(caption_end)}"[^>]*>.*?</figure>', html)
 
 
-N_PAIR_FIGURES = 2 * 2  # two pairs, two pair figures each
+N_PAIR_FIGURES = 2 * 3  # two pairs, three pair figures each
 
 
 def stage_figure_files(pairs) -> set:
@@ -84,6 +85,22 @@ def test_report_names_every_pair_and_stage_and_embeds_the_figures(study, tmp_pat
     link = re.findall(r'href="([^"#]+field_3d\.html)"', html)
     assert len(link) == 1 and (out.parent / link[0]).is_file()
     assert 'class="flag"' not in html
+
+
+def test_report_shows_what_to_try_next_per_stage_and_for_the_study(study, tmp_path):
+    root, pairs = study
+    found, rows = discover(root)
+    html = write_report({}, found, rows, tmp_path / "report.html").read_text()
+    study_part = html.split("<h2>What to try next</h2>", 1)[1].split("<h2>", 1)[0]
+    # Per pair, the best two candidates at its last stage (there are two candidates).
+    assert study_part.count("<tr>") == 1 + 2 * 2
+    for name, dirs in pairs.items():
+        assert f'<td class="text">{name}</td><td class="text">{dirs[-1].name}</td><td class="text">1</td>' in study_part
+    # Every stage has its own table, ranks 1 and 2 with the measured energy reduction.
+    assert html.count("<b>What to try next.</b>") == sum(len(d) for d in pairs.values())
+    table = pd.read_parquet(pairs["pair-00"][0] / "suggestions.parquet")
+    assert list(table["rank"]) == [1, 2]
+    assert f"{100 * table['energy_reduction'][0]:.1f}%" in html
 
 
 def test_report_shows_only_the_figures_the_config_draws_and_flags_a_lost_one(study, tmp_path):
@@ -243,7 +260,7 @@ def test_a_pair_figure_without_a_file_says_it_is_left_out(study, tmp_path):
     bare_pair = tmp_path / "pair-00"
     shutil.copytree(root / "pair-00" / "stages", bare_pair / "stages")  # no pair figures on disk
     html = write_report({}, {"pair-00": [bare_pair / "stages" / d.name for d in found["pair-00"]]}, [r for r in rows if r["pair"] == "pair-00"], tmp_path / "r.html", max_mb=0.001).read_text()
-    assert html.count("not embedded (size budget) and not on disk to link") == 2
+    assert html.count("not embedded (size budget) and not on disk to link") == 3  # the three pair figures
 
 
 def test_cli_report_takes_its_budget_from_max_mb_or_else_the_config(study, tmp_path, capsys):

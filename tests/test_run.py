@@ -29,7 +29,9 @@ ROW_KEYS = {
     "pair", "stage", "level", "hypothesis", "n1", "n2", "removed1", "removed2", "voxels_valid", "max_magnitude",
     "mean_magnitude", "rms_magnitude", "p95_magnitude", "paper_max_metric", "rigid_translation_m",
     "rigid_rotation_deg", "rigid_energy_share", "mean_resultant_length", "registration_method",
-    "registration_fitness", "registration_converged",
+    "registration_fitness", "registration_converged", "voxels_significant", "share_significant", "p_direction",
+    "p_coherence", "verdict", "field_energy", "energy_share_fov_edge", "energy_share_near_sensor",
+    "energy_share_depth_edge", "energy_share_radial", "energy_share_rigid", "energy_share_count_imbalance",
 }  # fmt: skip
 
 
@@ -111,10 +113,18 @@ def test_run_writes_every_stage_and_prints_the_table(tmp_path, paper_scans, caps
     assert list(summary["hypothesis"]) == ["none", "field_of_view", "shadow"]
     ids = list(summary["stage"])
     for stage_id in ids:
-        assert {p.name for p in (out / "stages" / stage_id).iterdir()} == {"points.parquet", "removed.parquet", "field.parquet", "stats.json"}
+        files = {"points.parquet", "removed.parquet", "field.parquet", "stats.json", "suggestions.parquet"}
+        assert {p.name for p in (out / "stages" / stage_id).iterdir()} == files
         assert stage_id in printed
     assert printed.splitlines()[0].split() == ["stage", "hypothesis", "n1", "n2", "removed1", "removed2", "voxels_valid", "max_magnitude", "paper_max_metric"]
     assert summary["max_magnitude"].is_monotonic_decreasing
+    # What to try next on the paper's simulated pair, before any mitigation: field_of_view or
+    # shadow (the adversities the paper builds this pair to show), far ahead of the rest.
+    first = pd.read_parquet(out / "stages" / ids[0] / "suggestions.parquet")
+    assert set(first["hypothesis"]) == {"ego_vehicle", "field_of_view", "shadow", "crop", "outliers"}
+    assert first["hypothesis"][0] in ("field_of_view", "shadow") and first["energy_reduction"][0] > 0.5
+    last = pd.read_parquet(out / "stages" / ids[-1] / "suggestions.parquet")
+    assert set(last["hypothesis"]) == {"ego_vehicle", "crop", "outliers"}
     assert (summary["n1"][1:].to_numpy() + summary["removed1"][1:].to_numpy() == summary["n1"][:-1].to_numpy()).all()
     assert all((out / name).is_file() for name in ("scan1.parquet", "scan2.parquet", "registered.parquet", "summary.csv"))
     # Run again into the same folder: allowed (it is lidarfield's), same stage ids.
@@ -167,6 +177,11 @@ def test_expd_paper_study_on_the_real_pair(expd, tmp_path, monkeypatch, capsys):
     assert all(math.isfinite(v) for v in rows["max_magnitude"])
     assert rows["max_magnitude"].max() <= 13.0 * math.sqrt(3)  # max_component_m 13
     assert rows["max_magnitude"].iloc[-1] < rows["max_magnitude"].iloc[0]
+    assert set(rows["verdict"]) <= {"random", "patterned"} and (rows["voxels_significant"] <= rows["voxels_valid"]).all()
+    # What to try next on the raw pair: the van the scans were taken from.
+    first = pd.read_parquet(out / "stages" / rows["stage"][0] / "suggestions.parquet")
+    assert first["hypothesis"][0] == "ego_vehicle" and first["rank"][0] == 1
+    assert first["energy_reduction"][0] > first["energy_reduction"][1]
     # Sensor 2 sits where the authors' translation puts it (about 3 m along y).
     pair, _ = read_pair(out / "registered.parquet")
     assert pair.origin2 == pytest.approx([0.0, 3.0, 0.0], abs=0.01)

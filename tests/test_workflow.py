@@ -49,6 +49,8 @@ def tiny_study() -> dict:
             {"field_of_view": {}},
         ],
         "plots": {"background_points": 2000, "interactive": False},
+        # Not the default candidates: outliers imports Open3D (seconds per job on a busy machine).
+        "suggest": [{"ego_vehicle": {}}, {"field_of_view": {}}, {"shadow": {}}],
     }
 
 
@@ -124,6 +126,11 @@ def test_full_run_writes_every_stage_and_the_report(study_dir):
         assert stage in html
     csv = pd.read_csv(study_dir / "results" / "summary.csv")
     assert len(csv) == len(summary) == 6
+    # What to try next, per stage, from the config's candidates.
+    for pair, stage in zip(summary["pair"], summary["stage"]):
+        table = pd.read_parquet(study_dir / "results" / pair / "stages" / stage / "suggestions.parquet")
+        assert sorted(table["hypothesis"]) == ["ego_vehicle", "field_of_view", "shadow"]
+        assert list(table["rank"]) == [1, 2, 3]
 
 
 def test_unchanged_config_plans_nothing(study_dir):
@@ -132,17 +139,17 @@ def test_unchanged_config_plans_nothing(study_dir):
 
 def test_appending_a_hypothesis_plans_one_stage_per_pair(study_dir):
     jobs = planned_after(study_dir, lambda s: s["hypotheses"].append({"crop": {"max_range_m": 40.0}}))
-    assert jobs == {"mitigate": 2, "field": 2, "plot_stage": 2, "plot_pair": 2, "summary": 1, "report": 1}
+    assert jobs == {"mitigate": 2, "field": 2, "suggest": 2, "plot_stage": 2, "plot_pair": 2, "summary": 1, "report": 1}
 
 
 def test_editing_hypothesis_two_replans_stage_two_only(study_dir):
     jobs = planned_after(study_dir, lambda s: s["hypotheses"].__setitem__(1, {"field_of_view": {"margin_deg": 1.0}}))
-    assert jobs == {"mitigate": 2, "field": 2, "plot_stage": 2, "plot_pair": 2, "summary": 1, "report": 1}
+    assert jobs == {"mitigate": 2, "field": 2, "suggest": 2, "plot_stage": 2, "plot_pair": 2, "summary": 1, "report": 1}
 
 
 def test_editing_the_grid_replans_only_fields_plots_and_report(study_dir):
     jobs = planned_after(study_dir, lambda s: s["grid"].update(azimuth_bins=36))
-    assert jobs == {"field": 6, "plot_stage": 6, "plot_pair": 2, "summary": 1, "report": 1}
+    assert jobs == {"field": 6, "suggest": 6, "plot_stage": 6, "plot_pair": 2, "summary": 1, "report": 1}
 
 
 def test_editing_a_plugin_source_replans_its_stage_and_later(study_dir):
@@ -157,7 +164,7 @@ def test_editing_a_plugin_source_replans_its_stage_and_later(study_dir):
         jobs = planned_jobs(study_dir)
     finally:
         write_study(study_dir, tiny_study())
-    assert jobs == {"mitigate": 4, "field": 4, "plot_stage": 4, "plot_pair": 2, "summary": 1, "report": 1}
+    assert jobs == {"mitigate": 4, "field": 4, "suggest": 4, "plot_stage": 4, "plot_pair": 2, "summary": 1, "report": 1}
 
 
 @pytest.mark.parametrize(

@@ -49,6 +49,8 @@ _EXPORTS = {
     "write_field": "field",
     "discrepancy_field_reference": "field_reference",
     "field_statistics": "field_stats",
+    "analyse_field": "field_stats",
+    "suggestions": "suggest",
     # simulation
     "load_scene": "scene",
     "builtin_scenes": "scene",

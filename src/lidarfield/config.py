@@ -58,9 +58,16 @@ class Study:
     hypotheses: list[dict]  # normalised stack, defaults filled in
     plots: dict
     scans: dict[str, ScanSpec] = field(default_factory=dict)
+    suggest: list[dict] | None = None  # the config's candidates, normalised; None: the default
 
     def stage_ids(self, pair: str) -> list[str]:
         return stage_ids(self.pairs[pair].inputs(), self.hypotheses, self.base_dir)
+
+    def candidates(self, level: int) -> list[dict]:
+        """The normalised candidate hypotheses of stage ``level`` (see ``suggest``)."""
+        from .suggest import candidate_steps
+
+        return candidate_steps(self.suggest, self.hypotheses[:level], self.base_dir, self.grid)
 
 
 @cache
@@ -153,6 +160,11 @@ def validate_config(
     try:
         grid_from_config(config["grid"])
         hypotheses = validate_stack(config["hypotheses"], base_dir, study_grid=config["grid"])
+        suggest = None
+        if config["suggest"] is not None:
+            from .suggest import candidate_steps
+
+            suggest = candidate_steps(config["suggest"], hypotheses, base_dir, config["grid"])
         pairs: dict[str, PairSpec] = {}
         for name, entry in config["pairs"].items():
             pairs[name] = _pair(name, entry, base_dir)
@@ -169,7 +181,7 @@ def validate_config(
     for pair in pairs.values():
         scans[pair.scan1.id] = pair.scan1
         scans[pair.scan2.id] = pair.scan2
-    return Study(config, base_dir, pairs, config["grid"], hypotheses, config["plots"], scans)
+    return Study(config, base_dir, pairs, config["grid"], hypotheses, config["plots"], scans, suggest)
 
 
 # --- pairs -------------------------------------------------------------------------------------

@@ -2,7 +2,9 @@
 
 The kernel never sorts points. Each cloud's points get a dense index (the spherical voxel id
 itself, or for a Cartesian grid a cell index inside the bounding box of both clouds) and every
-per-voxel sum is one ``np.bincount`` in float64. Out-of-grid points get the index one past the
+per-voxel sum is one ``np.bincount`` in float64: counts, coordinate sums and the sums of the six
+coordinate products that give each cloud's spread in the voxel (for ``se`` and ``z``, see
+``significance``). Out-of-grid points get the index one past the
 end, whose bin is dropped. ``field_reference.py`` holds a pandas groupby version of the same
 contract for the tests and the benchmark.
 """
@@ -15,9 +17,10 @@ import numpy as np
 from .errors import InputError
 from .grid import CARTESIAN_BITS, FieldSettings, Grid, SphericalGrid, relative_columns
 from .io.parquet_table import read_table, write_table
+from .significance import COVARIANCE_ENTRIES, covariance_from_sums, vector_standard_error, z_score
 
 GRID_COLUMNS = {"spherical": ("az_bin", "el_bin", "r_bin"), "cartesian": ("ix", "iy", "iz")}
-VALUE_COLUMNS = ("n1", "n2", "x1", "y1", "z1", "x2", "y2", "z2", "u", "v", "w", "magnitude", "valid")
+VALUE_COLUMNS = ("n1", "n2", "x1", "y1", "z1", "x2", "y2", "z2", "u", "v", "w", "magnitude", "se", "z", "valid")
 
 # A Cartesian bounding box with more cells than this (and than a few per point) falls back to
 # np.unique for compaction: the dense bincount arrays would cost more than the sort.
@@ -37,7 +40,8 @@ def discrepancy_field(
     One row per voxel holding points of either cloud, sorted by voxel id; the columns of
     ``field_columns(settings.grid)``. Means are NaN where a cloud has no point; ``u, v, w``
     and ``magnitude`` are NaN and ``valid`` False where either count is below ``min_points``
-    or, with ``max_component_m`` set, any |component| exceeds it.
+    or, with ``max_component_m`` set, any |component| exceeds it; ``se`` and ``z`` (see
+    ``significance``) are NaN there too.
     """
     grid = settings.grid
     columns1, columns2 = relative_columns(xyz1, origin), relative_columns(xyz2, origin)
@@ -78,17 +82,20 @@ def _identity(occupied: np.ndarray) -> np.ndarray:
 def _aggregate(dense, columns1, columns2, origin, settings: FieldSettings) -> dict[str, np.ndarray]:
     """Counts, sums and means per dense index, then the field columns (see module docstring)."""
     index1, index2, n, to_voxel = dense
-    counts1, sums1 = _bin_sums(index1, columns1, n)
-    counts2, sums2 = _bin_sums(index2, columns2, n)
+    counts1, sums1, products1 = _bin_sums(index1, columns1, n)
+    counts2, sums2, products2 = _bin_sums(index2, columns2, n)
     occupied = np.flatnonzero((counts1 + counts2) > 0)
     voxel = to_voxel(occupied).astype(np.int64)
     n1, n2 = counts1[occupied], counts2[occupied]
     # Sums are of coordinates relative to the origin (one column copy per cloud serves both
     # the binning and the sums); the origin goes back onto the means.
     offset = np.asarray(origin, dtype=np.float64).reshape(3, 1)
-    mean1 = _means(sums1[:, occupied], n1) + offset
-    mean2 = _means(sums2[:, occupied], n2) + offset
-    return assemble_field(settings.grid, voxel, n1, n2, mean1, mean2, settings)
+    sums1, sums2 = sums1[:, occupied], sums2[:, occupied]
+    mean1 = _means(sums1, n1) + offset
+    mean2 = _means(sums2, n2) + offset
+    covariance1 = covariance_from_sums(n1, sums1, products1[:, occupied])
+    covariance2 = covariance_from_sums(n2, sums2, products2[:, occupied])
+    return assemble_field(settings.grid, voxel, n1, n2, mean1, mean2, settings, covariance1, covariance2)
 
 
 def assemble_field(
@@ -99,8 +106,11 @@ def assemble_field(
     mean1: np.ndarray,
     mean2: np.ndarray,
     settings: FieldSettings,
+    covariance1: np.ndarray,
+    covariance2: np.ndarray,
 ) -> dict[str, np.ndarray]:
-    """The field columns from per-voxel counts and (3, V) means: vectors, validity, bins."""
+    """The field columns from per-voxel counts, (3, V) means and (6, V) covariances (rows in
+    ``significance.COVARIANCE_ENTRIES`` order): vectors, their se and z, validity, bins."""
     valid = (n1 >= settings.min_points) & (n2 >= settings.min_points)
     uvw = mean2 - mean1
     if settings.max_component_m is not None:
@@ -114,17 +124,23 @@ def assemble_field(
             columns[f"{axis}{k}"] = mean[i]
     columns["u"], columns["v"], columns["w"] = uvw
     columns["magnitude"] = np.sqrt(np.einsum("ij,ij->j", uvw, uvw))
+    columns["se"] = vector_standard_error(uvw, n1, covariance1, n2, covariance2)
+    columns["z"] = z_score(columns["magnitude"], columns["se"])
     columns["valid"] = valid
     return columns
 
 
-def _bin_sums(index: np.ndarray, columns: tuple[np.ndarray, ...], n: int) -> tuple[np.ndarray, np.ndarray]:
-    """Counts (n,) and column sums (3, n) per dense index; index n (out of grid) dropped."""
+def _bin_sums(index: np.ndarray, columns: tuple[np.ndarray, ...], n: int):
+    """Counts (n,), column sums (3, n) and sums of column products (6, n, in
+    ``COVARIANCE_ENTRIES`` order) per dense index; index n (out of grid) dropped."""
     counts = np.bincount(index, minlength=n + 1)[:n]
     sums = np.empty((3, n))
     for axis, column in enumerate(columns):
         sums[axis] = np.bincount(index, weights=column, minlength=n + 1)[:n]
-    return counts, sums
+    products = np.empty((6, n))
+    for row, (a, b) in enumerate(COVARIANCE_ENTRIES):
+        products[row] = np.bincount(index, weights=columns[a] * columns[b], minlength=n + 1)[:n]
+    return counts, sums, products
 
 
 def _means(sums: np.ndarray, counts: np.ndarray) -> np.ndarray:
@@ -205,6 +221,7 @@ def field_meta(settings: FieldSettings, statistics: dict, **extra) -> dict:
         "grid": settings.grid.to_config(),
         "min_points": int(settings.min_points),
         "max_component_m": settings.max_component_m,
+        "z_min": float(settings.z_min),
         "statistics": statistics,
         **extra,
     }

@@ -1,9 +1,10 @@
 """A plain reference for the field kernel: the grid's bins written out in degrees, and a pandas
 groupby over them.
 
-Slow and obvious on purpose, and independent of ``grid.assign``'s arithmetic: the tests check
-``field.discrepancy_field`` (binning and aggregation) against it to 1e-9 and the benchmark
-times the kernel against it.
+Slow and obvious on purpose, and independent of ``grid.assign``'s arithmetic and of the
+kernel's sums of products: covariances come from pandas' own ``cov`` and ``se`` from a plain
+loop over voxels with 3x3 matrices. The tests check ``field.discrepancy_field`` (binning,
+aggregation, se and z) against it and the benchmark times the kernel against it.
 """
 
 from __future__ import annotations
@@ -12,6 +13,7 @@ import numpy as np
 import pandas as pd
 
 from .grid import CARTESIAN_BITS, CARTESIAN_OFFSET, CartesianGrid, FieldSettings, SphericalGrid
+from .significance import SPREAD_FLOOR_M, SPREAD_MIN_POINTS
 
 
 def discrepancy_field_reference(
@@ -55,7 +57,7 @@ def field_from_voxel_ids_reference(
 ) -> dict[str, np.ndarray]:
     """Same contract as ``field.field_from_voxel_ids``, computed with a pandas groupby."""
     grid = settings.grid
-    per_cloud = []
+    per_cloud, covariances = [], []
     for k, xyz, ids in ((1, xyz1, ids1), (2, xyz2, ids2)):
         frame = pd.DataFrame(np.asarray(xyz, dtype=np.float64), columns=["x", "y", "z"])
         frame["voxel"] = ids
@@ -64,6 +66,7 @@ def field_from_voxel_ids_reference(
             **{f"n{k}": ("x", "size"), f"x{k}": ("x", "mean"), f"y{k}": ("y", "mean"), f"z{k}": ("z", "mean")}
         )
         per_cloud.append(grouped)
+        covariances.append(_covariances(frame))
     table = per_cloud[0].join(per_cloud[1], how="outer").sort_index()
     table[["n1", "n2"]] = table[["n1", "n2"]].fillna(0).astype(np.int64)
 
@@ -76,9 +79,40 @@ def field_from_voxel_ids_reference(
         table.loc[~valid, out] = np.nan
     table["magnitude"] = np.sqrt(table["u"] ** 2 + table["v"] ** 2 + table["w"] ** 2)
     table["valid"] = valid
+    table["se"] = [_standard_error(row, *covariances) if row.valid else np.nan for row in table.itertuples()]
+    table["z"] = table["magnitude"] / table["se"]
 
     voxel = table.index.to_numpy(dtype=np.int64)
     columns = {"voxel": voxel, **grid.bins(voxel)}
-    for name in ("n1", "n2", "x1", "y1", "z1", "x2", "y2", "z2", "u", "v", "w", "magnitude", "valid"):
+    for name in ("n1", "n2", "x1", "y1", "z1", "x2", "y2", "z2", "u", "v", "w", "magnitude", "se", "z", "valid"):
         columns[name] = table[name].to_numpy()
     return columns
+
+
+def _covariances(frame: pd.DataFrame) -> dict[int, np.ndarray]:
+    """voxel -> 3x3 sample covariance (ddof 1; NaN for one point), two-pass: products of
+    coordinates about their group's mean, summed per group."""
+    centred = frame[["x", "y", "z"]] - frame.groupby("voxel")[["x", "y", "z"]].transform("mean")
+    products = pd.DataFrame({"voxel": frame["voxel"]})
+    for a in "xyz":
+        for b in "xyz":
+            products[a + b] = centred[a] * centred[b]
+    grouped = products.groupby("voxel")
+    covariance = grouped.sum().div(grouped.size() - 1, axis=0).replace([np.inf, -np.inf], np.nan)
+    return dict(zip(covariance.index, covariance.to_numpy().reshape(-1, 3, 3)))
+
+
+def _standard_error(row, covariance1: dict, covariance2: dict) -> float:
+    """se of one voxel's vector along its direction: sqrt(d^T (S1/n1 + S2/n2) d) / |d|, with a
+    cloud of fewer than SPREAD_MIN_POINTS points borrowing the other's S, plus the floor."""
+    d = np.array([row.u, row.v, row.w])
+    own = [row.n1 >= SPREAD_MIN_POINTS, row.n2 >= SPREAD_MIN_POINTS]
+    if not np.all(np.isfinite(d)) or not any(own):
+        return np.nan
+    spreads = [c[row.Index] if ok else None for c, ok in zip((covariance1, covariance2), own)]
+    spread1 = spreads[0] if own[0] else spreads[1]
+    spread2 = spreads[1] if own[1] else spreads[0]
+    combined = spread1 / row.n1 + spread2 / row.n2
+    length = np.linalg.norm(d)
+    along = d @ combined @ d / length**2 if length > 0 else np.trace(combined) / 3
+    return float(np.sqrt(max(along, 0.0) + SPREAD_FLOOR_M**2 * (1 / row.n1 + 1 / row.n2)))

@@ -11,6 +11,10 @@ figure is undefined, e.g. no valid voxel; ``summary_json_safe`` turns NaN into n
   registration error explains the field, low for a scale error or local disagreements.
 - ``mean_resultant_length`` = |sum w u/|u|| / sum w: 1 when all vectors point the same way,
   about 1/sqrt(voxels) for random directions.
+- ``voxels_significant``: valid voxels with |z| >= ``z_min`` (``significance``);
+  ``p_direction``, ``p_coherence`` and ``verdict``: is the field random (``randomness``);
+  ``field_energy`` = sum min(n1, n2) |v|^2 and, when the field carries tag columns,
+  ``energy_share_{tag}`` for each tag (``tags``).
 """
 
 from __future__ import annotations
@@ -19,7 +23,12 @@ import math
 
 import numpy as np
 
+from .field import discrepancy_field
+from .grid import FieldSettings
+from .pair import RegisteredPair
 from .poses import rotation_angle
+from .randomness import neighbour_pairs, randomness_tests, unit_vectors
+from .tags import energy_shares, voxel_energy, voxel_tags
 
 STATISTIC_KEYS = (
     "voxels",
@@ -33,11 +42,28 @@ STATISTIC_KEYS = (
     "rigid_rotation_deg",
     "rigid_energy_share",
     "mean_resultant_length",
+    "voxels_significant",
+    "share_significant",
+    "p_direction",
+    "p_coherence",
+    "verdict",
+    "field_energy",
 )
 
 
-def field_statistics(columns: dict[str, np.ndarray]) -> dict:
-    """The summary figures of a field (the columns of ``field.discrepancy_field``)."""
+def analyse_field(pair: RegisteredPair, settings: FieldSettings) -> tuple[dict[str, np.ndarray], dict]:
+    """The field of a pair (binned about sensor 1) with its tag columns, and its statistics."""
+    columns = discrepancy_field(pair.xyz1, pair.xyz2, settings)
+    columns.update(voxel_tags(columns, pair, settings))
+    return columns, field_statistics(columns, settings)
+
+
+def field_statistics(columns: dict[str, np.ndarray], settings: FieldSettings | None = None) -> dict:
+    """The summary figures of a field (the columns of ``field.discrepancy_field``).
+
+    ``settings`` gives ``z_min`` (default 3) and the grid whose neighbours the coherence test
+    uses; without it ``p_coherence`` is NaN and the verdict rests on the directions alone.
+    """
     valid = np.asarray(columns["valid"], dtype=bool)
     uvw = np.column_stack([columns[c][valid] for c in ("u", "v", "w")]).astype(np.float64)
     magnitude = np.asarray(columns["magnitude"], dtype=np.float64)[valid]
@@ -60,6 +86,17 @@ def field_statistics(columns: dict[str, np.ndarray]) -> dict:
     stats["rigid_rotation_deg"] = float(np.degrees(rotation_angle(rotation)))
     stats["rigid_energy_share"] = rigid_energy_share(mean2, mean1, weight, rotation, translation)
     stats["mean_resultant_length"] = mean_resultant_length(uvw, weight)
+    z_min = 3.0 if settings is None else settings.z_min
+    significant = int(np.count_nonzero(np.abs(columns["z"][valid]) >= z_min))
+    stats["voxels_significant"] = significant
+    stats["share_significant"] = significant / magnitude.size if magnitude.size else math.nan
+    if settings is None:
+        neighbours = (np.zeros(0, np.int64), np.zeros(0, np.int64))
+    else:
+        neighbours = neighbour_pairs(settings.grid, np.asarray(columns["voxel"])[valid])
+    stats.update(randomness_tests(unit_vectors(uvw), neighbours))
+    stats["field_energy"] = float(voxel_energy(columns).sum())
+    stats.update(energy_shares(columns))
     return stats
 
 

@@ -32,7 +32,7 @@ _CARTESIAN_MASK = (1 << CARTESIAN_BITS) - 1
 
 SPHERICAL_KEYS = ("azimuth_bins", "azimuth_offset_deg", "elevation_deg", "elevation_bins", "range_edges_m")
 CARTESIAN_KEYS = ("cell_m", "origin")
-FIELD_KEYS = ("min_points", "max_component_m")
+FIELD_KEYS = ("min_points", "max_component_m", "z_min")
 
 
 def _as_points(xyz: np.ndarray) -> np.ndarray:
@@ -215,15 +215,23 @@ class FieldSettings:
     grid: Grid
     min_points: int = 30
     max_component_m: float | None = None
+    z_min: float = 3.0  # a vector is significant when |z| >= z_min (see significance.py)
 
     def __post_init__(self) -> None:
         if isinstance(self.min_points, bool) or not isinstance(self.min_points, (int, np.integer)) or self.min_points < 1:
             raise ConfigError(f"grid.min_points: must be an integer >= 1, got {self.min_points!r}")
         if self.max_component_m is not None and not _positive(self.max_component_m):
             raise ConfigError(f"grid.max_component_m: must be a positive number or null, got {self.max_component_m!r}")
+        if not _positive(self.z_min):
+            raise ConfigError(f"grid.z_min: must be a positive number, got {self.z_min!r}")
 
     def to_config(self) -> dict[str, Any]:
-        return {**self.grid.to_config(), "min_points": int(self.min_points), "max_component_m": self.max_component_m}
+        return {
+            **self.grid.to_config(),
+            "min_points": int(self.min_points),
+            "max_component_m": self.max_component_m,
+            "z_min": float(self.z_min),
+        }
 
 
 def grid_from_config(d: dict) -> Grid:
@@ -245,9 +253,12 @@ def grid_from_config(d: dict) -> Grid:
 
 
 def field_settings_from_config(d: dict) -> FieldSettings:
-    """Grid plus ``min_points`` (default 30) and ``max_component_m`` (default null)."""
+    """Grid plus ``min_points`` (default 30), ``max_component_m`` (default null) and ``z_min``
+    (default 3)."""
     grid = grid_from_config(d)
-    return FieldSettings(grid, min_points=d.get("min_points", 30), max_component_m=d.get("max_component_m"))
+    return FieldSettings(
+        grid, min_points=d.get("min_points", 30), max_component_m=d.get("max_component_m"), z_min=d.get("z_min", 3.0)
+    )
 
 
 def _number_tuple(value):

@@ -2,7 +2,7 @@
 
 Each function reads its inputs from files and writes its outputs whole (atomically), in the
 layout of the design: per stage ``points.parquet``, ``removed.parquet``, ``field.parquet`` and
-``stats.json`` (one summary row), and per pair ``summary.parquet`` / ``summary.csv``.
+``stats.json`` (one summary row), ``suggestions.parquet`` (what to try next), and per pair ``summary.parquet`` / ``summary.csv``.
 """
 
 from __future__ import annotations
@@ -14,8 +14,8 @@ from pathlib import Path
 import numpy as np
 
 from .errors import ConfigError, InputError
-from .field import discrepancy_field, field_meta, write_field
-from .field_stats import field_statistics, summary_json_safe
+from .field import field_meta, write_field
+from .field_stats import analyse_field, summary_json_safe
 from .grid import field_settings_from_config
 from .io import read_scan, write_scan
 from .io.atomic import atomic_path, write_text
@@ -23,6 +23,8 @@ from .io.parquet_table import read_table, write_table
 from .pair import RegisteredPair, read_pair, write_pair
 from .stack import Stage, apply_stack, initial_stage, next_stage
 from .stages import stage_ids
+from .suggest import suggestions, write_suggestions
+from .tags import TAGS
 
 log = logging.getLogger(__name__)
 
@@ -30,6 +32,7 @@ log = logging.getLogger(__name__)
 SUMMARY_COLUMNS = (
     "pair", "stage", "level", "hypothesis", "n1", "n2", "removed1", "removed2", "voxels_valid",
     "max_magnitude", "mean_magnitude", "rms_magnitude", "p95_magnitude", "paper_max_metric",
+    "voxels_significant", "p_direction", "p_coherence", "verdict", *(f"energy_share_{tag}" for tag in TAGS),
 )  # fmt: skip
 # Marks a folder written by ``lidarfield run``: only such a folder (or an empty one) is reused.
 RUN_MARKER = ".lidarfield-run.json"
@@ -75,8 +78,8 @@ def field_stage(
     pair, meta = read_pair(points_path)
     removed, _ = read_table(removed_path, required=("cloud",))
     settings = field_settings_from_config(grid_section)
-    columns = discrepancy_field(pair.xyz1, pair.xyz2, settings)
-    statistics = summary_json_safe(field_statistics(columns))
+    columns, statistics = analyse_field(pair, settings)
+    statistics = summary_json_safe(statistics)
     write_field(field_out, columns, field_meta(settings, statistics, stage=meta.get("stage")))
     row = summary_row(pair_name, pair, meta, removed["cloud"], statistics)
     write_text(stats_out, json.dumps(row, indent=1) + "\n")
@@ -189,10 +192,14 @@ def run_pair(
     pair = register_pair(scans[0], scans[1], settings)
     reg = pair.registration
     log.info("registered by %s: fitness %.3f, converged %s", reg.get("method"), reg.get("fitness", float("nan")), reg.get("converged"))
-    stages = []
+    candidates = [study.candidates(level) for level in range(len(study.hypotheses) + 1)]
+    field_settings = field_settings_from_config(study.grid)
+    stages, tables = [], []
     for stage in apply_stack(pair, study.hypotheses, study.base_dir, study.grid):
         log.info("stage %d (%s): removed %d + %d points", stage.level, stage.name, stage.removed1, stage.removed2)
         stages.append(stage)
+        # Candidates run before any file is written too (a plugin candidate can fail).
+        tables.append(suggestions(stage.pair, field_settings, candidates[stage.level], study.base_dir, study.grid))
 
     # The same inputs as a config pair {scan1, scan2, sensor, register}: equal stage ids.
     scan_specs = [{"path": str(p), "format": None, "sensor": sensor, "pose": None} for p in (scan1, scan2)]
@@ -211,12 +218,13 @@ def run_pair(
     write_pair(out_dir / "registered.parquet", pair)
     pair_name = out_dir.resolve().name
     rows = []
-    for stage, stage_id in zip(stages, ids):
+    for stage, stage_id, table in zip(stages, ids, tables):
         folder = out_dir / "stages" / stage_id
         write_stage(stage, stage_id, folder / "points.parquet", folder / "removed.parquet")
         rows.append(field_stage(
             folder / "points.parquet", folder / "removed.parquet", study.grid, pair_name,
             folder / "field.parquet", folder / "stats.json",
         ))  # fmt: skip
+        write_suggestions(folder / "suggestions.parquet", table, stage_id, candidates[stage.level], study.grid)
     write_summary([out_dir / "stages" / i / "stats.json" for i in ids], out_dir / "summary.parquet", out_dir / "summary.csv")
     return rows

@@ -87,6 +87,17 @@ def plugin_source(wildcards):
     return [step["plugin"]["file"]] if "plugin" in step else []
 
 
+def stage_candidates(wildcards):
+    """The candidate hypotheses of a stage's suggestions (canonical JSON)."""
+    return canonical_json(STUDY.candidates(stage_level(wildcards)))
+
+
+def candidate_plugin_sources(wildcards):
+    """A plugin candidate's file is an input of the suggestions: editing it reruns them."""
+    candidates = STUDY.candidates(stage_level(wildcards))
+    return [step["plugin"]["file"] for step in candidates if "plugin" in step]
+
+
 def previous_stage_dir(wildcards):
     level = stage_level(wildcards)
     return stage_dir(wildcards.pair, STAGES[wildcards.pair][level - 1]) if level else ""

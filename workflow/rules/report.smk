@@ -27,6 +27,7 @@ rule report:
     input:
         summary=f"{RESULTS}/summary.parquet",
         stage_figures=all_stage_files("figures"),
+        suggestions=all_stage_files("suggestions.parquet"),
         pair_figures=expand(f"{RESULTS}/{{pair}}/figures", pair=PAIRS),
     output:
         report(

@@ -21,6 +21,7 @@ _GRID_FLAGS = {
     "cell_m": "cell_m",
     "min_points": "min_points",
     "max_component_m": "max_component_m",
+    "z_min": "z_min",
 }
 
 
@@ -50,15 +51,17 @@ def add_parser(subparsers) -> None:
     p.add_argument("--cell-m", type=float, help="Cartesian cell size (default 1)")
     p.add_argument("--min-points", type=int, help="points per cloud for a valid vector (default 30)")
     p.add_argument("--max-component-m", type=float, help="invalidate vectors with a larger |u|, |v| or |w| (default off)")
+    p.add_argument("--z-min", type=float, help="a vector is significant when |z| >= this (default 3)")
     p.set_defaults(func=run)
 
 
 def run(args) -> int:
-    from ..field import discrepancy_field, field_meta, write_field
-    from ..field_stats import field_statistics, summary_json_safe
+    from ..field import field_meta, write_field
+    from ..field_stats import analyse_field, summary_json_safe
     from ..grid import field_settings_from_config
     from ..io import read_scan
     from ..io.atomic import write_text
+    from ..pair import RegisteredPair
     from ..poses import apply_pose, parse_pose_arg, read_pose
 
     # Everything that can fail on the user's input happens before the first file is written.
@@ -77,8 +80,7 @@ def run(args) -> int:
         raise InputError("--out exists and is not a folder", args.out)
 
     xyz2 = apply_pose(T_1_2, scan2.xyz)
-    columns = discrepancy_field(scan1.xyz, xyz2, settings)
-    statistics = field_statistics(columns)
+    columns, statistics = analyse_field(RegisteredPair(scan1.xyz, xyz2, T_1_2), settings)
     summary = {
         "scan1": str(args.scan1),
         "scan2": str(args.scan2),
@@ -118,6 +120,10 @@ def _grid_config(args) -> dict:
     return config
 
 
+def _p(value) -> str:
+    return "n/a" if value is None else f"{value:.3f}"
+
+
 def _table(summary: dict) -> str:
     s = summary["statistics"]
     t = s["rigid_translation_m"]
@@ -130,6 +136,8 @@ def _table(summary: dict) -> str:
         ("rigid part", f"t = ({t[0]:+.4f}, {t[1]:+.4f}, {t[2]:+.4f}) m, {s['rigid_rotation_deg']:.4f} deg, "
          f"energy share {s['rigid_energy_share']:.3f}"),
         ("mean resultant length", f"{s['mean_resultant_length']:.3f}"),
+        ("significant voxels", f"{s['voxels_significant']} (|z| >= {summary['z_min']:g})"),
+        ("randomness", f"{s['verdict']} (p_direction {_p(s['p_direction'])}, p_coherence {_p(s['p_coherence'])})"),
     ]
     width = max(len(name) for name, _ in rows)
     return "\n".join(f"{name:<{width}}  {value}" for name, value in rows)

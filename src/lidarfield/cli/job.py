@@ -49,6 +49,13 @@ def add_parser(subparsers) -> None:
     p.add_argument("--stats-out", required=True)
     p.set_defaults(func=_field)
 
+    p = jobs.add_parser("suggest")
+    p.add_argument("--points", required=True)
+    p.add_argument("--candidates", type=_json, required=True, help="normalised hypothesis entries")
+    p.add_argument("--grid", type=_json, required=True)
+    p.add_argument("--out", required=True)
+    p.set_defaults(func=_suggest)
+
     p = jobs.add_parser("plot-stage")
     p.add_argument("--stage-dir", required=True)
     p.add_argument("--previous", default="", help="the previous stage's folder ('' for stage 0)")
@@ -101,6 +108,12 @@ def _field(args: argparse.Namespace) -> None:
     from ..pipeline import field_stage
 
     field_stage(args.points, args.removed, args.grid, args.pair, args.field_out, args.stats_out)
+
+
+def _suggest(args: argparse.Namespace) -> None:
+    from ..suggest import suggest_stage
+
+    suggest_stage(args.points, args.candidates, args.grid, args.out)
 
 
 def _plot_stage(args: argparse.Namespace) -> None:

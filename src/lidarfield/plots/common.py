@@ -17,6 +17,7 @@ matplotlib.use("Agg")  # before pyplot: batch jobs have no display
 
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
+from matplotlib.cm import ScalarMappable  # noqa: E402
 from matplotlib.colors import Normalize  # noqa: E402
 
 from ..errors import ConfigError, InputError  # noqa: E402
@@ -30,6 +31,7 @@ CLOUD_COLOURS = {1: "#d62728", 2: "#1f77b4"}  # red = cloud 1, blue = cloud 2 (r
 KEPT_COLOUR = "0.55"
 BACKGROUND_COLOUR = "0.6"
 MAGNITUDE_CMAP = "viridis"
+FADED_ALPHA = 0.2  # vectors within their sampling noise (|z| < grid.z_min) are drawn faint
 SENSOR_STYLE = {1: dict(marker="^", color="#d62728", label="sensor 1"), 2: dict(marker="v", color="#1f77b4", label="sensor 2")}
 # 3-D point layers: flat colours, and nothing drawn outside the axes box (the view limits leave
 # out the farthest returns; mplot3d would draw them over the labels)
@@ -96,6 +98,27 @@ class VectorField:
     @property
     def max_magnitude(self) -> float:
         return float(self.magnitude.max()) if len(self.magnitude) else 0.0
+
+    @property
+    def z_min(self) -> float:
+        return float(self.meta.get("z_min") or 3.0)
+
+    @property
+    def significant(self) -> np.ndarray:
+        """|z| >= z_min per vector (all True for a field written before z existed)."""
+        if "z" not in self.columns:
+            return np.ones(len(self.magnitude), dtype=bool)
+        with np.errstate(invalid="ignore"):
+            return np.abs(np.asarray(self.columns["z"], dtype=np.float64)) >= self.z_min
+
+    def colours(self, norm: Normalize) -> np.ndarray:
+        """RGBA per vector: its magnitude's colour, faded to ``FADED_ALPHA`` where |z| < z_min."""
+        colours = ScalarMappable(norm, MAGNITUDE_CMAP).to_rgba(self.magnitude)
+        colours[~self.significant, 3] = FADED_ALPHA
+        return colours
+
+    def faded_label(self) -> str:
+        return f"faded: |z| < {self.z_min:g}, within sampling noise ({np.count_nonzero(~self.significant)} of {len(self.magnitude)})"
 
 
 @dataclass

@@ -36,13 +36,15 @@ def draw_field_top(ax, stage: Stage, bg: np.ndarray, norm: Normalize, limits: np
     """Arrows (magnified) over the faint points, sensors marked, the scale arrow in a corner."""
     f = stage.field
     ax.scatter(bg[:, 0], bg[:, 1], s=0.8, c=BACKGROUND_COLOUR, alpha=0.45, lw=0, rasterized=True, label="points (both clouds)")
-    order = np.argsort(f.magnitude)  # largest drawn last, on top
+    order = np.lexsort((f.magnitude, f.significant))  # significant and largest drawn last, on top
     m = settings.magnification
     q = ax.quiver(
-        f.tails[order, 0], f.tails[order, 1], m * f.vectors[order, 0], m * f.vectors[order, 1], f.magnitude[order],
-        cmap=MAGNITUDE_CMAP, norm=norm, angles="xy", scale_units="xy", scale=1.0,
+        f.tails[order, 0], f.tails[order, 1], m * f.vectors[order, 0], m * f.vectors[order, 1],
+        color=f.colours(norm)[order], angles="xy", scale_units="xy", scale=1.0,
         width=0.004, headwidth=3.5, headlength=4.5, minlength=0.5, zorder=3,
     )
+    if not f.significant.all():
+        ax.plot([], [], color="0.8", lw=3, label=f.faded_label())
     mark_sensors(ax, sensor_origins(stage.pair))
     scale = nice_length(norm.vmax / 2)  # from the shared colour scale: one arrow in both halves of before/after
     ax.quiverkey(
@@ -59,8 +61,7 @@ def draw_field_3d(ax, stage: Stage, bg: np.ndarray, norm: Normalize, limits: np.
     f = stage.field
     ax.scatter(bg[:, 0], bg[:, 1], bg[:, 2], s=0.3, c=BACKGROUND_COLOUR, alpha=0.25, lw=0, rasterized=True, **POINTS_3D)
     if len(f.magnitude):
-        cmap = ScalarMappable(norm, MAGNITUDE_CMAP)
-        colours = cmap.to_rgba(f.magnitude)
+        colours = f.colours(norm)
         m = settings.magnification
         # A 3-D quiver draws the shafts, then two head lines per arrow: colours in that order.
         ax.quiver(
@@ -68,6 +69,8 @@ def draw_field_3d(ax, stage: Stage, bg: np.ndarray, norm: Normalize, limits: np.
             arrow_length_ratio=0.25, linewidths=1.3,
         )
     mark_sensors(ax, sensor_origins(stage.pair), three_d=True)
+    if len(f.magnitude) and not f.significant.all():
+        ax.text2D(0.02, 0.02, f.faded_label(), transform=ax.transAxes, fontsize=8, color="0.3")
     set_equal_3d(ax, limits)
     ax.view_init(**PERSPECTIVE_VIEW)
 
@@ -77,7 +80,8 @@ def stage_title(stage: Stage, what: str) -> str:
     f = stage.field
     return (
         f"{pair_name} · {stage.label} · {what}\n"
-        f"{len(f.magnitude)} valid voxels · largest vector {f.max_magnitude:.3f} m"
+        f"{len(f.magnitude)} valid voxels ({np.count_nonzero(f.significant)} with |z| ≥ {f.z_min:g})"
+        f" · largest vector {f.max_magnitude:.3f} m"
     )
 
 

@@ -27,6 +27,13 @@ def vector_segments(tails: np.ndarray, tips: np.ndarray) -> np.ndarray:
     return seg
 
 
+def _z_texts(f) -> list[str]:
+    """", z 4.2" per vector (", z 1.3, within noise" below z_min); '' for a field without z."""
+    if "z" not in f.columns:
+        return [""] * len(f.magnitude)
+    return [f", z {z:.1f}" + ("" if sig else ", within noise") for z, sig in zip(f.columns["z"], f.significant)]
+
+
 def field_figure(stage: Stage, settings: PlotSettings) -> go.Figure:
     f = stage.field
     m = settings.magnification
@@ -50,7 +57,8 @@ def field_figure(stage: Stage, settings: PlotSettings) -> go.Figure:
     fig.add_trace(go.Scatter3d(
         x=tips[:, 0], y=tips[:, 1], z=tips[:, 2], mode="markers", name="vector tips (mean2)",
         marker=dict(size=3, color=f.magnitude, colorscale="Viridis", cmin=0, cmax=max(f.max_magnitude, 1e-9)),
-        text=[f"voxel {int(v)}: {mag:.3f} m" for v, mag in zip(f.columns["voxel"], f.magnitude)], hoverinfo="text",
+        text=[f"voxel {int(v)}: {mag:.3f} m{z}" for v, mag, z in zip(f.columns["voxel"], f.magnitude, _z_texts(f))],
+        hoverinfo="text",
     ))
     origins = np.array([stage.pair.origin1, stage.pair.origin2])
     fig.add_trace(go.Scatter3d(

@@ -6,7 +6,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .common import Margins, PlotSettings, figure, plot_settings, png_bytes, save
+from ..tags import TAGS
+from .common import Margins, PlotSettings, figure, legend_at_right, plot_settings, png_bytes, save
 
 MAGNITUDE_SERIES = (
     ("max_magnitude", "max", "o-"),
@@ -91,11 +92,34 @@ def rigid_randomness_figure(rows: list[dict], dpi: int):
     return fig
 
 
-PAIR_FIGURES = {"stages": stages_figure, "rigid_randomness": rigid_randomness_figure}
+def tags_figure(rows: list[dict], dpi: int):
+    """Per stage, each tag's share of the field energy (bars), with the verdict and the
+    significant voxels under the stage ticks."""
+    rows = sorted_rows(rows)
+    fig = figure(8.0, 5.0, dpi, Margins(bottom=1.1, top=0.45))
+    ax = fig.add_subplot()
+    x = column(rows, "level")
+    width = 0.8 / len(TAGS)
+    for i, tag in enumerate(TAGS):
+        ax.bar(x + (i - (len(TAGS) - 1) / 2) * width, column(rows, f"energy_share_{tag}"), width, label=tag.replace("_", " "))
+    ax.set_ylim(0, 1.02)
+    ax.set_ylabel("share of the field energy Σ min(n1, n2)·|v|² (0..1)")
+    levels = [f"{int(lv):02d} {r.get('hypothesis', '')}" for lv, r in zip(x, rows)]
+    verdicts = [f"{r.get('verdict') or '?'} · {r.get('voxels_significant', '?')}/{r.get('voxels_valid', '?')}" for r in rows]
+    ax.set_xticks(x, [f"{a}\n{b}" for a, b in zip(levels, verdicts)], fontsize=8)
+    ax.set_xlabel("stage (verdict, voxels with |z| ≥ z_min / valid)")
+    ax.grid(True, axis="y", lw=0.3, alpha=0.6)
+    # The last stage's two-line tick label reaches past the axes: a wider gap keeps it off the legend.
+    legend_at_right(fig, ax.get_legend_handles_labels()[0], gap_in=0.7, fontsize=8, title="voxel tag", title_fontsize=8)
+    ax.set_title(f"{rows[0].get('pair', '') if rows else ''} · where the field's energy sits, stage by stage", fontsize=10)
+    return fig
+
+
+PAIR_FIGURES = {"stages": stages_figure, "rigid_randomness": rigid_randomness_figure, "tags": tags_figure}
 
 
 def plot_pair(stats_rows: list[dict], out_dir: str | Path, settings: dict | PlotSettings | None = None) -> list[Path]:
-    """``stages.png`` and ``rigid_randomness.png`` of one pair from its summary rows."""
+    """``stages.png``, ``rigid_randomness.png`` and ``tags.png`` of one pair from its summary rows."""
     s = settings if isinstance(settings, PlotSettings) else plot_settings(settings)
     written = []
     for stem, make in PAIR_FIGURES.items():

@@ -13,14 +13,18 @@ from pathlib import Path
 
 import numpy as np
 
-from ..field import discrepancy_field, field_meta, write_field
-from ..field_stats import field_statistics, summary_json_safe
+from ..field import field_meta, write_field
+from ..field_stats import analyse_field, field_statistics, summary_json_safe
 from ..grid import FieldSettings, SphericalGrid
 from ..io.atomic import atomic_path, write_text
 from ..io.parquet_table import write_table
 from ..pair import RegisteredPair, write_pair
+from ..suggest import suggestions, write_suggestions
 
 SETTINGS = FieldSettings(SphericalGrid(36, 0.0, (-20.0, 20.0), 5), min_points=10)
+# The candidates of each stage's "what to try next" (the pair has no sensor models, so no
+# field_of_view; no outliers, which imports Open3D).
+SUGGEST = [{"ego_vehicle": {"radius_m": 3.0, "box_m": None}}, {"crop": {"min_range_m": 0.0, "max_range_m": 15.0, "box_m": None}}]
 HYPOTHESES = ("none", "ego_vehicle", "field_of_view")
 
 
@@ -58,7 +62,7 @@ def stats_row(pair_name: str, stage_id: str, level: int, hypothesis: str, pair: 
     return {
         "pair": pair_name, "stage": stage_id, "level": level, "hypothesis": hypothesis,
         "n1": len(pair.xyz1), "n2": len(pair.xyz2), "removed1": removed[0], "removed2": removed[1],
-        **summary_json_safe(field_statistics(field)),
+        **summary_json_safe(field_statistics(field, SETTINGS)),
         "registration_method": pair.registration.get("method"), "registration_fitness": pair.registration.get("fitness"),
     }
 
@@ -94,8 +98,11 @@ def write_synthetic_pair(pair_dir: str | Path, pair_name: str, seed: int = 0, le
         pair = pair.subset(keep1, keep2)
         write_pair(stage_dir / "points.parquet", pair, meta)
         write_table(stage_dir / "removed.parquet", removed, {**pair.metadata(), **meta})
-        field = discrepancy_field(pair.xyz1, pair.xyz2, SETTINGS)
-        write_field(stage_dir / "field.parquet", field, field_meta(SETTINGS, summary_json_safe(field_statistics(field)), stage=stage_id))
+        field, statistics = analyse_field(pair, SETTINGS)
+        write_field(stage_dir / "field.parquet", field, field_meta(SETTINGS, summary_json_safe(statistics), stage=stage_id))
+        grid = SETTINGS.to_config()
+        table = suggestions(pair, SETTINGS, SUGGEST, ".", grid)
+        write_suggestions(stage_dir / "suggestions.parquet", table, stage_id, SUGGEST, grid)
         row = stats_row(pair_name, stage_id, level, hypothesis, pair, (len(gone.xyz1), len(gone.xyz2)), field)
         write_text(stage_dir / "stats.json", json.dumps(row))
         rows.append(row)

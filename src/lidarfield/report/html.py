@@ -27,6 +27,7 @@ from ..plots.pair_stats import column, pair_figure_png, sorted_rows
 from ..stages import level_of
 from .budget import MB, Figure, Note, budget_mb, budget_note, embed_tiers, render, utf8_len
 from .page import esc, image, missing_image, page, table
+from .suggestions import stage_suggestions, study_suggestions
 
 log = logging.getLogger(__name__)
 
@@ -34,6 +35,7 @@ SUMMARY_COLUMNS = (
     "pair", "stage", "level", "hypothesis", "n1", "n2", "removed1", "removed2", "voxels_valid",
     "max_magnitude", "p95_magnitude", "mean_magnitude", "rms_magnitude", "paper_max_metric",
     "rigid_translation_m", "rigid_rotation_deg", "rigid_energy_share", "mean_resultant_length",
+    "voxels_significant", "p_direction", "p_coherence", "verdict",
     "registration_method", "registration_fitness",
 )
 STAGE_FIGURES = (
@@ -44,7 +46,11 @@ STAGE_FIGURES = (
     ("field_perspective", "field in perspective"),
     ("removed_perspective", "removed points in perspective"),
 )
-PAIR_FIGURES = (("stages", "magnitude stage by stage"), ("rigid_randomness", "rigid part and randomness stage by stage"))
+PAIR_FIGURES = (
+    ("stages", "magnitude stage by stage"),
+    ("rigid_randomness", "rigid part and randomness stage by stage"),
+    ("tags", "share of the field energy per voxel tag, stage by stage"),
+)
 PAIR_TIER = "pair figures"
 # The order in which figures are embedded while the page fits its budget: a pair's summary
 # first, then the stage figures that say most about a stage.
@@ -132,7 +138,7 @@ def pair_figures(name: str, pair_dir: Path | None, rows: list[dict], out_dir: Pa
 def stage_parts(name: str, stage_dir: Path, out_dir: Path, settings: PlotSettings) -> list[Figure | str]:
     """A stage's heading, the link to its 3-D view and the figures the settings draw for it."""
     fig_dir = stage_dir / "figures"
-    parts = [f"<h3>{esc(name)} · stage {esc(stage_dir.name)}</h3>"]
+    parts = [f"<h3>{esc(name)} · stage {esc(stage_dir.name)}</h3>", stage_suggestions(stage_dir)]
     view = fig_dir / "field_3d.html"
     if view.is_file():
         parts.append(f'<p><a href="{esc(relative_href(view, out_dir))}">interactive 3-D view of this stage</a></p>')
@@ -170,6 +176,7 @@ def report_parts(study: dict, pairs: dict[str, list[Path]], summary_rows: list[d
         '<p class="note">One row per pair and stage; rows in red: the registration did not converge or warned.</p>',
         overview_table(summary_rows),
     ]
+    parts += ["<h2>What to try next</h2>", study_suggestions(pairs)]
     if summary_rows:
         parts += ["<h2>Stage by stage, all pairs</h2>", image(png_bytes(all_pairs_figure(summary_rows), DPI), "largest vector per stage, one line per pair")]
     parts += ["<h2>Pairs</h2>", "<ul>" + "".join(f'<li><a href="#pair-{esc(n)}">{esc(n)}</a>: ' + ", ".join(esc(d.name) for d in dirs) + "</li>" for n, dirs in pairs.items()) + "</ul>"]

@@ -1,0 +1,149 @@
+"""What to try next: every candidate hypothesis applied on its own to a stage's survivors.
+
+For each candidate the field it would leave is computed from the same voxel ids (the pair is
+binned once) and compared with the stage's field:
+
+- ``energy_reduction``: 1 - energy after / energy before, both summed over the voxels valid
+  before *and* after (energy = min(n1, n2) |v|^2, as in ``tags``). A rule that only empties
+  voxels below ``min_points`` makes their vectors vanish without explaining them: those voxels
+  are counted in ``voxels_invalidated`` (and their share of the energy before in
+  ``energy_invalidated``), not in the reduction.
+- ``removed1``, ``removed2`` and ``removed_share`` (of both clouds' points): what it costs. A
+  rule that removes half the scan to shrink the field is not an explanation.
+- ``max_after``, ``p95_after`` (m) and ``energy_after``: the field it leaves, all valid voxels.
+
+``rank`` 1 is the largest energy reduction (ties: fewer points removed; undefined reductions
+last). Candidates are the config's ``suggest`` list, or by default every built-in hypothesis
+the stack has not applied up to that stage, with its defaults.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import time
+from pathlib import Path
+
+import numpy as np
+
+from .errors import HypothesisError
+from .field import field_from_voxel_ids
+from .grid import FieldSettings, field_settings_from_config
+from .hypotheses import BUILTINS, apply_step, validate_step
+from .io.parquet_table import write_table
+from .pair import RegisteredPair, read_pair
+from .stages import canonical_json, step_name
+from .tags import voxel_energy
+
+log = logging.getLogger(__name__)
+
+SUGGESTION_COLUMNS = (
+    "rank", "hypothesis", "params", "removed1", "removed2", "removed_share", "voxels_invalidated",
+    "energy_invalidated", "max_after", "p95_after", "energy_after", "energy_reduction",
+)  # fmt: skip
+
+
+def candidate_steps(
+    suggest: list[dict] | None, applied: list[dict], base_dir: str | Path = ".", study_grid: dict | None = None
+) -> list[dict]:
+    """The normalised candidates of a stage whose stack so far is ``applied``: ``suggest``
+    validated, or every built-in not in ``applied`` with its defaults."""
+    if suggest is None:
+        done = {step_name(step) for step in applied}
+        suggest = [{name: {}} for name in BUILTINS if name not in done]
+    if not isinstance(suggest, list):
+        raise HypothesisError(f"suggest: a list of {{name: {{parameters}}}} entries, got {suggest!r}")
+    candidates = []
+    for k, step in enumerate(suggest, start=1):
+        try:
+            candidates.append(validate_step(step, base_dir, study_grid))
+        except HypothesisError as e:
+            raise HypothesisError(f"suggest entry {k}: {e}") from None
+    return candidates
+
+
+def suggestions(
+    pair: RegisteredPair,
+    settings: FieldSettings,
+    candidates: list[dict],
+    base_dir: str | Path = ".",
+    study_grid: dict | None = None,
+) -> dict[str, np.ndarray]:
+    """The suggestion table (``SUGGESTION_COLUMNS``, one row per candidate, sorted by rank)."""
+    ids1, ids2 = settings.grid.assign(pair.xyz1), settings.grid.assign(pair.xyz2)
+    before = field_from_voxel_ids(ids1, pair.xyz1, ids2, pair.xyz2, settings)
+    total = len(pair.xyz1) + len(pair.xyz2)
+    rows = []
+    for spec in candidates:
+        start = time.perf_counter()
+        keep1, keep2 = apply_step(pair, spec, base_dir, study_grid)
+        after = field_from_voxel_ids(ids1[keep1], pair.xyz1[keep1], ids2[keep2], pair.xyz2[keep2], settings)
+        removed1, removed2 = int(np.count_nonzero(~keep1)), int(np.count_nonzero(~keep2))
+        row = {
+            "hypothesis": step_name(spec),
+            "params": canonical_json(spec[step_name(spec)]),
+            "removed1": removed1,
+            "removed2": removed2,
+            "removed_share": (removed1 + removed2) / total if total else math.nan,
+            **compare_fields(before, after),
+        }
+        log.info("candidate %s %s: energy reduction %.3f, %d + %d points removed (%.2f s)",
+                 row["hypothesis"], row["params"], row["energy_reduction"], removed1, removed2, time.perf_counter() - start)  # fmt: skip
+        rows.append(row)
+    order = sorted(range(len(rows)), key=lambda i: _rank_key(rows[i]))
+    columns = {name: [] for name in SUGGESTION_COLUMNS}
+    for rank, i in enumerate(order, start=1):
+        rows[i]["rank"] = rank
+        for name in SUGGESTION_COLUMNS:
+            columns[name].append(rows[i][name])
+    types = {"rank": np.int64, "removed1": np.int64, "removed2": np.int64, "voxels_invalidated": np.int64, "hypothesis": str, "params": str}
+    return {name: np.asarray(values, dtype=types.get(name, np.float64)) for name, values in columns.items()}
+
+
+def compare_fields(before: dict[str, np.ndarray], after: dict[str, np.ndarray]) -> dict:
+    """The field ``after`` removing points, against ``before`` (its voxels are a subset)."""
+    valid_before = np.asarray(before["valid"], dtype=bool)
+    rows = np.searchsorted(before["voxel"], after["voxel"])
+    valid_after = np.zeros(len(valid_before), dtype=bool)
+    valid_after[rows] = after["valid"]
+    energy_before = voxel_energy(before)
+    energy_after = np.zeros(len(valid_before))
+    energy_after[rows] = voxel_energy(after)
+    common = valid_before & valid_after
+    common_before = float(energy_before[common].sum())
+    invalidated = valid_before & ~valid_after
+    magnitude = np.asarray(after["magnitude"], dtype=np.float64)[np.asarray(after["valid"], dtype=bool)]
+    total_before = float(energy_before.sum())
+    return {
+        "voxels_invalidated": int(np.count_nonzero(invalidated)),
+        "energy_invalidated": float(energy_before[invalidated].sum()) / total_before if total_before > 0 else math.nan,
+        "max_after": float(magnitude.max()) if magnitude.size else math.nan,
+        "p95_after": float(np.percentile(magnitude, 95)) if magnitude.size else math.nan,
+        "energy_after": float(energy_after.sum()),
+        "energy_reduction": 1.0 - float(energy_after[common].sum()) / common_before if common_before > 0 else math.nan,
+    }
+
+
+def _rank_key(row: dict) -> tuple:
+    reduction = row["energy_reduction"]
+    defined = math.isfinite(reduction)
+    return (not defined, -reduction if defined else 0.0, row["removed1"] + row["removed2"])
+
+
+def suggest_stage(
+    points_path: str | Path,
+    candidates: list[dict],
+    grid_section: dict,
+    out: str | Path,
+    base_dir: str | Path = ".",
+) -> dict[str, np.ndarray]:
+    """``suggestions.parquet`` of a stage from its ``points.parquet``; returns the table."""
+    pair, meta = read_pair(points_path)
+    table = suggestions(pair, field_settings_from_config(grid_section), candidates, base_dir, grid_section)
+    write_suggestions(out, table, meta.get("stage"), candidates, grid_section)
+    return table
+
+
+def write_suggestions(out: str | Path, table: dict[str, np.ndarray], stage_id: str | None, candidates: list[dict], grid_section: dict) -> None:
+    """Write a suggestion table (atomically) with the stage, candidates and grid as metadata."""
+    write_table(out, table, {"stage": stage_id, "candidates": candidates, "grid": grid_section})

@@ -1,0 +1,161 @@
+"""Where each discrepancy could come from: per valid voxel, tags computed from geometry.
+
+Tags say what a voxel's points and vector look like, not what the stack did, so that an
+analyst (and the suggestions) can see which adversity a field's energy sits with. A voxel can
+carry several tags; an invalid voxel carries none. The point-based tags hold when at least
+``POINT_SHARE`` of either cloud's points in the voxel qualify:
+
+- ``fov_edge``: the point lies within ``FOV_EDGE_DEG`` of the *other* sensor's elevation limits
+  or beyond them (or beyond its range limits), as ``field_of_view`` sees it; needs both
+  sensor models (without them no voxel is tagged).
+- ``near_sensor``: the point is within ``NEAR_SENSOR_M`` of either sensor's origin.
+- ``depth_edge``: the first-radial-cluster rule of ``shadow`` (its defaults, on the study's
+  angular grid, about both sensors) would remove the point: the ranges of its cell split into
+  separate surfaces.
+
+From the vector and counts:
+
+- ``radial``: the vector within ``RADIAL_DEG`` of the line of sight from sensor 1 (either way).
+- ``rigid``: the field's rigid part (``field_stats.weighted_rigid_transform``) leaves a residual
+  no longer than ``RIGID_RESIDUAL_SHARE`` of the vector (it explains >= 75% of its energy).
+- ``count_imbalance``: one cloud has at least ``IMBALANCE_RATIO`` times the other's points.
+
+The energy of a voxel is min(n1, n2) |v|^2 (the weight of the rigid fit: the precision of a
+difference of means is set by the smaller count); ``energy_shares`` gives each tag's share of
+the stage's field energy.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .errors import HypothesisError
+from .grid import FieldSettings, SphericalGrid
+from .pair import RegisteredPair
+
+TAGS = ("fov_edge", "near_sensor", "depth_edge", "radial", "rigid", "count_imbalance")
+POINT_SHARE = 0.1
+FOV_EDGE_DEG = 1.0
+NEAR_SENSOR_M = 5.0
+RADIAL_DEG = 25.0
+RIGID_RESIDUAL_SHARE = 0.5
+IMBALANCE_RATIO = 3.0
+
+
+def tag_column(tag: str) -> str:
+    """The field Parquet column of a tag."""
+    return f"tag_{tag}"
+
+
+def voxel_energy(columns: dict[str, np.ndarray]) -> np.ndarray:
+    """min(n1, n2) |v|^2 per voxel, 0 where invalid (m^2 x points)."""
+    weight = np.minimum(columns["n1"], columns["n2"]).astype(np.float64)
+    with np.errstate(invalid="ignore"):
+        energy = weight * np.asarray(columns["magnitude"], dtype=np.float64) ** 2
+    return np.where(np.asarray(columns["valid"], dtype=bool), energy, 0.0)
+
+
+def voxel_tags(columns: dict[str, np.ndarray], pair: RegisteredPair, settings: FieldSettings) -> dict[str, np.ndarray]:
+    """``{tag_column(tag): bool (V,)}`` for the field ``columns`` of ``pair`` (binned about sensor 1)."""
+    valid = np.asarray(columns["valid"], dtype=bool)
+    voxel = np.asarray(columns["voxel"], dtype=np.int64)
+    rows = [_rows(voxel, settings.grid.assign(xyz)) for xyz in (pair.xyz1, pair.xyz2)]
+    counts = [columns["n1"], columns["n2"]]
+
+    def point_tag(flags) -> np.ndarray:
+        shares = [_share(row, flag, count) for row, flag, count in zip(rows, flags, counts)]
+        return (shares[0] >= POINT_SHARE) | (shares[1] >= POINT_SHARE)
+
+    tags = {
+        "fov_edge": point_tag(_near_fov_edge(pair)),
+        "near_sensor": point_tag([_near_a_sensor(xyz, pair) for xyz in (pair.xyz1, pair.xyz2)]),
+        "depth_edge": point_tag(_on_depth_edge(pair, settings)),
+        "radial": _radial(columns),
+        "rigid": _rigid(columns, valid),
+        "count_imbalance": _imbalanced(columns["n1"], columns["n2"]),
+    }
+    return {tag_column(tag): tags[tag] & valid for tag in TAGS}
+
+
+def energy_shares(columns: dict[str, np.ndarray]) -> dict[str, float]:
+    """``energy_share_{tag}``: the share of the field energy in the voxels carrying each tag."""
+    energy = voxel_energy(columns)
+    total = float(energy.sum())
+    return {
+        f"energy_share_{tag}": float(energy[np.asarray(columns[tag_column(tag)], dtype=bool)].sum() / total)
+        if total > 0 and tag_column(tag) in columns
+        else math.nan
+        for tag in TAGS
+    }
+
+
+def _rows(voxel: np.ndarray, ids: np.ndarray) -> np.ndarray:
+    """Row of each point's voxel in the field (-1 outside the grid)."""
+    if len(voxel) == 0:
+        return np.full(len(ids), -1, dtype=np.int64)
+    row = np.minimum(np.searchsorted(voxel, ids), len(voxel) - 1)
+    return np.where((ids >= 0) & (voxel[row] == ids), row, -1)
+
+
+def _share(row: np.ndarray, flag: np.ndarray, count: np.ndarray) -> np.ndarray:
+    hits = np.bincount(row[(row >= 0) & flag], minlength=len(count)).astype(np.float64)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(count > 0, hits / np.maximum(count, 1), 0.0)
+
+
+def _near_fov_edge(pair: RegisteredPair) -> list[np.ndarray]:
+    from .hypotheses.field_of_view import Params, sensor_limits, visible
+    from .hypotheses.geometry import in_sensor_frame
+
+    try:
+        limits1, limits2 = (sensor_limits(model, Params(), k) for k, model in ((1, pair.sensor1), (2, pair.sensor2)))
+    except HypothesisError:  # a sensor model is missing: its limits are unknown
+        return [np.zeros(len(pair.xyz1), bool), np.zeros(len(pair.xyz2), bool)]
+    return [
+        ~visible(in_sensor_frame(pair.xyz1, pair.T_1_2), limits2, -FOV_EDGE_DEG),
+        ~visible(pair.xyz2, limits1, -FOV_EDGE_DEG),
+    ]
+
+
+def _near_a_sensor(xyz: np.ndarray, pair: RegisteredPair) -> np.ndarray:
+    return (np.linalg.norm(xyz, axis=1) < NEAR_SENSOR_M) | (np.linalg.norm(xyz - pair.origin2, axis=1) < NEAR_SENSOR_M)
+
+
+def _on_depth_edge(pair: RegisteredPair, settings: FieldSettings) -> list[np.ndarray]:
+    from .hypotheses.shadow import ANGULAR_KEYS, Params, shadow
+
+    grid = settings.grid
+    angular = {key: grid.to_config()[key] for key in ANGULAR_KEYS} if isinstance(grid, SphericalGrid) else None
+    keep1, keep2 = shadow(pair, Params(grid=angular))
+    return [~keep1, ~keep2]
+
+
+def _radial(columns: dict[str, np.ndarray]) -> np.ndarray:
+    uvw = np.column_stack([columns[c] for c in ("u", "v", "w")])
+    sight = 0.5 * (np.column_stack([columns[c] for c in ("x1", "y1", "z1")]) + np.column_stack([columns[c] for c in ("x2", "y2", "z2")]))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        cosine = np.einsum("ij,ij->i", uvw, sight) / (np.linalg.norm(uvw, axis=1) * np.linalg.norm(sight, axis=1))
+    return np.abs(cosine) >= math.cos(math.radians(RADIAL_DEG))
+
+
+def _rigid(columns: dict[str, np.ndarray], valid: np.ndarray) -> np.ndarray:
+    from .field_stats import weighted_rigid_transform
+
+    mean1 = np.column_stack([columns[c] for c in ("x1", "y1", "z1")])
+    mean2 = np.column_stack([columns[c] for c in ("x2", "y2", "z2")])
+    weight = np.minimum(columns["n1"], columns["n2"]).astype(np.float64)
+    rotation, translation = weighted_rigid_transform(mean2[valid], mean1[valid], weight[valid])
+    tagged = np.zeros(len(valid), dtype=bool)
+    if not np.all(np.isfinite(rotation)):
+        return tagged
+    residual = np.linalg.norm(mean2[valid] @ rotation.T + translation - mean1[valid], axis=1)
+    magnitude = np.asarray(columns["magnitude"], dtype=np.float64)[valid]
+    tagged[valid] = (magnitude > 0) & (residual <= RIGID_RESIDUAL_SHARE * magnitude)
+    return tagged
+
+
+def _imbalanced(n1: np.ndarray, n2: np.ndarray) -> np.ndarray:
+    low, high = np.minimum(n1, n2), np.maximum(n1, n2)
+    return high >= IMBALANCE_RATIO * low

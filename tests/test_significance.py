@@ -1,0 +1,173 @@
+"""Significance of field vectors (se, z), the randomness tests and the verdict, the tags.
+
+Analytic fields on square targets facing the sensor at the centre of every voxel of the 36 x 5
+grid (points stay in their voxel under the motions used), and a calibration of the verdict
+on many seeds of pure sampling noise.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from lidarfield.field import discrepancy_field
+from lidarfield.field_stats import field_statistics
+from lidarfield.grid import CartesianGrid, FieldSettings, SphericalGrid
+from lidarfield.pair import RegisteredPair
+from lidarfield.randomness import LEVEL, neighbour_pairs, randomness_tests, unit_vectors
+from lidarfield.sensors import PRESETS
+from lidarfield.significance import SPREAD_FLOOR_M
+from lidarfield.tags import tag_column, voxel_tags
+
+SETTINGS = FieldSettings(SphericalGrid())  # 36 x 10 deg, 5 x 8 deg from -20 to +20
+
+
+def targets(per_voxel: int, seed: int, noise_m: float = 0.02, half_deg: float = 1.5, range_m: float = 10.0) -> np.ndarray:
+    """Points on a square target facing the sensor at the centre of every voxel, 2 cm of noise
+    along the line of sight: two seeds are two independent samplings of the same surfaces."""
+    rng = np.random.default_rng(seed)
+    az, el = np.meshgrid(np.radians(np.arange(5.0, 360.0, 10.0)), np.radians(np.arange(-16.0, 20.0, 8.0)))
+    az, el = np.repeat(az.ravel(), per_voxel), np.repeat(el.ravel(), per_voxel)
+    sight = np.column_stack([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)])
+    across = np.column_stack([-np.sin(az), np.cos(az), np.zeros_like(az)])
+    up = np.cross(sight, across)
+    half = range_m * math.radians(half_deg)
+    a, b = rng.uniform(-half, half, (2, len(az)))
+    r = range_m + rng.normal(scale=noise_m, size=len(az))
+    return sight * r[:, None] + across * a[:, None] + up * b[:, None]
+
+
+def cylinder_and_ground(n: int, seed: int) -> np.ndarray:
+    """Rays uniform over the grid's angles onto a 10 m cylinder wall and the ground 3 m below
+    the sensor, whichever is nearer, with 2 cm of range noise: mixed surfaces, depth steps."""
+    rng = np.random.default_rng(seed)
+    az, el = rng.uniform(-np.pi, np.pi, n), np.radians(rng.uniform(-20.0, 20.0, n))
+    sight = np.column_stack([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)])
+    with np.errstate(divide="ignore"):
+        ground = np.where(sight[:, 2] < 0, -3.0 / sight[:, 2], np.inf)
+    r = np.minimum(10.0 / np.cos(el), ground) + rng.normal(scale=0.02, size=n)
+    return sight * r[:, None]
+
+
+def analysed(xyz1: np.ndarray, xyz2: np.ndarray) -> tuple[dict, dict]:
+    field = discrepancy_field(xyz1, xyz2, SETTINGS)
+    pair = RegisteredPair(xyz1, xyz2, sensor1=PRESETS["vlp16"], sensor2=PRESETS["vlp16"])
+    field.update(voxel_tags(field, pair, SETTINGS))
+    return field, field_statistics(field, SETTINGS)
+
+
+def share(field: dict, mask: np.ndarray) -> float:
+    return float(np.mean(mask[field["valid"]]))
+
+
+def test_independent_samplings_of_the_same_surfaces_are_random():
+    field, stats = analysed(targets(60, seed=1), targets(60, seed=2))
+    assert field["valid"].all()
+    assert share(field, np.abs(field["z"]) < 4) >= 0.99
+    assert stats["verdict"] == "random"
+    assert stats["voxels_significant"] <= 0.06 * stats["voxels_valid"]
+
+
+def test_a_translation_is_patterned_significant_everywhere_and_rigid():
+    field, stats = analysed(targets(60, seed=1), targets(60, seed=2) + [0.3, 0.0, 0.0])
+    assert stats["verdict"] == "patterned" and stats["p_direction"] <= 0.002
+    assert np.abs(field["z"][field["valid"]]).min() > 5
+    assert stats["voxels_significant"] == stats["voxels_valid"] == 180
+    assert share(field, field[tag_column("rigid")]) >= 0.95
+    assert stats["energy_share_rigid"] >= 0.95
+
+
+def test_a_scale_error_is_patterned_radial_and_not_rigid():
+    field, stats = analysed(targets(60, seed=1), 1.02 * targets(60, seed=2))
+    # Outward everywhere: no common direction, but neighbours agree.
+    assert stats["p_direction"] > LEVEL and stats["p_coherence"] <= 0.002
+    assert stats["verdict"] == "patterned"
+    assert stats["voxels_significant"] == 180
+    assert share(field, field[tag_column("radial")]) >= 0.95
+    assert share(field, field[tag_column("rigid")]) <= 0.05
+    assert stats["rigid_energy_share"] < 0.2
+
+
+@pytest.mark.parametrize("scene", ["targets", "cylinder_and_ground"])
+def test_false_patterned_rate_on_pure_sampling_noise_is_near_the_level(scene):
+    seeds = 200
+    patterned, z = 0, []
+    for seed in range(seeds):
+        if scene == "targets":
+            xyz1, xyz2 = targets(40, seed=1000 + 2 * seed), targets(40, seed=1001 + 2 * seed)
+        else:
+            xyz1, xyz2 = cylinder_and_ground(12_000, 1000 + 2 * seed), cylinder_and_ground(12_000, 1001 + 2 * seed)
+        field = discrepancy_field(xyz1, xyz2, SETTINGS)
+        patterned += field_statistics(field, SETTINGS)["verdict"] == "patterned"
+        z.append(np.abs(field["z"][field["valid"]]))
+    rate = patterned / seeds
+    slack = 2.5 * math.sqrt(LEVEL * (1 - LEVEL) / seeds)
+    assert LEVEL / 4 <= rate <= LEVEL + slack
+    # z^2 is at most a chi^2(3) under this null: P(z >= 3) <= 2.9%.
+    z = np.concatenate(z)
+    assert np.mean(z >= 3) <= 0.029 + 0.005 and np.mean(z >= 4) <= 0.002
+
+
+def test_se_of_a_voxel_with_known_spread():
+    # 40 points per cloud in one voxel, +-0.1 m along x about a centre 10 m out: S_xx = 0.01 n/(n-1).
+    n = 40
+    offsets = np.where(np.arange(n) % 2 == 0, 0.1, -0.1)
+    xyz1 = np.column_stack([10.0 + offsets, np.full(n, 0.5), np.zeros(n)])
+    xyz2 = xyz1 + [0.05, 0.0, 0.0]
+    field = discrepancy_field(xyz1, xyz2, SETTINGS)
+    s_xx = 0.01 * n / (n - 1)
+    expected = math.sqrt(2 * s_xx / n + SPREAD_FLOOR_M**2 * 2 / n)
+    assert field["se"][0] == pytest.approx(expected, rel=1e-9)
+    assert field["z"][0] == pytest.approx(0.05 / expected, rel=1e-9)
+    # A vector across the spread: only the floor is left.
+    field = discrepancy_field(xyz1, xyz1 + [0.0, 0.0, 0.002], SETTINGS)
+    assert field["se"][0] == pytest.approx(SPREAD_FLOOR_M * math.sqrt(2 / n), rel=1e-6)
+
+
+def test_small_counts_borrow_the_other_clouds_spread():
+    n = 40
+    offsets = np.where(np.arange(n) % 2 == 0, 0.1, -0.1)
+    xyz1 = np.column_stack([10.0 + offsets, np.full(n, 0.5), np.zeros(n)])
+    few = xyz1[:3] + [0.05, 0.0, 0.0]  # 3 points: below SPREAD_MIN_POINTS
+    settings = FieldSettings(SphericalGrid(), min_points=1)
+    field = discrepancy_field(xyz1, few, settings)
+    s_xx = 0.01 * n / (n - 1)
+    d = field["u"][0]
+    expected = math.sqrt(s_xx / n + s_xx / 3 + SPREAD_FLOOR_M**2 * (1 / n + 1 / 3))
+    assert abs(d) > 0 and field["se"][0] == pytest.approx(expected, rel=1e-9)
+    both_few = discrepancy_field(xyz1[:4], few, settings)
+    assert both_few["valid"][0] and np.isnan(both_few["se"][0]) and np.isnan(both_few["z"][0])
+
+
+def test_neighbour_pairs_of_full_grids():
+    grid = SphericalGrid()
+    first, second = neighbour_pairs(grid, np.arange(grid.n_voxels))
+    assert len(first) == 36 * 5 + 36 * 4  # azimuth wraps round, elevation does not
+    assert (first < second).all() and len(set(zip(first, second))) == len(first)
+    shells = SphericalGrid(range_edges_m=(0.0, 5.0, 10.0))
+    assert len(neighbour_pairs(shells, np.arange(shells.n_voxels))[0]) == 2 * (36 * 5 + 36 * 4) + 180
+    cube = CartesianGrid(cell_m=1.0)
+    ids = np.sort(cube.assign(np.array([[x + 0.5, y + 0.5, z + 0.5] for x in (0, 1) for y in (0, 1) for z in (0, 1)])))
+    assert len(neighbour_pairs(cube, ids)[0]) == 12
+    # Two voxels of a 36-bin ring with a gap between them are not neighbours.
+    assert len(neighbour_pairs(grid, np.array([0, 2]))[0]) == 0
+    assert len(neighbour_pairs(grid, np.array([0, 35]))[0]) == 1
+
+
+def test_sign_flip_p_values_match_their_exact_values():
+    # Three equal vectors: |sum|^2 = 9 is reached by 2 of the 8 sign patterns, p = 1/4.
+    units = unit_vectors(np.tile([0.0, 0.0, 2.0], (3, 1)))
+    result = randomness_tests(units, (np.array([0, 1]), np.array([1, 2])))
+    assert result["p_direction"] == pytest.approx(0.25, abs=0.04)
+    # Neighbour sum 2 needs signs (+,+,+) or (-,-,-): also 1/4.
+    assert result["p_coherence"] == pytest.approx(0.25, abs=0.04)
+    assert result["verdict"] == "random"  # three voxels cannot show a pattern at 5%
+    assert randomness_tests(units[:2], (np.array([0]), np.array([1])))["verdict"] == "undetermined"
+
+
+def test_without_a_grid_the_verdict_rests_on_the_directions():
+    field = discrepancy_field(targets(40, 1), targets(40, 2) + [0.3, 0.0, 0.0], SETTINGS)
+    stats = field_statistics(field)
+    assert math.isnan(stats["p_coherence"]) and stats["verdict"] == "patterned"

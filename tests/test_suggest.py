@@ -1,0 +1,84 @@
+"""What to try next: each candidate alone on a stage's survivors, ranked by energy reduction."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from lidarfield.config import load_config
+from lidarfield.errors import HypothesisError
+from lidarfield.grid import FieldSettings, SphericalGrid
+from lidarfield.pair import RegisteredPair
+from lidarfield.suggest import SUGGESTION_COLUMNS, candidate_steps, suggestions
+
+from test_significance import targets
+
+SETTINGS = FieldSettings(SphericalGrid())
+GRID = SETTINGS.to_config()
+
+
+def with_vehicle(n: int = 40, voxels: int = 10) -> tuple[np.ndarray, np.ndarray]:
+    """Points 1.5 m out at the centre of the first ``voxels`` azimuth bins of band 2 (scan 2's own
+    vehicle), ``n`` per voxel."""
+    az = np.radians(np.repeat(np.arange(voxels) * 10.0 + 5.0, n))
+    return np.column_stack([1.5 * np.cos(az), 1.5 * np.sin(az), np.zeros_like(az)]), az
+
+
+def test_the_candidate_that_removes_the_cause_ranks_first():
+    vehicle, _ = with_vehicle()
+    pair = RegisteredPair(targets(60, 1), np.vstack([targets(60, 2), vehicle]))
+    candidates = candidate_steps([{"crop": {}}, {"ego_vehicle": {}}, {"crop": {"max_range_m": 9.0}}], [])
+    table = suggestions(pair, SETTINGS, candidates)
+    assert list(table) == list(SUGGESTION_COLUMNS)
+    assert list(table["rank"]) == [1, 2, 3]
+    best = {name: table[name][0] for name in table}
+    assert best["hypothesis"] == "ego_vehicle" and best["params"] == '{"box_m":null,"radius_m":3.0}'
+    assert best["removed1"] == 0 and best["removed2"] == len(vehicle)
+    assert best["voxels_invalidated"] == 0
+    assert best["energy_reduction"] > 0.95
+    assert best["removed_share"] == pytest.approx(len(vehicle) / (2 * 180 * 60 + len(vehicle)))
+    # crop with defaults removes nothing: no reduction, nothing invalidated.
+    noop = int(np.flatnonzero(table["params"] == '{"box_m":null,"max_range_m":null,"min_range_m":0.0}')[0])
+    assert table["energy_reduction"][noop] == pytest.approx(0.0, abs=1e-12) and table["removed1"][noop] == 0
+
+
+def test_emptying_voxels_is_counted_apart_not_as_a_reduction():
+    vehicle, _ = with_vehicle()
+    pair = RegisteredPair(targets(60, 1), np.vstack([targets(60, 2), vehicle]))
+    # Every target is 10 m out: max_range_m 9 empties every voxel of scan 2's targets.
+    table = suggestions(pair, SETTINGS, candidate_steps([{"crop": {"max_range_m": 9.0}}], []))
+    assert table["voxels_invalidated"][0] == 180
+    assert table["energy_invalidated"][0] == pytest.approx(1.0)
+    assert math.isnan(table["energy_reduction"][0])  # no voxel is valid both before and after
+    # Cropping away the targets of one azimuth half keeps the others unchanged: reduction 0
+    # over the voxels still valid, the emptied ones counted apart.
+    half = candidate_steps([{"crop": {"box_m": [-100, 100, 0, 100, -100, 100]}}], [])
+    table = suggestions(RegisteredPair(targets(60, 1), targets(60, 2)), SETTINGS, half)
+    assert table["voxels_invalidated"][0] == 90
+    assert table["energy_reduction"][0] == pytest.approx(0.0, abs=1e-12)
+
+
+def test_default_candidates_are_the_builtins_not_yet_applied():
+    grid = {"kind": "spherical", "azimuth_bins": 12, "elevation_deg": [-30.0, 10.0], "elevation_bins": 4}
+    names = [next(iter(step)) for step in candidate_steps(None, [{"field_of_view": {}}], ".", grid)]
+    assert names == ["ego_vehicle", "shadow", "crop", "outliers"]
+    shadow = candidate_steps(None, [], ".", grid)[2]["shadow"]
+    assert shadow["grid"]["azimuth_bins"] == 12 and shadow["origins"] == [1, 2]  # the study's grid, defaults
+    with pytest.raises(HypothesisError, match="suggest entry 2"):
+        candidate_steps([{"crop": {}}, {"shadow": {"jump_m": -1}}], [])
+
+
+def test_study_candidates_per_stage(tmp_path):
+    study = load_config("config/config.yaml")  # stack: field_of_view, shadow
+    assert [next(iter(s)) for s in study.candidates(0)] == ["ego_vehicle", "field_of_view", "shadow", "crop", "outliers"]
+    assert [next(iter(s)) for s in study.candidates(2)] == ["ego_vehicle", "crop", "outliers"]
+    config = tmp_path / "study.yaml"
+    config.write_text("hypotheses: [{ego_vehicle: {}}]\nsuggest: [{ego_vehicle: {radius_m: 5}}, {shadow: {origins: [1]}}]\n")
+    study = load_config(config, require_pairs=False)
+    assert study.candidates(1) == study.candidates(0)  # an explicit list is used as given
+    assert study.candidates(0)[0] == {"ego_vehicle": {"radius_m": 5.0, "box_m": None}}
+    config.write_text("suggest: [{no_such_rule: {}}]\n")
+    with pytest.raises(HypothesisError, match="suggest entry 1.*unknown hypothesis"):
+        load_config(config, require_pairs=False)

@@ -13,10 +13,10 @@ is exact under that null for any number of voxels and any shape of the noise:
 - ``p_coherence``: do neighbouring voxels' vectors agree? Statistic: the sum over pairs of
   grid neighbours of the dot product of their unit vectors. Catches patterns with no net
   resultant (a scale error's outward vectors, a rotation's swirl, opposing vectors in halves).
-  Shuffling the vectors over the voxels would be the wrong null here: noise vectors lie in
-  their surface's plane, neighbours share that plane, so shuffled noise agrees less with its
-  neighbours than real noise does and noise would be called coherent; random signs keep each
-  voxel's own axis.
+  Random signs rather than shuffling the vectors over the voxels: a shuffle is exact only for
+  vectors exchangeable over the voxels, and noise is not (it lies in its surface's plane, which
+  neighbours share); random signs keep each voxel's own axis. (On the calibration scenes of
+  the tests a shuffle test was close too: 3% false rejections at 2.5% over 100 seeds.)
 
 ``verdict`` is ``patterned`` when either p-value is at most ``LEVEL / 2`` (Bonferroni over the
 two tests, so the false ``patterned`` rate on pure noise is at most ``LEVEL``), ``random``

@@ -182,6 +182,8 @@ def test_expd_paper_study_on_the_real_pair(expd, tmp_path, monkeypatch, capsys):
     first = pd.read_parquet(out / "stages" / rows["stage"][0] / "suggestions.parquet")
     assert first["hypothesis"][0] == "ego_vehicle" and first["rank"][0] == 1
     assert first["energy_reduction"][0] > first["energy_reduction"][1]
+    line = next(ln for ln in printed.splitlines() if ln.strip().startswith(rows["stage"][0]) and "reduces" in ln)
+    assert f"ego_vehicle reduces the energy by {100 * first['energy_reduction'][0]:.1f}%" in line
     # Sensor 2 sits where the authors' translation puts it (about 3 m along y).
     pair, _ = read_pair(out / "registered.parquet")
     assert pair.origin2 == pytest.approx([0.0, 3.0, 0.0], abs=0.01)

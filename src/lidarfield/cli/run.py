@@ -39,8 +39,29 @@ def _run(args: argparse.Namespace) -> int:
     poses = None if args.poses is None else {"topic": args.poses, **({"frame": args.pose_frame} if args.pose_frame else {})}
     rows = run_pair(args.scan1, args.scan2, args.config, args.out, args.register, args.transform, args.sensor, poses)
     print(format_table(rows))
+    print(format_next_steps(rows, args.out))
     print(f"wrote {args.out}/stages/*/ and {args.out}/summary.parquet, summary.csv")
     return 0
+
+
+def format_next_steps(rows: list[dict], out_dir) -> str:
+    """Per stage its verdict and the best candidate of its suggestions.parquet."""
+    from pathlib import Path
+
+    from ..report.suggestions import read_suggestions
+
+    lines = ["what to try next (best candidate alone on each stage's survivors):"]
+    for row in rows:
+        best = (read_suggestions(Path(out_dir) / "stages" / row["stage"]) or [None])[0]
+        field = f"{row.get('verdict')}, {row.get('voxels_significant')} of {row.get('voxels_valid')} vectors significant"
+        if best is None:
+            lines.append(f"  {row['stage']} ({field}): no candidate")
+            continue
+        lines.append(
+            f"  {row['stage']} ({field}): {best['hypothesis']} reduces the energy by "
+            f"{100 * best['energy_reduction']:.1f}% removing {100 * best['removed_share']:.1f}% of the points"
+        )
+    return "\n".join(lines)
 
 
 def format_table(rows: list[dict]) -> str:

@@ -54,8 +54,8 @@ def format_next_steps(rows: list[dict], out_dir) -> str:
     for row in rows:
         best = (read_suggestions(Path(out_dir) / "stages" / row["stage"]) or [None])[0]
         field = f"{row.get('verdict')}, {row.get('voxels_significant')} of {row.get('voxels_valid')} vectors significant"
-        if best is None:
-            lines.append(f"  {row['stage']} ({field}): no candidate")
+        if best is None or not best["energy_reduction"] > 0:
+            lines.append(f"  {row['stage']} ({field}): no candidate reduces the energy")
             continue
         lines.append(
             f"  {row['stage']} ({field}): {best['hypothesis']} reduces the energy by "

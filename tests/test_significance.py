@@ -171,3 +171,25 @@ def test_without_a_grid_the_verdict_rests_on_the_directions():
     field = discrepancy_field(targets(40, 1), targets(40, 2) + [0.3, 0.0, 0.0], SETTINGS)
     stats = field_statistics(field)
     assert math.isnan(stats["p_coherence"]) and stats["verdict"] == "patterned"
+
+
+def blob(az_deg: float, el_deg: float, range_m: float, n: int, seed: int) -> np.ndarray:
+    """``n`` points within 1 deg of a direction at ``range_m`` (all in one voxel of SETTINGS)."""
+    rng = np.random.default_rng(seed)
+    az, el = np.radians(az_deg + rng.uniform(-1, 1, n)), np.radians(el_deg + rng.uniform(-1, 1, n))
+    return range_m * np.column_stack([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)])
+
+
+def test_point_tags_mark_the_voxels_built_to_carry_them():
+    near = blob(15.0, 0.0, 2.0, 40, 3)  # both clouds: a vehicle part 2 m away
+    xyz1 = np.vstack([targets(60, 1), near, blob(25.0, 0.0, 20.0, 40, 4)])  # plus a wall behind one target
+    xyz2 = np.vstack([targets(60, 2), near, blob(5.0, 0.0, 10.0, 200, 5)])  # plus 200 more on one target
+    field, _ = analysed(xyz1, xyz2)
+    row = {az: int(np.searchsorted(field["voxel"], az // 10 + 36 * 2)) for az in (5, 15, 25)}  # band 2: -4..4 deg
+    tagged = {tag: set(np.flatnonzero(field[tag_column(tag)])) for tag in ("near_sensor", "depth_edge", "count_imbalance", "fov_edge")}
+    assert tagged["near_sensor"] == {row[15]}
+    # Two surfaces in range: the wall behind the target, and the target behind the near part.
+    assert tagged["depth_edge"] == {row[15], row[25]}
+    assert tagged["count_imbalance"] == {row[5]}
+    # VLP-16 limits are +-15 deg: the targets at +-16 deg (bands 0 and 4) lie beyond them.
+    assert tagged["fov_edge"] == set(np.flatnonzero(np.isin(field["el_bin"], [0, 4])))

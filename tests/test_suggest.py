@@ -82,3 +82,23 @@ def test_study_candidates_per_stage(tmp_path):
     config.write_text("suggest: [{no_such_rule: {}}]\n")
     with pytest.raises(HypothesisError, match="suggest entry 1.*unknown hypothesis"):
         load_config(config, require_pairs=False)
+
+
+def test_a_plugin_candidate_runs_from_its_file(tmp_path):
+    (tmp_path / "near.py").write_text(
+        "import numpy as np\n\n"
+        "def remove(pair, params):\n"
+        "    far = lambda xyz: np.linalg.norm(xyz, axis=1) >= params['radius_m']\n"
+        "    return far(pair.xyz1), far(pair.xyz2)\n"
+    )
+    vehicle, _ = with_vehicle()
+    pair = RegisteredPair(targets(60, 1), np.vstack([targets(60, 2), vehicle]))
+    spec = {"plugin": {"file": "near.py", "function": "remove", "params": {"radius_m": 3.0}}}
+    (candidate,) = candidate_steps([spec], [], tmp_path)
+    table = suggestions(pair, SETTINGS, [candidate], tmp_path)
+    # The same points as ego_vehicle's 3 m radius: the same reduction.
+    ego = suggestions(pair, SETTINGS, candidate_steps([{"ego_vehicle": {}}], []))
+    assert table["hypothesis"][0] == "plugin" and table["removed2"][0] == len(vehicle)
+    assert table["energy_reduction"][0] == pytest.approx(ego["energy_reduction"][0], rel=1e-12)
+    with pytest.raises(HypothesisError, match="suggest entry 1"):
+        candidate_steps([{"plugin": {"file": "missing.py", "function": "remove"}}], [], tmp_path)

@@ -161,3 +161,18 @@ def test_kitti_line_of_wrong_length(tmp_path):
     path.write_text(" ".join(["0"] * 12) + "\n1 2 3\n")
     with pytest.raises(InputError, match="line 2 has 3 numbers, expected 12"):
         read_kitti_poses(path)
+
+
+def test_interpolate_pose_linear_translation_slerp_rotation():
+    from lidarfield.poses import interpolate_pose, rotation_angle
+
+    stamps = np.array([10.0, 10.4, 11.0])
+    poses = np.stack([pose_from_xyzrpy(p) for p in ([0, 0, 0, 0, 0, 0], [4, -2, 1, 0.2, 0, 0.8], [4, -2, 1, 0.2, 0, 0.8])])
+    quarter = interpolate_pose(stamps, poses, 10.1)
+    np.testing.assert_allclose(quarter[:3, 3], [1.0, -0.5, 0.25])
+    # Slerp: a quarter of the way turns a quarter of the angle, about the same axis.
+    assert rotation_angle(quarter) == pytest.approx(rotation_angle(poses[1]) / 4)
+    assert rotation_angle(relative_pose(quarter, poses[1])) == pytest.approx(3 * rotation_angle(poses[1]) / 4)
+    np.testing.assert_array_equal(interpolate_pose(stamps, poses, 10.4), poses[1])
+    np.testing.assert_array_equal(interpolate_pose(stamps, poses, 11.0), poses[2])
+    assert interpolate_pose(stamps, poses, 9.999) is None and interpolate_pose(stamps, poses, 11.001) is None

@@ -4,6 +4,7 @@ study with ``register: truth`` (its ingest jobs here; the whole workflow in the 
 
 from __future__ import annotations
 
+import copy
 import re
 import sys
 from pathlib import Path
@@ -14,7 +15,7 @@ import pytest
 import yaml
 
 from lidarfield.cli import main
-from lidarfield.config import load_config
+from lidarfield.config import load_config, validate_config
 from lidarfield.io import read_scan
 from lidarfield.io.bag_writer import CloudMessage, write_bag
 from lidarfield.jobs import scan_job
@@ -140,3 +141,28 @@ def test_bad_bag_input_is_one_line_exit_2_and_no_output(tmp_path, recording, cap
     assert len(error.splitlines()) == 1
     assert re.search(message, error), error
     assert not out.exists()
+
+
+def test_sequences_from_a_bag_topic_and_a_capture(tmp_path, expd, shared_data):
+    from lidarfield.errors import InputError
+    from lidarfield.io.bag_writer import CloudMessage
+    from lidarfield.scan import Scan
+
+    scan = Scan(read_scan(expd / "Cloud1_ExpD.txt").xyz[:500])
+    clouds = [CloudMessage(scan, 1.0 + 0.1 * k, topic="/rear") for k in range(5)] + [CloudMessage(scan, 1.0, topic="/front")]
+    bag = write_bag(tmp_path / "two_lidars", clouds, storage="mcap")
+    capture = shared_data / "velodyne-pcap" / "sample_velodyne_vlp16_gps.pcap"
+    config = {
+        "sequences": {
+            "rear": {"scans": str(bag), "topic": "/rear", "first": 1, "stride": 2, "register": "identity"},
+            "spin": {"scans": str(capture), "register": "identity"},
+        }
+    }
+    study = validate_config(copy.deepcopy(config), tmp_path)
+    assert [(p.scan1.spec["path"], p.scan2.spec["path"]) for n, p in study.pairs.items() if n.startswith("rear")] == [
+        (f"{bag}#/rear#1", f"{bag}#/rear#3"),
+    ]
+    assert [p.scan2.spec["path"] for n, p in study.pairs.items() if n.startswith("spin")] == [f"{capture}#1", f"{capture}#2"]
+    del config["sequences"]["rear"]["topic"]
+    with pytest.raises(InputError, match=r"two_lidars: the bag holds 2 PointCloud2 topics: .*or topic: in a sequence\); topics: /front .*, /rear"):
+        validate_config(config, tmp_path)

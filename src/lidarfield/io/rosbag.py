@@ -84,7 +84,10 @@ def cloud_topic(reader, path: Path, topic: str | None) -> str:
             return clouds[0]
         if not clouds:
             raise InputError(f"the bag holds no sensor_msgs/PointCloud2 topic; its topics: {listing}", path)
-        raise InputError(f"the bag holds {len(clouds)} PointCloud2 topics: name one as {path}#TOPIC#k; topics: {listing}", path)
+        raise InputError(
+            f"the bag holds {len(clouds)} PointCloud2 topics: name one ({path}#/TOPIC#k, or topic: in a sequence); topics: {listing}",
+            path,
+        )
     if topic not in clouds:
         problem = "is not a PointCloud2 topic" if topic in {t.name for t in topics} else "is not in the bag"
         raise InputError(f"topic {topic} {problem}; its topics: {listing}", path)
@@ -188,12 +191,14 @@ def read_rosbag(
         stamp_s = stamp_seconds(msg.header)
         pose = None if poses is None else pose_from_bag(reader, path, poses, stamp_s, int(times[index]))
     except InputError as e:
-        raise InputError(f"{where}: {e}" if e.path is None else str(e)) from None
+        if e.path is None:
+            raise InputError(f"{where}: {e}", path) from None
+        raise
     except Exception as e:  # truncated or corrupt data: rosbags, lz4, zstd and struct errors
         raise InputError(f"{where} cannot be read: {_detail(e)}", path) from None
     scan = scan_from_rows(xyz, attributes, path, sensor=sensor, pose=pose)
     scan.source = f"{path}#{topic}#{index}"
-    scan.stamp_s = stamp_seconds(msg.header)
+    scan.stamp_s = stamp_s
     return scan
 
 

@@ -4,6 +4,7 @@
 
 
 include: "workflow/rules/common.smk"
+include: "workflow/rules/worker.smk"
 include: "workflow/rules/scans.smk"
 include: "workflow/rules/register.smk"
 include: "workflow/rules/mitigate.smk"

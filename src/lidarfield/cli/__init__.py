@@ -6,17 +6,15 @@ registers its arguments and sets ``func`` to a callable taking the parsed argume
 
 from __future__ import annotations
 
-import argparse
-import importlib
-import logging
 import sys
-
-from ..errors import LidarfieldError
 
 SUBCOMMANDS = ("field", "simulate", "register", "run", "plot", "report", "compare", "info", "job")
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser():
+    import argparse
+    import importlib
+
     parser = argparse.ArgumentParser(
         prog="lidarfield",
         description="Discrepancy-vector fields between registered lidar scans, and hypotheses that explain them.",
@@ -35,6 +33,22 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else list(argv)
+    if argv[:1] == ["job"]:
+        from ..job_client import run_on_worker
+
+        status = run_on_worker(argv)
+        if status is not None:
+            return status
+    return run(argv)
+
+
+def run(argv: list[str]) -> int:
+    """``lidarfield ARGV`` in this process."""
+    import logging
+
+    from ..errors import LidarfieldError
+
     parser = build_parser()
     args = parser.parse_args(argv)
     logging.basicConfig(

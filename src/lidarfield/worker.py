@@ -1,0 +1,317 @@
+"""A pre-imported worker for the local workflow's jobs: each job forked from it.
+
+Starting Python and importing numpy, pyarrow, matplotlib, Open3D, ... costs a second or more,
+which is most of a short job. The worker pays it once: it imports what the jobs use, listens
+on a Unix socket, and for each job (sent by :mod:`lidarfield.job_client`) forks a child that
+takes the job's stdin/stdout/stderr, working directory and environment and runs ``lidarfield
+job ...`` in-process, so a crash or a kill stays in its job. It reports the child's exit status
+(or the signal that killed it) to the client, and kills the child if the client goes away.
+
+The workflow starts one worker per run (``start``, in ``onstart``), with its socket in the
+results folder named after the Snakemake process, and stops it (``stop``, in ``onsuccess`` /
+``onerror``). The worker also exits when the process that started it is gone, or after
+``idle_timeout_s`` without a job. Its log, with each job's CPU time and peak memory (which
+Snakemake's benchmark files cannot see), is ``results/logs/worker.log``.
+
+Fork safety: the worker imports libraries but runs nothing that starts a thread pool, and it
+is started with one thread per numeric library (the rules declare ``threads: 1``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import logging
+import os
+import selectors
+import signal
+import socket
+import subprocess
+import sys
+import time
+import traceback
+from pathlib import Path
+
+from .job_client import ENV, recv_message, send_message, worker_socket
+
+log = logging.getLogger("lidarfield.worker")
+
+# What the jobs import, loaded once in the worker before it forks anything.
+PRELOAD = (
+    "lidarfield.cli.job",
+    "lidarfield.jobs",
+    "lidarfield.pipeline",
+    "lidarfield.plots",
+    "lidarfield.registration",
+    "lidarfield.simulate",
+    "lidarfield.scene",
+    "lidarfield.stack",
+    "lidarfield.report",
+    "pandas",  # the summary job's
+)
+# Numeric libraries start as many threads as these say; jobs run with threads: 1.
+THREAD_VARS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMEXPR_NUM_THREADS")
+IDLE_TIMEOUT_S = 900.0
+SOCKET_GLOB = ".worker-*.sock"
+
+
+class Worker:
+    """The socket loop: accept a job, fork its child, report its status; one thread only."""
+
+    def __init__(self, listener: socket.socket, parent_pid: int, idle_timeout_s: float):
+        self.listener = listener
+        self.parent_pid = parent_pid
+        self.idle_timeout_s = idle_timeout_s
+        self.jobs: dict[int, tuple[socket.socket, float, list[str]]] = {}  # pid -> (client, start, argv)
+        self.selector = selectors.DefaultSelector()
+        self.wakeup_r, self.wakeup_w = os.pipe()
+        self.stopping = False
+
+    def serve(self) -> None:
+        os.set_blocking(self.wakeup_w, False)
+        signal.set_wakeup_fd(self.wakeup_w)
+        signal.signal(signal.SIGCHLD, lambda *_: None)  # only to wake the loop up
+        signal.signal(signal.SIGTERM, self.stop)
+        signal.signal(signal.SIGINT, self.stop)
+        self.selector.register(self.listener, selectors.EVENT_READ, "accept")
+        self.selector.register(self.wakeup_r, selectors.EVENT_READ, "wakeup")
+        last_job = time.monotonic()
+        while not self.stopping:
+            for key, _ in self.selector.select(timeout=1.0):
+                if key.data == "accept":
+                    self.accept()
+                elif key.data == "wakeup":
+                    os.read(self.wakeup_r, 4096)
+                else:
+                    self.client_gone(key.data)
+            self.reap()
+            if self.jobs:
+                last_job = time.monotonic()
+            if os.getppid() != self.parent_pid:
+                log.info("the workflow (pid %d) is gone: stopping", self.parent_pid)
+                break
+            if time.monotonic() - last_job > self.idle_timeout_s:
+                log.info("no job for %.0f s: stopping", self.idle_timeout_s)
+                break
+        for pid in self.jobs:
+            os.kill(pid, signal.SIGTERM)
+
+    def stop(self, signum, frame) -> None:
+        self.stopping = True
+
+    def accept(self) -> None:
+        conn, _ = self.listener.accept()
+        try:
+            conn.settimeout(10.0)  # a client sends its request at once: never block the loop long
+            _, fds, _, _ = socket.recv_fds(conn, 1, 3)
+            request = recv_message(conn)
+            if len(fds) != 3:
+                raise ValueError(f"expected 3 file descriptors, got {len(fds)}")
+        except (OSError, EOFError, ValueError) as e:
+            log.warning("dropped a malformed request: %s", e)
+            conn.close()
+            return
+        sys.stdout.flush()
+        sys.stderr.flush()
+        pid = os.fork()
+        if pid == 0:
+            self.run_child(conn, fds, request)  # never returns
+        for fd in fds:
+            os.close(fd)
+        conn.settimeout(None)
+        self.jobs[pid] = (conn, time.monotonic(), request["argv"])
+        self.selector.register(conn, selectors.EVENT_READ, pid)
+        send_message(conn, {"pid": pid})
+
+    def run_child(self, conn: socket.socket, fds: list[int], request: dict) -> None:
+        """In the forked child: become the job's process, run it, exit with its status."""
+        status = 1
+        try:
+            signal.set_wakeup_fd(-1)
+            for signum in (signal.SIGCHLD, signal.SIGTERM):
+                signal.signal(signum, signal.SIG_DFL)
+            signal.signal(signal.SIGINT, signal.default_int_handler)
+            self.selector.close()
+            for sock in (self.listener, conn, *(job[0] for job in self.jobs.values())):
+                sock.close()
+            os.close(self.wakeup_r)
+            os.close(self.wakeup_w)
+            for target, fd in enumerate(fds):
+                os.dup2(fd, target)
+                os.close(fd)
+            os.chdir(request["cwd"])
+            os.environ.clear()
+            os.environ.update(request["env"])
+            sys.argv = ["lidarfield", *request["argv"]]
+            logging.getLogger().handlers.clear()  # the job configures logging to its stderr
+            status = run_job(request["argv"])
+        except BaseException:
+            traceback.print_exc()
+        finally:
+            for stream in (sys.stdout, sys.stderr):
+                try:
+                    stream.flush()
+                except BaseException:
+                    pass
+            os._exit(status)
+
+    def client_gone(self, pid: int) -> None:
+        """A job's client closed its end (it was killed): kill the job too."""
+        conn = self.jobs[pid][0]
+        self.selector.unregister(conn)
+        log.warning("the client of job %d went away: killing the job", pid)
+        try:
+            os.kill(pid, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
+
+    def reap(self) -> None:
+        while self.jobs:
+            try:
+                pid, status, usage = os.wait4(-1, os.WNOHANG)
+            except ChildProcessError:
+                return
+            if pid == 0:
+                return
+            conn, started, argv = self.jobs.pop(pid)
+            if os.WIFSIGNALED(status):
+                result = {"signal": os.WTERMSIG(status)}
+            else:
+                result = {"exit": os.waitstatus_to_exitcode(status)}
+            log.info(
+                "job %d %s: %s, %.2f s wall, %.2f s CPU, %.0f MB peak",
+                pid, argv[1] if len(argv) > 1 else "?", result, time.monotonic() - started,
+                usage.ru_utime + usage.ru_stime, usage.ru_maxrss / 1024,
+            )  # fmt: skip
+            try:
+                self.selector.unregister(conn)
+            except KeyError:
+                pass  # already unregistered: its client went away
+            try:
+                send_message(conn, result)
+            except OSError:
+                pass
+            conn.close()
+
+
+def run_job(argv: list[str]) -> int:
+    """``lidarfield ARGV`` in this process, with the exit status ``python -m lidarfield`` gives."""
+    from .cli import run
+
+    try:
+        return run(argv) or 0
+    except SystemExit as e:
+        if e.code is None or isinstance(e.code, int):
+            return e.code or 0
+        print(e.code, file=sys.stderr)
+        return 1
+
+
+def preload() -> None:
+    for module in PRELOAD:
+        try:
+            importlib.import_module(module)
+        except ImportError as e:  # the jobs that need it will fail with the same error
+            log.warning("could not preload %s: %s", module, e)
+
+
+def serve(socket_path: str, parent_pid: int, idle_timeout_s: float = IDLE_TIMEOUT_S) -> None:
+    """Listen on ``socket_path`` at once (clients queue while the imports run), then serve."""
+    listener = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+    listener.bind(socket_path)
+    try:
+        listener.listen(socket.SOMAXCONN)
+        started = time.perf_counter()
+        preload()
+        log.info("worker %d on %s: imports took %.2f s", os.getpid(), socket_path, time.perf_counter() - started)
+        Worker(listener, parent_pid, idle_timeout_s).serve()
+    finally:
+        listener.close()
+        Path(socket_path).unlink(missing_ok=True)
+        log.info("worker %d stopped", os.getpid())
+
+
+# --- started and stopped by the workflow ----------------------------------------------------
+
+
+def socket_path(results: str | Path, owner_pid: int) -> str:
+    """The socket of the worker of the workflow run ``owner_pid``, in its results folder; a
+    relative path where the absolute one is too long for a Unix socket (108 bytes)."""
+    path = Path(results).absolute() / f".worker-{owner_pid}.sock"
+    return str(path) if len(str(path)) < 100 else os.path.relpath(path)
+
+
+def remove_stale_sockets(results: Path) -> None:
+    """Sockets left by workers whose workflow run is gone (killed before its onerror)."""
+    for path in results.glob(SOCKET_GLOB):
+        try:
+            os.kill(int(path.name.split("-")[1].split(".")[0]), 0)
+        except ProcessLookupError:
+            path.unlink(missing_ok=True)
+        except (ValueError, PermissionError):
+            pass
+
+
+# The worker of this workflow run (the Snakemake process), between start() and stop().
+_running: subprocess.Popen | None = None
+
+
+def start(results: str | Path, idle_timeout_s: float = IDLE_TIMEOUT_S) -> subprocess.Popen | None:
+    """Start this workflow run's worker and point its jobs at it (``LIDARFIELD_WORKER``);
+    None, and jobs run as plain processes, when ``LIDARFIELD_WORKER=off``."""
+    global _running
+    if ENV in os.environ and worker_socket() is None:
+        return None
+    results = Path(results)
+    (results / "logs").mkdir(parents=True, exist_ok=True)
+    remove_stale_sockets(results)
+    path = socket_path(results, os.getpid())
+    Path(path).unlink(missing_ok=True)
+    env = {**os.environ, **{name: "1" for name in THREAD_VARS}}
+    env.pop(ENV, None)
+    with open(results / "logs" / "worker.log", "a") as log_file:
+        worker = subprocess.Popen(
+            [sys.executable, "-m", "lidarfield.worker", path, "--parent-pid", str(os.getpid()), "--idle-timeout", str(idle_timeout_s)],
+            stdin=subprocess.DEVNULL,
+            stdout=log_file,
+            stderr=subprocess.STDOUT,
+            env=env,
+            start_new_session=True,  # Ctrl-C reaches the jobs through their clients, not the worker
+        )  # fmt: skip
+    deadline = time.monotonic() + 10.0
+    while not os.path.exists(path) and worker.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.01)
+    if not os.path.exists(path):
+        worker.kill()
+        return None  # jobs run as plain processes; the reason is in the worker's log
+    os.environ[ENV] = path
+    _running = worker
+    return worker
+
+
+def stop() -> None:
+    """Stop the worker (after the workflow's last job) and let later jobs run in-process."""
+    global _running
+    worker, _running = _running, None
+    if worker is None:
+        return
+    os.environ.pop(ENV, None)
+    worker.terminate()
+    try:
+        worker.wait(timeout=10)
+    except subprocess.TimeoutExpired:
+        worker.kill()
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(prog="python -m lidarfield.worker", description=__doc__.split("\n")[0])
+    parser.add_argument("socket", help="the Unix socket to listen on")
+    parser.add_argument("--parent-pid", type=int, default=os.getppid(), help="stop when this process is gone")
+    parser.add_argument("--idle-timeout", type=float, default=IDLE_TIMEOUT_S, help="stop after this many seconds without a job")
+    args = parser.parse_args(argv)
+    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(levelname)s %(name)s: %(message)s", datefmt="%H:%M:%S")
+    serve(args.socket, args.parent_pid, args.idle_timeout)
+
+
+if __name__ == "__main__":
+    main()

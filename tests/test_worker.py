@@ -1,0 +1,258 @@
+"""The pre-imported job worker: jobs forked from it give the outputs, logs and exit codes of
+plain processes, and a job that dies or is killed takes nothing else with it."""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import signal
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pyarrow.parquet as pq
+import pytest
+
+from lidarfield.config import validate_config
+from lidarfield.stages import canonical_json
+from lidarfield.worker import THREAD_VARS
+
+pytestmark = pytest.mark.slow
+
+TINY_SENSOR = {"name": "tiny-16", "elevation_deg": [-22 + 2 * i for i in range(16)], "azimuth_resolution_deg": 1.0}
+SIMULATE = {"scene": "paper-intersection", "sensor": TINY_SENSOR, "pose1": [0, 0, 3, 0, 0, 0]}
+# What Snakemake sets for a job of one thread; the workflow starts its worker with it too.
+SNAKEMAKE_ENV = {name: "1" for name in THREAD_VARS}
+GRID = {"azimuth_bins": 18, "elevation_deg": [-25, 12.5], "elevation_bins": 5, "min_points": 5}
+
+# A plugin hypothesis that hangs: it writes its process id where the test can read it.
+SLEEPER = '''import os, time
+from pathlib import Path
+
+
+def remove(pair, params):
+    Path(params["pid_file"]).write_text(str(os.getpid()))
+    time.sleep(120)
+    return pair.xyz1[:, 2] > 0, pair.xyz2[:, 2] > 0
+'''
+
+
+def study(hypothesis: dict, base_dir: Path):
+    config = {
+        "pairs": {"shift": {"simulate": {**SIMULATE, "pose2": [1, 1, 3, 0, 0, 0.05]}, "register": "truth"}},
+        "grid": dict(GRID),
+        "hypotheses": [hypothesis],
+    }
+    return validate_config(config, base_dir=base_dir)
+
+
+def pair_jobs(hypothesis: dict, base_dir: Path) -> list[list[list[str]]]:
+    """The workflow's jobs for one pair and a one-hypothesis stack, in waves that can run at
+    once (paths relative to ``base_dir``, the jobs' working directory)."""
+    s = study(hypothesis, base_dir)
+    pair = s.pairs["shift"]
+    stages = s.stage_ids("shift")
+    scans = [["simulate", "--spec", canonical_json(scan.spec), "--out", f"scans/{scan.id}.parquet"] for scan in (pair.scan1, pair.scan2)]
+    register = ["register", "--scan1", f"scans/{pair.scan1.id}.parquet", "--scan2", f"scans/{pair.scan2.id}.parquet",
+                "--settings", canonical_json(pair.register), "--out", "registered.parquet"]  # fmt: skip
+
+    def mitigate(level: int) -> list[str]:
+        points_in = "registered.parquet" if level == 0 else f"{stages[level - 1]}/points.parquet"
+        step = canonical_json(s.hypotheses[level - 1] if level else None)
+        return ["mitigate", "--points-in", points_in, "--step", step, "--stage", stages[level], "--level", str(level),
+                "--points-out", f"{stages[level]}/points.parquet", "--removed-out", f"{stages[level]}/removed.parquet"]  # fmt: skip
+
+    def field(level: int) -> list[str]:
+        d = stages[level]
+        return ["field", "--points", f"{d}/points.parquet", "--removed", f"{d}/removed.parquet", "--grid", canonical_json(s.grid),
+                "--pair", "shift", "--field-out", f"{d}/field.parquet", "--stats-out", f"{d}/stats.json"]  # fmt: skip
+
+    return [scans, [register], [mitigate(0)], [field(0), mitigate(1)], [field(1)]]
+
+
+def start_job(argv: list[str], cwd: Path, worker: str, log: Path) -> subprocess.Popen:
+    """``lidarfield job ARGV`` as a workflow rule runs it: output and errors into its log."""
+    env = {**os.environ, **SNAKEMAKE_ENV, "LIDARFIELD_WORKER": worker}
+    with open(log, "w") as f:
+        return subprocess.Popen([sys.executable, "-m", "lidarfield", "job", *argv], cwd=cwd, env=env, stdout=f, stderr=subprocess.STDOUT)
+
+
+def run_waves(waves, cwd: Path, worker: str) -> None:
+    for i, wave in enumerate(waves):
+        jobs = [start_job(argv, cwd, worker, cwd / f"job-{i}-{j}.log") for j, argv in enumerate(wave)]
+        for j, job in enumerate(jobs):
+            assert job.wait(timeout=120) == 0, (cwd / f"job-{i}-{j}.log").read_text()
+
+
+def rounded(value):
+    """JSON-like ``value`` with floats to 12 significant digits: Open3D's registration
+    statistics vary in their last digits from run to run, with or without the worker."""
+    if isinstance(value, float):
+        return f"{value:.12g}"  # NaN compares equal as text
+    if isinstance(value, dict):
+        return {k: rounded(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [rounded(v) for v in value]
+    return value
+
+
+class Frame:
+    """A table that equals another with the same columns and values, NaN where it has NaN."""
+
+    def __init__(self, frame):
+        self.frame = frame
+
+    def __eq__(self, other):
+        return self.frame.equals(other.frame)
+
+    def __repr__(self):
+        return repr(self.frame)
+
+
+def content(path: Path):
+    if path.suffix == ".parquet":
+        table = pq.read_table(path)
+        meta = {k.decode(): json.loads(v) if k == b"lidarfield" else v for k, v in (table.schema.metadata or {}).items()}
+        return Frame(table.to_pandas()), rounded(meta)
+    return path.read_bytes()
+
+
+def outputs(folder: Path) -> dict[str, object]:
+    """Every file a job wrote under ``folder`` (logs and inputs aside), by relative path."""
+    files = sorted(p for p in folder.rglob("*") if p.is_file() and p.suffix not in (".log", ".py"))
+    return {str(p.relative_to(folder)): content(p) for p in files}
+
+
+def wait_for(predicate, timeout: float = 60.0) -> None:
+    deadline = time.monotonic() + timeout
+    while not predicate():
+        assert time.monotonic() < deadline, "timed out"
+        time.sleep(0.05)
+
+
+def alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    # A zombie (killed, not yet reaped by the worker) counts as gone.
+    return Path(f"/proc/{pid}/stat").read_text().split()[2] != "Z" if Path(f"/proc/{pid}").exists() else True
+
+
+@pytest.fixture
+def worker(tmp_path):
+    """A worker serving on a socket in ``tmp_path``, with this test as its parent."""
+    path = str(tmp_path / "w.sock")
+    log = open(tmp_path / "worker.log", "w")
+    command = [sys.executable, "-m", "lidarfield.worker", path, "--parent-pid", str(os.getpid())]
+    proc = subprocess.Popen(command, stdout=log, stderr=subprocess.STDOUT, env={**os.environ, **SNAKEMAKE_ENV})
+    wait_for(lambda: os.path.exists(path), timeout=30)
+    yield proc, path
+    proc.terminate()
+    proc.wait(timeout=30)
+    log.close()
+    assert not os.path.exists(path), "the worker leaves no socket behind"
+
+
+def test_killed_job_leaves_other_jobs_and_the_worker_sound(tmp_path, worker):
+    proc, sock = worker
+    plain, forked = tmp_path / "plain", tmp_path / "forked"
+    for folder in (plain, forked):
+        folder.mkdir()
+        (folder / "sleeper.py").write_text(SLEEPER)
+    waves = pair_jobs({"field_of_view": {}}, forked)
+    run_waves(waves, plain, "off")
+
+    run_waves(waves[:3], forked, sock)
+    sleeper_stage = pair_jobs({"plugin": {"file": "sleeper.py", "params": {"pid_file": "sleeper.pid"}}}, forked)[3][1]
+    sleeper = start_job(sleeper_stage, forked, sock, forked / "sleeper.log")
+    wait_for(lambda: (forked / "sleeper.pid").exists() and (forked / "sleeper.pid").read_text())
+    child = int((forked / "sleeper.pid").read_text())
+    assert child not in (sleeper.pid, proc.pid), "the job runs in a child forked from the worker"
+    others = [start_job(argv, forked, sock, forked / f"other-{j}.log") for j, argv in enumerate(waves[3])]
+    os.kill(child, signal.SIGKILL)
+
+    assert sleeper.wait(timeout=60) == -signal.SIGKILL, "the client dies of its job's signal"
+    for j, job in enumerate(others):
+        assert job.wait(timeout=120) == 0, (forked / f"other-{j}.log").read_text()
+    run_waves(waves[4:], forked, sock)  # the worker still serves after the kill
+    assert proc.poll() is None
+
+    sleeper_dir = forked / sleeper_stage[sleeper_stage.index("--stage") + 1]
+    assert not sleeper_dir.exists() or not any(p.suffix == ".parquet" for p in sleeper_dir.iterdir())
+    (forked / "sleeper.pid").unlink()
+    # Byte for byte what the same jobs write as plain processes, logs aside.
+    assert outputs(forked) == outputs(plain)
+    assert len(outputs(plain)) == 11  # 2 scans, registered pair, 2 stages x 4 files
+    # The job's log is written as by a plain process (clock times aside).
+    logs = [re.sub(r"\d\d:\d\d:\d\d", "T", log.read_text()) for log in (plain / "job-3-1.log", forked / "other-1.log")]
+    assert logs[0] == logs[1] and "removed" in logs[0]
+
+
+def test_a_failing_job_reports_the_same_exit_code_and_message_on_both_paths(tmp_path, worker):
+    _, sock = worker
+    argv = ["field", "--points", "missing.parquet", "--removed", "missing.parquet", "--grid", json.dumps(GRID),
+            "--pair", "p", "--field-out", "f.parquet", "--stats-out", "s.json"]  # fmt: skip
+    logs = {}
+    for mode in ("off", sock):
+        log = tmp_path / f"{'plain' if mode == 'off' else 'forked'}.log"
+        assert start_job(argv, tmp_path, mode, log).wait(timeout=60) == 2
+        logs[mode] = log.read_text()
+    assert logs["off"] == logs[sock]
+    assert logs[sock].startswith("lidarfield job: error: ") and "missing.parquet" in logs[sock]
+    assert start_job(["field", "--no-such-flag"], tmp_path, sock, tmp_path / "usage.log").wait(timeout=60) == 2
+    assert "usage:" in (tmp_path / "usage.log").read_text()
+    assert not (tmp_path / "f.parquet").exists()
+
+
+def test_a_killed_client_takes_its_job_with_it(tmp_path, worker):
+    _, sock = worker
+    (tmp_path / "sleeper.py").write_text(SLEEPER)
+    waves = pair_jobs({"plugin": {"file": "sleeper.py", "params": {"pid_file": "sleeper.pid"}}}, tmp_path)
+    run_waves(waves[:3], tmp_path, sock)
+    client = start_job(waves[3][1], tmp_path, sock, tmp_path / "sleeper.log")
+    wait_for(lambda: (tmp_path / "sleeper.pid").exists() and (tmp_path / "sleeper.pid").read_text())
+    child = int((tmp_path / "sleeper.pid").read_text())
+    client.kill()
+    client.wait()
+    wait_for(lambda: not alive(child), timeout=10)
+
+
+def test_without_a_reachable_worker_the_job_runs_in_process(tmp_path):
+    stale = tmp_path / "stale.sock"
+    listener = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+    listener.bind(str(stale))
+    listener.close()  # the socket file stays, nobody listens: as after a killed worker
+    for worker in (str(stale), str(tmp_path / "absent.sock")):
+        log = tmp_path / "plotly.log"
+        assert start_job(["plotly-js", "--out", "plotly.min.js"], tmp_path, worker, log).wait(timeout=60) == 0, log.read_text()
+        assert (tmp_path / "plotly.min.js").stat().st_size > 1_000_000
+        (tmp_path / "plotly.min.js").unlink()
+
+
+def test_the_client_imports_none_of_the_numeric_libraries(tmp_path, worker):
+    _, sock = worker
+    code = (
+        "import sys; from lidarfield.cli import main; status = main(['job', 'plotly-js', '--out', 'p.js']); "
+        "print(status, [m for m in ('numpy', 'pyarrow', 'pandas', 'matplotlib', 'open3d', 'yaml', 'argparse') if m in sys.modules])"
+    )
+    proc = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, env={**os.environ, "LIDARFIELD_WORKER": sock},
+                          capture_output=True, text=True, timeout=60)  # fmt: skip
+    assert proc.stdout.strip() == "0 []", proc.stderr
+    assert (tmp_path / "p.js").stat().st_size > 1_000_000
+
+
+def test_the_worker_stops_when_its_workflow_is_gone(tmp_path):
+    path = tmp_path / "w.sock"
+    # A parent that starts the worker and exits at once, as a killed Snakemake would.
+    starter = (
+        "import os, subprocess, sys; "
+        f"p = subprocess.Popen([sys.executable, '-m', 'lidarfield.worker', {str(path)!r}, '--parent-pid', str(os.getpid())]); "
+        "print(p.pid)"
+    )
+    pid = int(subprocess.run([sys.executable, "-c", starter], capture_output=True, text=True, check=True).stdout)
+    wait_for(lambda: not alive(pid), timeout=60)
+    assert not path.exists()

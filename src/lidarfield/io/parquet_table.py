@@ -16,7 +16,7 @@ METADATA_KEY = b"lidarfield"
 
 
 def write_table(path: str | Path, columns: dict[str, np.ndarray], meta: dict | None = None) -> None:
-    table = pa.table({name: np.asarray(col) for name, col in columns.items()})
+    table = pa.Table.from_arrays([arrow_array(col) for col in columns.values()], names=list(columns))
     if meta is not None:
         table = table.replace_schema_metadata({METADATA_KEY: json.dumps(meta, default=_json_default)})
     with atomic_path(path) as tmp:
@@ -29,7 +29,10 @@ def read_table(path: str | Path, required: tuple[str, ...] = ()) -> tuple[dict[s
     if not path.is_file():
         raise InputError("file not found", path)
     try:
-        table = pq.read_table(path)
+        # ParquetFile, not pq.read_table: that one loads pyarrow.dataset, which imports pandas
+        # (half a second of every job's start).
+        with pq.ParquetFile(path) as file:
+            table = file.read()
     except (pa.ArrowException, OSError) as e:
         raise InputError(f"not a readable Parquet file ({e})", path) from None
     missing = [c for c in required if c not in table.column_names]
@@ -37,8 +40,44 @@ def read_table(path: str | Path, required: tuple[str, ...] = ()) -> tuple[dict[s
         raise InputError(f"missing column(s) {missing}; has {table.column_names}", path)
     raw = (table.schema.metadata or {}).get(METADATA_KEY)
     meta = json.loads(raw) if raw else {}
-    columns = {name: table.column(name).to_numpy(zero_copy_only=False) for name in table.column_names}
+    columns = {name: numpy_array(table.column(name)) for name in table.column_names}
     return columns, meta
+
+
+# pyarrow's own conversions (pa.array, to_numpy) import pandas to look at their input: half a
+# second of every job's start. Numeric, boolean and string columns without nulls, all of
+# lidarfield's, go through their buffers instead: the same values and dtypes as pyarrow's.
+
+
+def arrow_array(values) -> pa.Array:
+    values = np.asarray(values)
+    if values.ndim == 1 and values.dtype.kind in "UO" and all(isinstance(v, str) for v in values.tolist()):
+        encoded = [v.encode() for v in values.tolist()]
+        offsets = np.zeros(len(encoded) + 1, np.int64)
+        np.cumsum([len(b) for b in encoded], out=offsets[1:])
+        return pa.Array.from_buffers(pa.large_string(), len(encoded), [None, pa.py_buffer(offsets), pa.py_buffer(b"".join(encoded))]).cast(pa.string())
+    if values.ndim != 1 or values.dtype.kind not in "biuf":
+        return pa.array(values)
+    values = np.ascontiguousarray(values)
+    if values.dtype.kind == "b":
+        bits = np.packbits(values, bitorder="little")
+        return pa.Array.from_buffers(pa.bool_(), len(values), [None, pa.py_buffer(bits)])
+    return pa.Array.from_buffers(pa.from_numpy_dtype(values.dtype), len(values), [None, pa.py_buffer(values)])
+
+
+def numpy_array(column: pa.ChunkedArray) -> np.ndarray:
+    array = column.chunk(0) if column.num_chunks == 1 else column.combine_chunks()
+    kind = array.type
+    if array.null_count == 0 and (pa.types.is_string(kind) or pa.types.is_large_string(kind)):
+        return np.array(array.to_pylist(), dtype=object)
+    if array.null_count or not (pa.types.is_integer(kind) or pa.types.is_floating(kind) or pa.types.is_boolean(kind)):
+        return column.to_numpy(zero_copy_only=False)
+    data, n, offset = array.buffers()[1], len(array), array.offset
+    if pa.types.is_boolean(kind):
+        bits = np.frombuffer(data, np.uint8) if n else np.empty(0, np.uint8)
+        return np.unpackbits(bits, count=offset + n, bitorder="little")[offset:].astype(bool)
+    dtype = np.dtype(kind.to_pandas_dtype())
+    return np.frombuffer(data, dtype, count=n, offset=offset * dtype.itemsize) if n else np.empty(0, dtype)
 
 
 def _json_default(obj):

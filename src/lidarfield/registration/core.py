@@ -10,7 +10,6 @@ from ..errors import RegistrationError
 from ..pair import RegisteredPair
 from ..poses import apply_pose, pose_error, read_pose, relative_pose
 from ..scan import Scan
-from . import matching
 from .settings import MATCHING_METHODS, RegistrationSettings, parse_settings
 
 # Fewer points than this after downsampling cannot constrain six degrees of freedom robustly.
@@ -28,6 +27,8 @@ def register_pair(
     matching that fails or fits poorly is not an exception: ``converged`` is False and
     ``warning`` says why. Relative file names in ``settings`` are taken from ``base_dir``.
     """
+    from . import matching  # Open3D: imported by the jobs that register, not by config checks
+
     s = parse_settings(settings, base_dir)
     reference = _reference(scan1, scan2)
     p = s.params
@@ -84,6 +85,8 @@ def _fixed_transform(s: RegistrationSettings, scan1: Scan, scan2: Scan, referenc
 
 
 def _scan_match(s: RegistrationSettings, scan1, scan2, source, target, reference):
+    from . import matching
+
     p = s.params
     guess = _require_reference(reference, scan1, scan2, "guess 'truth'") if isinstance(s.guess, str) else s.guess
     for k, cloud in ((1, target), (2, source)):

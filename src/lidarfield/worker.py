@@ -196,10 +196,10 @@ class Worker:
 
 def run_job(argv: list[str]) -> int:
     """``lidarfield ARGV`` in this process, with the exit status ``python -m lidarfield`` gives."""
-    from .cli import run
+    from .cli import run_in_process
 
     try:
-        return run(argv) or 0
+        return run_in_process(argv) or 0
     except SystemExit as e:
         if e.code is None or isinstance(e.code, int):
             return e.code or 0

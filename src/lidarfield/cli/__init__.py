@@ -40,10 +40,10 @@ def main(argv: list[str] | None = None) -> int:
         status = run_on_worker(argv)
         if status is not None:
             return status
-    return run(argv)
+    return run_in_process(argv)
 
 
-def run(argv: list[str]) -> int:
+def run_in_process(argv: list[str]) -> int:
     """``lidarfield ARGV`` in this process."""
     import logging
 

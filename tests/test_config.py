@@ -61,6 +61,10 @@ def test_a_simulated_drive_expands_along_its_arc():
         ({"pairs": {}, "report": {"max_mb": 0}}, r"config key report\.max_mb: 0 is less than or equal to the minimum of 0"),
         ({"pairs": {}, "report": {"max_mb": "x"}}, r"config key report\.max_mb: 'x' is not of type 'number'"),
         ({"pairs": {}, "report": {"max_kb": 5}}, r"config key report: Additional properties are not allowed \('max_kb' was unexpected\)"),
+        (
+            {"pairs": {"logs": {"simulate": {"scene": "paper-intersection", "sensor": "vlp16", "pose1": [0] * 6, "pose2": [0] * 6}}}},
+            r"pair name\(s\) \['logs'\] are folders of the results folder",
+        ),
     ],
 )
 def test_bad_configs_say_what_is_wrong(config, message):

@@ -26,6 +26,8 @@ from .poses import pose_from_xyzrpy
 from .stages import stage_ids
 
 SCHEMA_PATH = Path(__file__).parent / "schemas" / "config.schema.yaml"
+# The results folder's own subfolders, beside one folder per pair: no pair may take their names.
+RESULTS_FOLDERS = ("scans", "logs", "benchmarks", "assets", "study")
 
 
 @dataclass(frozen=True)
@@ -175,6 +177,9 @@ def validate_config(
                 pairs[pair.name] = pair
     except LidarfieldError as e:
         raise type(e)(str(e) if e.path else f"{source}: {e}") from None
+    taken = sorted(set(pairs) & set(RESULTS_FOLDERS))
+    if taken:
+        raise ConfigError(f"pair name(s) {taken} are folders of the results folder; rename the pair(s)", source)
     if require_pairs and not pairs:
         raise ConfigError("the study has no pairs: add entries under 'pairs' or 'sequences'", source)
     scans = {}

@@ -19,13 +19,16 @@ from timing import machine  # bench/timing.py
 PLOT_RULES = ("plot_stage", "plot_pair", "plotly_js")
 
 
-def job_seconds(results: Path) -> dict[str, list[float]]:
-    """``{rule: [wall seconds of each job]}`` from the benchmark files under ``results``."""
+def job_seconds(results: Path, since: float = 0.0) -> dict[str, list[float]]:
+    """``{rule: [wall seconds of each job]}`` from the benchmark files under ``results``
+    (only those written after ``since``, in seconds since the epoch, when given)."""
     root = results / "benchmarks"
     if not root.is_dir():
         sys.exit(f"{root}: no benchmark files; run the study first (snakemake --cores 2)")
     by_rule: dict[str, list[float]] = defaultdict(list)
     for tsv in sorted(root.rglob("*.tsv")):
+        if tsv.stat().st_mtime < since:
+            continue
         rule = tsv.relative_to(root).parts[0].removesuffix(".tsv")
         with tsv.open() as f:
             rows = list(csv.DictReader(f, delimiter="\t"))

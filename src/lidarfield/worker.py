@@ -42,11 +42,12 @@ PRELOAD = (
     "lidarfield.jobs",
     "lidarfield.pipeline",
     "lidarfield.plots",
-    "lidarfield.registration",
+    "lidarfield.registration.matching",  # Open3D
     "lidarfield.simulate",
     "lidarfield.scene",
     "lidarfield.stack",
     "lidarfield.report",
+    "lidarfield.suggest",
     "pandas",  # the summary job's
 )
 # Numeric libraries start as many threads as these say; jobs run with threads: 1.

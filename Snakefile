@@ -10,6 +10,7 @@ include: "workflow/rules/mitigate.smk"
 include: "workflow/rules/field.smk"
 include: "workflow/rules/suggest.smk"
 include: "workflow/rules/plot.smk"
+include: "workflow/rules/study.smk"
 include: "workflow/rules/report.smk"
 
 
@@ -17,3 +18,4 @@ rule all:
     default_target: True
     input:
         f"{RESULTS}/report.html",
+        expand(f"{RESULTS}/{{pair}}/report.html", pair=PAIRS),

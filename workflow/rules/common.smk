@@ -161,7 +161,9 @@ def pair_page_stage_figures(wildcards):
 
 
 def stage_figures_flag(wildcards):
-    return "--stage-figures" if page_has_stage_figures(wildcards) else "--no-stage-figures"
+    return (
+        "--stage-figures" if page_has_stage_figures(wildcards) else "--no-stage-figures"
+    )
 
 
 def on_demand_page(wildcards):

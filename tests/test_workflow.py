@@ -145,7 +145,7 @@ def test_full_run_writes_the_study_level_and_a_page_per_pair(study_dir):
         assert f'href="{pair}/report.html"' in overview
         page = (results / pair / "report.html").read_text()
         assert "field_3d.html" not in page or "interactive 3-D view" in page
-        assert page.count("field from above") == 3 and 'class="missing"' not in page
+        assert page.count("field from above</figcaption>") == 3 and 'class="missing"' not in page
 
 
 def test_unchanged_config_plans_nothing(study_dir):

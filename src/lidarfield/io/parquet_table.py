@@ -31,11 +31,12 @@ def read_table(path: str | Path, required: tuple[str, ...] = (), columns: tuple[
         raise InputError("file not found", path)
     required = tuple(required) + tuple(c for c in columns or () if c not in required)
     try:
-        names = pq.read_schema(path).names
-        missing = [c for c in required if c not in names]
-        if missing:
-            raise InputError(f"missing column(s) {missing}; has {names}", path)
-        table = pq.read_table(path, columns=list(columns) if columns is not None else None)
+        with pq.ParquetFile(path) as file:  # one open for the schema and the columns
+            names = file.schema_arrow.names
+            missing = [c for c in required if c not in names]
+            if missing:
+                raise InputError(f"missing column(s) {missing}; has {names}", path)
+            table = file.read(columns=list(columns) if columns is not None else None)
     except (pa.ArrowException, OSError) as e:
         raise InputError(f"not a readable Parquet file ({e})", path) from None
     raw = (table.schema.metadata or {}).get(METADATA_KEY)

@@ -160,9 +160,9 @@ def write_field_study(results_dir: str | Path, n_pairs: int, levels: int = 3, n:
             stage_id = f"{level:02d}-{hypothesis}-{k:04x}{level:04x}"
             stage_dir = results_dir / name / "stages" / stage_id
             xyz1, xyz2 = _ring_clouds(rng, n, (k % 5 + 1) / 10 / 2**level)
-            field = discrepancy_field(xyz1, xyz2, SETTINGS)
-            write_field(stage_dir / "field.parquet", field, field_meta(SETTINGS, summary_json_safe(field_statistics(field)), stage=stage_id))
             pair = RegisteredPair(xyz1, xyz2, np.eye(4), registration={"method": "truth", "fitness": 1.0, "converged": True})
+            field, statistics = analyse_field(pair, SETTINGS)
+            write_field(stage_dir / "field.parquet", field, field_meta(SETTINGS, summary_json_safe(statistics), stage=stage_id))
             row = stats_row(name, stage_id, level, hypothesis, pair, (level * 10, level * 12), field)
             write_text(stage_dir / "stats.json", json.dumps(row))
             rows.append(row)

@@ -20,6 +20,8 @@ from lidarfield.plots.study import _polar_cells, plot_study
 from lidarfield.plots.synthetic import write_field_study
 from lidarfield.study import group_medians, read_study_tables, write_study_tables, write_study_voxels
 
+from layout import assert_fixed_layout
+
 
 @pytest.fixture(scope="module")
 def study(tmp_path_factory):
@@ -125,11 +127,19 @@ def test_polar_cells_put_each_voxel_at_its_azimuth_and_elevation(study):
         np.testing.assert_equal(cells[r.el_bin, r.az_bin], expected)
 
 
-def test_study_figures_are_written_one_per_stage_level_plus_three(study, tmp_path):
+def test_study_figures_are_written_one_per_stage_level_plus_three_and_keep_their_layout(study, tmp_path, monkeypatch):
+    import matplotlib.pyplot as plt
+
     root, _ = study
     t = read_study_tables(root / "summary.parquet", root / "study")
+    figures = []
+    monkeypatch.setattr(plt, "close", figures.append)  # keep each figure open after saving
     written = plot_study(t.summary, t.voxels, t.hypotheses, t.pairs, t.grid, tmp_path / "figures")
     assert sorted(p.name for p in written) == ["all_pairs.png", "heatmap.png", "hypotheses.png", "voxels_00.png", "voxels_01.png", "voxels_02.png"]
+    for fig in figures:
+        assert_fixed_layout(fig)
+    monkeypatch.undo()
+    plt.close("all")
 
 
 def test_plots_pairs_chooses_the_pairs_that_get_stage_figures():

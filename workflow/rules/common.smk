@@ -144,6 +144,11 @@ def last_stage_suggestions(wildcards):
     ]
 
 
+def study_dir(wildcards, input):
+    """The study level's folder, from its voxels table among the inputs."""
+    return str(Path(input.voxels).parent)
+
+
 def pair_stage_dirs(wildcards):
     return [stage_dir(wildcards.pair, stage) for stage in STAGES[wildcards.pair]]
 

@@ -80,7 +80,7 @@ rule report:
     params:
         config=canonical_json(config),
         plotted=canonical_json(PLOT_PAIRS),
-        study_dir=f"{RESULTS}/study",
+        study_dir=study_dir,
     shell:
         "lidarfield job report --config {params.config:q} --summary {input.summary:q}"
         " --study-dir {params.study_dir:q} --figures {input.figures:q}"

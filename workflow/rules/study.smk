@@ -63,7 +63,7 @@ rule study_figures:
     resources:
         mem_mb=2000,
     params:
-        study_dir=f"{RESULTS}/study",
+        study_dir=study_dir,
     shell:
         "lidarfield job study-figures --summary {input.summary:q} --study-dir {params.study_dir:q}"
         " --out {output:q} > {log:q} 2>&1"

@@ -11,6 +11,7 @@ include: "workflow/rules/mitigate.smk"
 include: "workflow/rules/field.smk"
 include: "workflow/rules/suggest.smk"
 include: "workflow/rules/plot.smk"
+include: "workflow/rules/study.smk"
 include: "workflow/rules/report.smk"
 
 
@@ -18,3 +19,4 @@ rule all:
     default_target: True
     input:
         f"{RESULTS}/report.html",
+        expand(f"{RESULTS}/{{pair}}/report.html", pair=PAIRS),

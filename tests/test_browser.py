@@ -1,4 +1,4 @@
-"""Headless Chromium opens the report and a 3-D view from file://: not blank, no console errors."""
+"""Headless Chromium opens the study overview, a pair page and a 3-D view from file://: not blank, no console errors."""
 
 from __future__ import annotations
 
@@ -61,10 +61,11 @@ def study(tmp_path_factory):
     return root, report, dirs
 
 
-def test_report_renders(study, tmp_path):
-    _, report, _ = study
+@pytest.mark.parametrize("page", ["report.html", "pair-00/report.html"], ids=["overview", "pair-page"])
+def test_report_renders(study, tmp_path, page):
+    root, _, _ = study
     shot = tmp_path / "report.png"
-    log = chromium(report.as_uri(), shot, tmp_path / "profile")
+    log = chromium((root / page).as_uri(), shot, tmp_path / "profile")
     assert not_blank(shot) > 10.0
     assert console_errors(log) == []
 

@@ -13,8 +13,8 @@ from lidarfield.cli import main
 from lidarfield.errors import InputError
 from lidarfield.plots import plot_pair, plot_stage
 from lidarfield.plots.synthetic import write_summary, write_synthetic_study
-from lidarfield.report import compare_studies, discover, write_report
-from lidarfield.report.html import STAGE_FIGURES
+from lidarfield.report import compare_studies, discover, write_pair_page, write_report
+from lidarfield.report.pair_page import STAGE_FIGURES
 
 FAST = {"background_points": 2000, "dpi": 50}
 
@@ -57,7 +57,8 @@ def embedded_elements(html: str, caption_end: str) -> list[str]:
     return re.findall(rf'<figure[^>]*><img [^>]*alt="[^"]*{re.escape(caption_end)}"[^>]*>.*?</figure>', html)
 
 
-N_PAIR_FIGURES = 2 * 3  # two pairs, three pair figures each
+N_PAIR_FIGURES = 3  # a pair page's stage-by-stage figures
+N_STUDY_FIGURES = 3 + 2  # heat map, hypotheses, all pairs; a polar map per stage level
 
 
 def stage_figure_files(pairs) -> set:
@@ -66,25 +67,31 @@ def stage_figure_files(pairs) -> set:
     return {f for f in files if f.is_file()}
 
 
-def test_report_names_every_pair_and_stage_and_embeds_the_figures(study, tmp_path):
+def pair_page(root, name: str) -> str:
+    return (root / name / "report.html").read_text()
+
+
+def test_report_writes_an_overview_and_a_page_per_pair(study, tmp_path):
     root, pairs = study
     found, rows = discover(root)
     assert {k: [d.name for d in v] for k, v in found.items()} == {k: [d.name for d in v] for k, v in pairs.items()}
     out = write_report({"grid": {"kind": "spherical"}, "note": "<script>alert(1)</script>"}, found, rows, tmp_path / "report.html")
     html = out.read_text()
-    for name, dirs in pairs.items():
-        assert f"pair {name}" in html
-        for d in dirs:
-            assert d.name in html
-    # the all-pairs plot, 2 pair figures per pair and every stage figure drawn
-    assert image_count(html) == 1 + N_PAIR_FIGURES + len(stage_figure_files(pairs))
-    # stage 0 has no removed_* nor before_after, stage 1 has all six: none is reported missing
-    assert len(stage_figure_files(pairs)) == 2 * (3 + 6) and 'class="missing"' not in html
+    assert image_count(html) == N_STUDY_FIGURES  # the study level only: each pair's figures are on its page
+    assert html.index("The study level") < html.index("Pairs ranked") < html.index("<details><summary>the config")
     assert "<script>alert(1)</script>" not in html and "&lt;script&gt;alert(1)&lt;/script&gt;" in html
     assert "<script" not in html  # one static page: no script at all
-    link = re.findall(r'href="([^"#]+field_3d\.html)"', html)
-    assert len(link) == 1 and (out.parent / link[0]).is_file()
-    assert 'class="flag"' not in html
+    for name, dirs in pairs.items():
+        assert f'<a href="{name}/report.html">{name}</a>' in html
+        page = pair_page(tmp_path, name)
+        assert f"<h1>pair {name}</h1>" in page and '<a href="../report.html">' in page
+        for d in dirs:
+            assert d.name in page
+        # 2 pair figures and every stage figure drawn: stage 0 has 3, stage 1 all six
+        assert image_count(page) == N_PAIR_FIGURES + 3 + 6 and 'class="missing"' not in page
+        assert "<script" not in page and 'class="flag"' not in page
+    link = re.findall(r'href="([^"#]+field_3d\.html)"', pair_page(tmp_path, "pair-00"))
+    assert len(link) == 1 and (tmp_path / "pair-00" / link[0]).is_file()
 
 
 def test_report_shows_what_to_try_next_per_stage_and_for_the_study(study, tmp_path):
@@ -96,44 +103,60 @@ def test_report_shows_what_to_try_next_per_stage_and_for_the_study(study, tmp_pa
     assert study_part.count("<tr>") == 1 + 2 * 2
     for name, dirs in pairs.items():
         assert f'<td class="text">{name}</td><td class="text">{dirs[-1].name}</td><td class="text">1</td>' in study_part
-    # Every stage has its own table, ranks 1 and 2 with the measured energy reduction.
-    assert html.count("<b>What to try next.</b>") == sum(len(d) for d in pairs.values())
+    # Every stage has its own table on its pair's page, ranks 1 and 2 with the measured energy reduction.
+    for name, dirs in pairs.items():
+        assert pair_page(tmp_path, name).count("<b>What to try next.</b>") == len(dirs)
     table = pd.read_parquet(pairs["pair-00"][0] / "suggestions.parquet")
     assert list(table["rank"]) == [1, 2]
-    assert f"{100 * table['energy_reduction'][0]:.1f}%" in html
+    assert f"{100 * table['energy_reduction'][0]:.1f}%" in pair_page(tmp_path, "pair-00")
 
 
-def test_report_shows_only_the_figures_the_config_draws_and_flags_a_lost_one(study, tmp_path):
+def test_pair_page_shows_only_the_figures_the_config_draws_and_flags_a_lost_one(study, tmp_path):
     root, pairs = study
     found, rows = discover(root)
-    html = write_report({"plots": {"figures": ["field_top", "before_after"]}}, found, rows, tmp_path / "r.html").read_text()
-    assert image_count(html) == 1 + N_PAIR_FIGURES + 2 * (1 + 2)  # stage 0: field_top; stage 1: both
-    assert 'class="missing"' not in html
+    write_report({"plots": {"figures": ["field_top", "before_after"]}}, found, rows, tmp_path / "r.html")
+    assert image_count(pair_page(tmp_path, "pair-01")) == N_PAIR_FIGURES + 1 + 2  # stage 0: field_top; stage 1: both
+    assert 'class="missing"' not in pair_page(tmp_path, "pair-01")
     lost = tmp_path / "lost"
     shutil.copytree(root, lost)
     (lost / "pair-01" / "stages" / pairs["pair-01"][1].name / "figures" / "field_top.png").unlink()
     found, rows = discover(lost)
-    html = write_report({}, found, rows, tmp_path / "lost.html").read_text()
-    assert len(re.findall('class="missing"', html)) == 1 and "field_top.png missing" in html
+    write_report({}, found, rows, lost / "report.html")
+    page = pair_page(lost, "pair-01")
+    assert len(re.findall('class="missing"', page)) == 1 and "field_top.png missing" in page
+    assert 'class="missing"' not in pair_page(lost, "pair-00")
+
+
+def test_a_pair_without_stage_figures_says_how_to_draw_them(study, tmp_path):
+    root, pairs = study
+    found, rows = discover(root)
+    rows = [r for r in rows if r["pair"] == "pair-01"]
+    out = write_pair_page("pair-01", found["pair-01"], rows, tmp_path / "pair-01" / "report.html",
+                          with_stage_figures=False, on_demand="results/pair-01/stages.html")
+    page = out.read_text()
+    assert image_count(page) == N_PAIR_FIGURES and 'class="missing"' not in page
+    assert "snakemake --cores 2 results/pair-01/stages.html" in page and "plots.pairs" in page
 
 
 def test_report_links_3d_views_relative_to_itself(study):
     root, _ = study
     found, rows = discover(root)
-    out = write_report({}, found, rows, root / "report.html")
-    (link,) = re.findall(r'href="([^"#]+field_3d\.html)"', out.read_text())
-    assert not link.startswith("/") and (root / link).is_file()
+    write_report({}, found, rows, root / "report.html")
+    (link,) = re.findall(r'href="([^"#]+field_3d\.html)"', pair_page(root, "pair-00"))
+    assert not link.startswith("/") and (root / "pair-00" / link).is_file()
 
 
 def test_report_flags_a_registration_that_did_not_converge(study, tmp_path):
     root, _ = study
     found, rows = discover(root)
     rows = [dict(r) for r in rows]
-    rows[1]["registration_converged"] = False
-    rows[2]["registration_warning"] = "fitness below 0.3"
+    last = [i for i, r in enumerate(rows) if r["pair"] == "pair-01"][-1]
+    rows[last]["registration_converged"] = False
+    rows[0]["registration_warning"] = "fitness below 0.3"
     html = write_report({}, found, rows, tmp_path / "r.html").read_text()
-    assert html.count('<tr class="flag">') == 2
-    assert "registration did not converge" in html and "fitness below 0.3" in html
+    assert html.count('<tr class="flag">') == 1 and "registration did not converge" in html  # the ranking: last stages
+    assert pair_page(tmp_path, "pair-01").count('<tr class="flag">') == 1
+    assert pair_page(tmp_path, "pair-00").count('<tr class="flag">') == 1 and "fitness below 0.3" in pair_page(tmp_path, "pair-00")
 
 
 def test_discover_takes_the_stages_of_the_summary_only(study, tmp_path):
@@ -191,35 +214,42 @@ def test_cli_report_compare_and_plot(study, tmp_path, capsys):
     assert "field.parquet: file not found" in err and len(err.strip().splitlines()) == 1
 
 
+def write_page(found, rows, out, max_mb):
+    """pair-00's page within ``max_mb``."""
+    return write_pair_page("pair-00", found["pair-00"], [r for r in rows if r["pair"] == "pair-00"], out, max_mb=max_mb)
+
+
 def test_a_large_budget_embeds_every_figure(study, tmp_path):
     root, pairs = study
     found, rows = discover(root)
-    html = write_report({}, found, rows, tmp_path / "r.html", max_mb=100).read_text()
-    assert image_count(html) == 1 + N_PAIR_FIGURES + len(stage_figure_files(pairs))
+    html = write_page(found, rows, tmp_path / "r.html", max_mb=100).read_text()
+    stage_files = stage_figure_files({"pair-00": pairs["pair-00"]})
+    assert image_count(html) == N_PAIR_FIGURES + len(stage_files)
     # stage 0 has no removed_* nor before_after, stage 1 has all six: none is reported missing
-    assert len(stage_figure_files(pairs)) == 2 * (3 + 6) and 'class="missing"' not in html
+    assert len(stage_files) == 3 + 6 and 'class="missing"' not in html
     assert figure_links(html) == [] and budget_counts(html) is None
 
 
 def test_a_small_budget_embeds_the_pair_figures_and_links_the_stage_figures(study, caplog):
     root, pairs = study
-    stage_files = stage_figure_files(pairs)
+    stage_files = stage_figure_files({"pair-00": pairs["pair-00"]})
     found, rows = discover(root)
-    full = write_report({}, found, rows, root / "full.html", max_mb=100)
-    bare = write_report({}, found, rows, root / "bare.html", max_mb=1e-6)
+    out_dir = root / "pair-00"
+    full = write_page(found, rows, out_dir / "full.html", max_mb=100)
+    bare = write_page(found, rows, out_dir / "bare.html", max_mb=1e-6)
     # Just above the page with only the pair figures: the bare page plus their embedded elements.
     pair_figures = embedded_elements(full.read_text(), "stage by stage")
     assert len(pair_figures) == N_PAIR_FIGURES
     budget = report_bytes(bare) + sum(len(f.encode()) for f in pair_figures)
     assert budget < report_bytes(full)
-    with caplog.at_level("INFO", logger="lidarfield.report.html"):
-        out = write_report({}, found, rows, root / "report.html", max_mb=budget / 1e6)
+    with caplog.at_level("INFO", logger="lidarfield.report.budget"):
+        out = write_page(found, rows, out_dir / "report.html", max_mb=budget / 1e6)
     html = out.read_text()
     assert report_bytes(out) <= budget
-    assert image_count(html) == 1 + N_PAIR_FIGURES  # the all-pairs figure is always embedded
+    assert image_count(html) == N_PAIR_FIGURES
     links = figure_links(html)
     assert not any(link.startswith("/") for link in links)
-    assert len(links) == len(stage_files) and {(root / link).resolve() for link in links} == {f.resolve() for f in stage_files}
+    assert len(links) == len(stage_files) and {(out_dir / link).resolve() for link in links} == {f.resolve() for f in stage_files}
     assert budget_counts(html) == (N_PAIR_FIGURES, N_PAIR_FIGURES + len(stage_files), len(stage_files))
     assert f"size budget of {budget / 1e6:g} MB" in html and "report.max_mb" in html and "inside its results folder" in html
     assert f"{report_bytes(out) / 1e6:.2f} MB" in caplog.text and f"{N_PAIR_FIGURES} figures embedded, {len(stage_files)} linked" in caplog.text
@@ -228,29 +258,32 @@ def test_a_small_budget_embeds_the_pair_figures_and_links_the_stage_figures(stud
 def test_the_next_tier_is_embedded_in_every_stage_when_it_fits_too(study):
     root, pairs = study
     found, rows = discover(root)
-    full = write_report({}, found, rows, root / "full.html", max_mb=100).read_text()
-    bare = write_report({}, found, rows, root / "bare.html", max_mb=1e-6)
+    out_dir = root / "pair-00"
+    full = write_page(found, rows, out_dir / "full.html", max_mb=100).read_text()
+    bare = write_page(found, rows, out_dir / "bare.html", max_mb=1e-6)
     field_top = embedded_elements(full, ": field from above")
-    assert len(field_top) == 4  # 2 pairs x 2 stages
+    assert len(field_top) == 2  # 2 stages
     budget = report_bytes(bare) + sum(len(f.encode()) for f in embedded_elements(full, "stage by stage") + field_top)
-    html = write_report({}, found, rows, root / "report.html", max_mb=budget / 1e6).read_text()
-    assert image_count(html) == 1 + N_PAIR_FIGURES + len(field_top)
+    html = write_page(found, rows, out_dir / "report.html", max_mb=budget / 1e6).read_text()
+    assert image_count(html) == N_PAIR_FIGURES + len(field_top)
     assert embedded_elements(html, ": field from above") == field_top
-    linked = {(root / link).resolve() for link in figure_links(html)}
-    assert linked == {f.resolve() for f in stage_figure_files(pairs) if f.name != "field_top.png"}
+    linked = {(out_dir / link).resolve() for link in figure_links(html)}
+    assert linked == {f.resolve() for f in stage_figure_files({"pair-00": pairs["pair-00"]}) if f.name != "field_top.png"}
 
 
 def test_a_budget_too_small_for_any_figure_still_writes_the_page_with_every_figure_linked(study, caplog):
     root, pairs = study
     found, rows = discover(root)
-    with caplog.at_level("WARNING", logger="lidarfield.report.html"):
-        out = write_report({"grid": {"kind": "spherical"}}, found, rows, root / "tiny.html", max_mb=0.001)
+    out_dir = root / "pair-00"
+    with caplog.at_level("WARNING", logger="lidarfield.report.budget"):
+        out = write_page(found, rows, out_dir / "tiny.html", max_mb=0.001)
     html = out.read_text()
     assert report_bytes(out) > 1000 and "over its 0.001 MB budget" in caplog.text
-    assert html.rstrip().endswith("</html>") and "<table>" in html and "kind: spherical" in html
-    assert image_count(html) == 1
+    assert html.rstrip().endswith("</html>") and "<table>" in html
+    assert image_count(html) == 0
     links = figure_links(html)
-    assert len(links) == N_PAIR_FIGURES + len(stage_figure_files(pairs)) and all((root / link).is_file() for link in links)
+    assert len(links) == N_PAIR_FIGURES + len(stage_figure_files({"pair-00": pairs["pair-00"]}))
+    assert all((out_dir / link).is_file() for link in links)
     assert budget_counts(html) == (0, len(links), len(links))
 
 
@@ -259,7 +292,7 @@ def test_a_pair_figure_without_a_file_says_it_is_left_out(study, tmp_path):
     found, rows = discover(root)
     bare_pair = tmp_path / "pair-00"
     shutil.copytree(root / "pair-00" / "stages", bare_pair / "stages")  # no pair figures on disk
-    html = write_report({}, {"pair-00": [bare_pair / "stages" / d.name for d in found["pair-00"]]}, [r for r in rows if r["pair"] == "pair-00"], tmp_path / "r.html", max_mb=0.001).read_text()
+    html = write_pair_page("pair-00", [bare_pair / "stages" / d.name for d in found["pair-00"]], [r for r in rows if r["pair"] == "pair-00"], tmp_path / "r.html", max_mb=0.001).read_text()
     assert html.count("not embedded (size budget) and not on disk to link") == 3  # the three pair figures
 
 
@@ -269,9 +302,9 @@ def test_cli_report_takes_its_budget_from_max_mb_or_else_the_config(study, tmp_p
     config.write_text("report: {max_mb: 0.001}\n")
     out = tmp_path / "r.html"
     assert main(["report", str(root), "--out", str(out), "--config", str(config)]) == 0
-    assert budget_counts(out.read_text())[0] == 0
+    assert budget_counts(pair_page(tmp_path, "pair-00"))[0] == 0
     assert main(["report", str(root), "--out", str(out), "--config", str(config), "--max-mb", "100"]) == 0
-    assert budget_counts(out.read_text()) is None
+    assert budget_counts(pair_page(tmp_path, "pair-00")) is None
     for bad in ("0", "-1", "x", "nan"):
         with pytest.raises(SystemExit):
             main(["report", str(root), "--out", str(out), "--max-mb", bad])

@@ -121,9 +121,8 @@ def test_full_run_writes_every_stage_and_the_report(study_dir):
     levels = summary.set_index(["pair", "level"])
     assert levels.loc[("shift", 2), "removed1"] > 0 and levels.loc[("shift", 2), "removed2"] > 0
     assert levels.loc[("turn", 2), "removed1"] == 0 and levels.loc[("turn", 2), "removed2"] == 0
-    html = (study_dir / "results" / "report.html").read_text()
-    for stage in summary["stage"]:
-        assert stage in html
+    for pair, stage in zip(summary["pair"], summary["stage"]):
+        assert stage in (study_dir / "results" / pair / "report.html").read_text()
     csv = pd.read_csv(study_dir / "results" / "summary.csv")
     assert len(csv) == len(summary) == 6
     # What to try next, per stage, from the config's candidates.
@@ -133,23 +132,64 @@ def test_full_run_writes_every_stage_and_the_report(study_dir):
         assert list(table["rank"]) == [1, 2, 3]
 
 
+def test_full_run_writes_the_study_level_and_a_page_per_pair(study_dir):
+    results = study_dir / "results"
+    voxels = pd.read_parquet(results / "study" / "voxels.parquet")
+    assert sorted(voxels["level"].unique()) == [0, 1, 2] and (voxels["pairs"] == 2).all()
+    assert len(pd.read_parquet(results / "study" / "hypotheses.parquet")) == 2 * 2
+    assert sorted(pd.read_parquet(results / "study" / "pairs.parquet")["pair"]) == ["shift", "turn"]
+    assert {p.name for p in (results / "study" / "figures").glob("*.png")} == {
+        "heatmap.png", "hypotheses.png", "all_pairs.png", "voxels_00.png", "voxels_01.png", "voxels_02.png"}
+    overview = (results / "report.html").read_text()
+    for pair in ("shift", "turn"):
+        assert f'href="{pair}/report.html"' in overview
+        page = (results / pair / "report.html").read_text()
+        assert "field_3d.html" not in page or "interactive 3-D view" in page
+        assert page.count("field from above</figcaption>") == 3 and 'class="missing"' not in page
+
+
 def test_unchanged_config_plans_nothing(study_dir):
     assert planned_jobs(study_dir) == collections.Counter()
 
 
 def test_appending_a_hypothesis_plans_one_stage_per_pair(study_dir):
     jobs = planned_after(study_dir, lambda s: s["hypotheses"].append({"crop": {"max_range_m": 40.0}}))
-    assert jobs == {"mitigate": 2, "field": 2, "suggest": 2, "plot_stage": 2, "plot_pair": 2, "summary": 1, "report": 1}
+    assert jobs == {"mitigate": 2, "field": 2, "suggest": 2, "plot_stage": 2, "plot_pair": 2, "summary": 1, "study_voxels": 1, "study_tables": 1, "study_figures": 1, "pair_report": 2, "report": 1}
 
 
 def test_editing_hypothesis_two_replans_stage_two_only(study_dir):
     jobs = planned_after(study_dir, lambda s: s["hypotheses"].__setitem__(1, {"field_of_view": {"margin_deg": 1.0}}))
-    assert jobs == {"mitigate": 2, "field": 2, "suggest": 2, "plot_stage": 2, "plot_pair": 2, "summary": 1, "report": 1}
+    assert jobs == {"mitigate": 2, "field": 2, "suggest": 2, "plot_stage": 2, "plot_pair": 2, "summary": 1, "study_voxels": 1, "study_tables": 1, "study_figures": 1, "pair_report": 2, "report": 1}
 
 
 def test_editing_the_grid_replans_only_fields_plots_and_report(study_dir):
     jobs = planned_after(study_dir, lambda s: s["grid"].update(azimuth_bins=36))
-    assert jobs == {"field": 6, "suggest": 6, "plot_stage": 6, "plot_pair": 2, "summary": 1, "report": 1}
+    assert jobs == {"field": 6, "suggest": 6, "plot_stage": 6, "plot_pair": 2, "summary": 1, "study_voxels": 1, "study_tables": 1, "study_figures": 1, "pair_report": 2, "report": 1}
+
+
+def test_choosing_the_plotted_pairs_replans_only_their_pages(study_dir):
+    assert planned_after(study_dir, lambda s: s["plots"].update(pairs=["shift"])) == {"pair_report": 1, "report": 1}
+    assert planned_after(study_dir, lambda s: s["plots"].update(pairs="none")) == {"pair_report": 2, "report": 1}
+
+
+def test_a_pair_left_out_of_plots_pairs_gets_its_figures_on_demand(study_dir):
+    """Without its stage figures on disk, the pair's page with them plans their plot jobs."""
+    results = study_dir / "results"
+    figures = sorted((results / "turn" / "stages").glob("*/figures"))
+    for d in figures:
+        d.rename(d.with_name("figures.away"))
+    study = tiny_study()
+    study["plots"]["pairs"] = ["shift"]
+    write_study(study_dir, study)
+    try:
+        default = planned_jobs(study_dir)
+        proc = snakemake(study_dir, "--dry-run", "--cores", "1", "results/turn/stages.html")
+    finally:
+        for d in figures:
+            d.with_name("figures.away").rename(d)
+        write_study(study_dir, tiny_study())
+    assert "plot_stage" not in default  # the study itself does not draw them
+    assert re.search(r"^plot_stage\s+3\s*$", proc.stdout, re.M) and re.search(r"^pair_report\s+1\s*$", proc.stdout, re.M)
 
 
 def test_editing_a_plugin_source_replans_its_stage_and_later(study_dir):
@@ -164,7 +204,7 @@ def test_editing_a_plugin_source_replans_its_stage_and_later(study_dir):
         jobs = planned_jobs(study_dir)
     finally:
         write_study(study_dir, tiny_study())
-    assert jobs == {"mitigate": 4, "field": 4, "suggest": 4, "plot_stage": 4, "plot_pair": 2, "summary": 1, "report": 1}
+    assert jobs == {"mitigate": 4, "field": 4, "suggest": 4, "plot_stage": 4, "plot_pair": 2, "summary": 1, "study_voxels": 1, "study_tables": 1, "study_figures": 1, "pair_report": 2, "report": 1}
 
 
 @pytest.mark.parametrize(

@@ -61,6 +61,7 @@ class Study:
     plots: dict
     scans: dict[str, ScanSpec] = field(default_factory=dict)
     suggest: list[dict] | None = None  # the config's candidates, normalised; None: the default
+    plot_pairs: list[str] = field(default_factory=list)  # the pairs that get per-stage figures
 
     def stage_ids(self, pair: str) -> list[str]:
         return stage_ids(self.pairs[pair].inputs(), self.hypotheses, self.base_dir)
@@ -186,7 +187,31 @@ def validate_config(
     for pair in pairs.values():
         scans[pair.scan1.id] = pair.scan1
         scans[pair.scan2.id] = pair.scan2
-    return Study(config, base_dir, pairs, config["grid"], hypotheses, config["plots"], scans, suggest)
+    plotted = plot_pairs(config["plots"]["pairs"], sorted(pairs), source)
+    return Study(config, base_dir, pairs, config["grid"], hypotheses, config["plots"], scans, suggest, plotted)
+
+
+# A study of up to this many pairs gets every pair's stage figures by default; a larger one
+# gets this many, evenly spaced (a drive's pairs are named in driving order).
+AUTO_PLOT_PAIRS = 12
+
+
+def plot_pairs(setting: str | list[str], names: list[str], source: str = "config") -> list[str]:
+    """The pairs that get per-stage figures, in name order, for the ``plots.pairs`` setting.
+
+    Decided when the config is read (the workflow knows its jobs when it is parsed), so
+    ``auto`` goes by the number of pairs, not by any result."""
+    if setting == "all" or (setting == "auto" and len(names) <= AUTO_PLOT_PAIRS):
+        return list(names)
+    if setting == "none":
+        return []
+    if setting == "auto":
+        picks = np.unique(np.round(np.linspace(0, len(names) - 1, AUTO_PLOT_PAIRS)).astype(int))
+        return [names[i] for i in picks]
+    unknown = [name for name in setting if name not in names]
+    if unknown and names:
+        raise ConfigError(f"config key plots.pairs: unknown pair(s) {unknown}; the study's pairs are {names[:20]}", source)
+    return [name for name in names if name in setting]
 
 
 # --- pairs -------------------------------------------------------------------------------------

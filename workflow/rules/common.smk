@@ -4,6 +4,7 @@ from pathlib import Path
 from snakemake.utils import min_version
 
 import lidarfield.config
+from lidarfield.plots.common import figure_settings
 from lidarfield.stages import canonical_json
 
 min_version("9.0")
@@ -30,6 +31,9 @@ STAGES = {pair: STUDY.stage_ids(pair) for pair in PAIRS}
 # Each stage level's suggestion candidates, validated once here rather than in every job's
 # params (that was 8% of planning a 300-pair study).
 CANDIDATES = [STUDY.candidates(level) for level in range(len(STUDY.hypotheses) + 1)]
+# The pairs whose stage figures the study draws (plots.pairs); any other pair's are drawn on
+# demand, by asking for its page with them: results/{pair}/stages.html.
+PLOT_PAIRS = STUDY.plot_pairs
 
 
 # A pair is any folder of the results but the study's own. Not the list of the pairs: Snakemake
@@ -39,6 +43,7 @@ wildcard_constraints:
     pair=rf"(?!(?:{'|'.join(lidarfield.config.RESULTS_FOLDERS)})/)[A-Za-z0-9][A-Za-z0-9_.-]*",
     stage=r"\d\d-[A-Za-z0-9_]+-[0-9a-f]{8}",
     scan=r"[A-Za-z0-9][A-Za-z0-9_.-]*",
+    page="report|stages",
 
 
 def scan_path(scan):
@@ -127,16 +132,56 @@ def pair_stats(wildcards):
     ]
 
 
-def results_dir(wildcards, output):
-    """The study's results folder, from the report's path (results/report.html)."""
-    return str(Path(output[0]).parent)
-
-
 def all_stage_files(name):
     return [
         f"{stage_dir(pair, stage)}/{name}" for pair in PAIRS for stage in STAGES[pair]
     ]
 
 
+def pair_suggestions(wildcards):
+    return [
+        f"{stage_dir(wildcards.pair, stage)}/suggestions.parquet"
+        for stage in STAGES[wildcards.pair]
+    ]
+
+
+def last_stage_suggestions(wildcards):
+    """The study's next steps: each pair's suggestions at its last stage."""
+    return [
+        f"{stage_dir(pair, STAGES[pair][-1])}/suggestions.parquet" for pair in PAIRS
+    ]
+
+
+def study_dir(wildcards, input):
+    """The study level's folder, from its voxels table among the inputs."""
+    return str(Path(input.voxels).parent)
+
+
+def pair_stage_dirs(wildcards):
+    return [stage_dir(wildcards.pair, stage) for stage in STAGES[wildcards.pair]]
+
+
+def page_has_stage_figures(wildcards):
+    """A pair's report.html shows its stage figures when plots.pairs selects it; its
+    stages.html (asked for on demand) always does."""
+    return wildcards.page == "stages" or wildcards.pair in PLOT_PAIRS
+
+
+def pair_page_stage_figures(wildcards):
+    if not page_has_stage_figures(wildcards):
+        return []
+    return [f"{d}/figures" for d in pair_stage_dirs(wildcards)]
+
+
+def stage_figures_flag(wildcards):
+    return (
+        "--stage-figures" if page_has_stage_figures(wildcards) else "--no-stage-figures"
+    )
+
+
+def on_demand_page(wildcards):
+    return f"{RESULTS}/{wildcards.pair}/stages.html"
+
+
 GRID = canonical_json(STUDY.grid)
-PLOTS = canonical_json(STUDY.plots)
+PLOTS = canonical_json(figure_settings(STUDY.plots))

@@ -1,4 +1,4 @@
-# The study-wide summary table and the self-contained HTML report.
+# The study-wide summary table, one page per pair, and the study overview (results/report.html).
 
 
 rule summary:
@@ -23,17 +23,50 @@ rule summary:
         " --csv {output.csv:q} > {log:q} 2>&1"
 
 
+# A pair's page: report.html for every pair (with its stage figures when plots.pairs selects
+# it), stages.html on demand (always with them: asking for it draws them).
+rule pair_report:
+    input:
+        stats=pair_stats,
+        suggestions=pair_suggestions,
+        pair_figures=f"{RESULTS}/{{pair}}/figures",
+        stage_figures=pair_page_stage_figures,
+    output:
+        f"{RESULTS}/{{pair}}/{{page}}.html",
+    log:
+        f"{RESULTS}/logs/pair_report/{{pair}}/{{page}}.log",
+    benchmark:
+        f"{RESULTS}/benchmarks/pair_report/{{pair}}/{{page}}.tsv"
+    conda:
+        "../envs/lidarfield.yaml"
+    threads: 1
+    resources:
+        mem_mb=1000,
+    params:
+        stage_dirs=pair_stage_dirs,
+        plots=PLOTS,
+        stage_figures=stage_figures_flag,
+        on_demand=on_demand_page,
+        max_mb=config["report"]["max_mb"],
+    shell:
+        "lidarfield job pair-report --pair {wildcards.pair} --stats {input.stats:q}"
+        " --stage-dirs {params.stage_dirs:q} --plots {params.plots:q} {params.stage_figures}"
+        " --on-demand {params.on_demand:q} --max-mb {params.max_mb} --out {output:q} > {log:q} 2>&1"
+
+
 rule report:
     input:
         summary=f"{RESULTS}/summary.parquet",
-        stage_figures=all_stage_files("figures"),
-        suggestions=all_stage_files("suggestions.parquet"),
-        pair_figures=expand(f"{RESULTS}/{{pair}}/figures", pair=PAIRS),
+        voxels=f"{RESULTS}/study/voxels.parquet",
+        hypotheses=f"{RESULTS}/study/hypotheses.parquet",
+        pairs=f"{RESULTS}/study/pairs.parquet",
+        figures=f"{RESULTS}/study/figures",
+        suggestions=last_stage_suggestions,
     output:
         report(
             f"{RESULTS}/report.html",
             category="Study",
-            labels={"report": "study report"},
+            labels={"report": "study overview"},
         ),
     log:
         f"{RESULTS}/logs/report.log",
@@ -43,9 +76,13 @@ rule report:
         "../envs/lidarfield.yaml"
     threads: 1
     resources:
-        mem_mb=4000,
+        mem_mb=2000,
     params:
-        study=canonical_json({"config": config, "stages": STAGES}),
-        results=results_dir,
+        config=canonical_json(config),
+        plotted=canonical_json(PLOT_PAIRS),
+        study_dir=study_dir,
     shell:
-        "lidarfield job report --study {params.study:q} --results {params.results:q} --out {output:q} > {log:q} 2>&1"
+        "lidarfield job report --config {params.config:q} --summary {input.summary:q}"
+        " --study-dir {params.study_dir:q} --figures {input.figures:q}"
+        " --plotted {params.plotted:q} --suggestions {input.suggestions:q}"
+        " --out {output:q} > {log:q} 2>&1"

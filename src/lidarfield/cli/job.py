@@ -79,9 +79,41 @@ def add_parser(subparsers) -> None:
     p.add_argument("--csv", required=True)
     p.set_defaults(func=_summary)
 
+    p = jobs.add_parser("study-voxels")
+    p.add_argument("--fields", nargs="+", required=True, help="every stage's field.parquet of the study")
+    p.add_argument("--out", required=True)
+    p.set_defaults(func=_study_voxels)
+
+    p = jobs.add_parser("study-tables")
+    p.add_argument("--summary", required=True)
+    p.add_argument("--hypotheses-out", required=True)
+    p.add_argument("--pairs-out", required=True)
+    p.set_defaults(func=_study_tables)
+
+    p = jobs.add_parser("study-figures")
+    p.add_argument("--summary", required=True)
+    p.add_argument("--study-dir", required=True, help="the folder of voxels.parquet, hypotheses.parquet, pairs.parquet")
+    p.add_argument("--out", required=True)
+    p.set_defaults(func=_study_figures)
+
+    p = jobs.add_parser("pair-report")
+    p.add_argument("--pair", required=True)
+    p.add_argument("--stats", nargs="+", required=True)
+    p.add_argument("--stage-dirs", nargs="+", required=True)
+    p.add_argument("--plots", type=_json, required=True)
+    p.add_argument("--stage-figures", action=argparse.BooleanOptionalAction, required=True)
+    p.add_argument("--on-demand", help="the target that draws the stage figures of a pair without them")
+    p.add_argument("--max-mb", type=float, required=True)
+    p.add_argument("--out", required=True)
+    p.set_defaults(func=_pair_report)
+
     p = jobs.add_parser("report")
-    p.add_argument("--study", type=_json, required=True, help='{"config": ..., "stages": {pair: [ids]}}')
-    p.add_argument("--results", required=True)
+    p.add_argument("--config", type=_json, required=True, help="the study's config, folded at the end of the page")
+    p.add_argument("--summary", required=True)
+    p.add_argument("--study-dir", required=True)
+    p.add_argument("--figures", required=True, help="the study figures' folder")
+    p.add_argument("--plotted", type=_json, required=True, help="the pairs whose stage figures are drawn (JSON list)")
+    p.add_argument("--suggestions", nargs="+", required=True, help="each pair's suggestions.parquet at its last stage")
     p.add_argument("--out", required=True)
     p.set_defaults(func=_report)
 
@@ -141,14 +173,41 @@ def _summary(args: argparse.Namespace) -> None:
     write_summary(args.stats, args.parquet, args.csv)
 
 
+def _study_voxels(args: argparse.Namespace) -> None:
+    from ..study import write_study_voxels
+
+    write_study_voxels(args.fields, args.out)
+
+
+def _study_tables(args: argparse.Namespace) -> None:
+    from ..study import write_study_tables
+
+    write_study_tables(args.summary, args.hypotheses_out, args.pairs_out)
+
+
+def _study_figures(args: argparse.Namespace) -> None:
+    from ..plots.study import plot_study
+    from ..study import read_study_tables
+
+    t = read_study_tables(args.summary, args.study_dir)
+    plot_study(t.summary, t.voxels, t.hypotheses, t.pairs, t.grid, args.out)
+
+
+def _pair_report(args: argparse.Namespace) -> None:
+    from ..pipeline import read_stats
+    from ..report import write_pair_page
+
+    write_pair_page(args.pair, args.stage_dirs, read_stats(args.stats), args.out, args.plots, args.stage_figures,
+                    overview_href="../report.html", on_demand=args.on_demand, max_mb=args.max_mb)
+
+
 def _report(args: argparse.Namespace) -> None:
     from pathlib import Path
 
-    from ..pipeline import read_stats
-    from ..report import write_report
+    from ..report import write_overview
+    from ..study import read_study_tables
 
-    results = Path(args.results)
-    stages = args.study["stages"]
-    pairs = {pair: [results / pair / "stages" / stage for stage in ids] for pair, ids in stages.items()}
-    summary = read_stats([d / "stats.json" for dirs in pairs.values() for d in dirs])
-    write_report(args.study["config"], pairs, summary, args.out)
+    tables = read_study_tables(args.summary, args.study_dir)
+    # .../{pair}/stages/{stage}/suggestions.parquet
+    last_stages = {Path(p).parents[2].name: Path(p).parent for p in args.suggestions}
+    write_overview(args.config, tables, args.out, args.figures, set(args.plotted), last_stages)

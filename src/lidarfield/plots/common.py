@@ -58,9 +58,15 @@ class PlotSettings:
     interactive: bool = True  # write field_3d.html
 
 
+def figure_settings(plots: dict | None) -> dict:
+    """The ``plots`` section without ``pairs``: which pairs get figures is the workflow's
+    choice, not a figure's setting, so changing it redraws no figure."""
+    return {k: v for k, v in (plots or {}).items() if k != "pairs"}
+
+
 def plot_settings(settings: dict | None) -> PlotSettings:
     """PlotSettings from a config ``plots`` mapping (missing keys take their defaults)."""
-    settings = dict(settings or {})
+    settings = figure_settings(settings)
     known = {f.name for f in fields(PlotSettings)}
     unknown = set(settings) - known
     if unknown:

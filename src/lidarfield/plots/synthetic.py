@@ -129,3 +129,44 @@ def write_synthetic_study(results_dir: str | Path, n_pairs: int = 2, levels: int
     rows = [json.loads((d / "stats.json").read_text()) for dirs in pairs.values() for d in dirs]
     write_summary(results_dir, rows)
     return pairs
+
+
+def _ring_clouds(rng, n: int, ring_m: float) -> tuple[np.ndarray, np.ndarray]:
+    """Two clouds of the same random directions and ranges about the origin; cloud 2 pushed
+    ``ring_m`` outwards below -12 deg elevation (a ring) and its ranges jittered by 5 cm (along
+    the ray, so that no point changes voxel: a voxel's vector is the push, not a membership change)."""
+    az = rng.uniform(-np.pi, np.pi, n)
+    el = np.radians(rng.uniform(-20.0, 20.0, n))
+    r = rng.uniform(5.0, 30.0, n)
+    direction = np.column_stack([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)])
+    xyz1 = direction * r[:, None]
+    push = np.where(np.degrees(el) < -12.0, ring_m, 0.0)
+    xyz2 = direction * (r + push + rng.normal(0.0, 0.05, n))[:, None]
+    return xyz1, xyz2
+
+
+def write_field_study(results_dir: str | Path, n_pairs: int, levels: int = 3, n: int = 4000) -> dict[str, list[Path]]:
+    """A results folder with only what the study level and the report read: per pair and
+    stage ``field.parquet`` and ``stats.json`` (no points), and the study summary. Pair k's
+    stage l has a ring of (k % 5 + 1) / 10 / 2^l m at the lowest elevations: hundreds of
+    pairs in seconds, for the report's tests and benchmarks."""
+    results_dir = Path(results_dir)
+    pairs, rows = {}, []
+    for k in range(n_pairs):
+        name, rng = f"pair-{k:03d}", np.random.default_rng(k)
+        dirs = []
+        for level in range(levels):
+            hypothesis = HYPOTHESES[level % len(HYPOTHESES)]
+            stage_id = f"{level:02d}-{hypothesis}-{k:04x}{level:04x}"
+            stage_dir = results_dir / name / "stages" / stage_id
+            xyz1, xyz2 = _ring_clouds(rng, n, (k % 5 + 1) / 10 / 2**level)
+            pair = RegisteredPair(xyz1, xyz2, np.eye(4), registration={"method": "truth", "fitness": 1.0, "converged": True})
+            field, statistics = analyse_field(pair, SETTINGS)
+            write_field(stage_dir / "field.parquet", field, field_meta(SETTINGS, summary_json_safe(statistics), stage=stage_id))
+            row = stats_row(name, stage_id, level, hypothesis, pair, (level * 10, level * 12), field)
+            write_text(stage_dir / "stats.json", json.dumps(row))
+            rows.append(row)
+            dirs.append(stage_dir)
+        pairs[name] = dirs
+    write_summary(results_dir, rows)
+    return pairs

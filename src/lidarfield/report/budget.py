@@ -8,10 +8,16 @@ linked is measured once, and embedding a figure adds the difference between its 
 
 from __future__ import annotations
 
+import logging
 from collections.abc import Callable, Collection
 from dataclasses import dataclass
+from functools import partial
+from pathlib import Path
 
-from .page import compact_png, embedded_image, esc, linked_image
+from ..io.atomic import write_text
+from .page import compact_png, embedded_image, esc, linked_image, missing_image, page, relative_href
+
+log = logging.getLogger(__name__)
 
 MB = 1_000_000  # the budget's unit: mail size limits are quoted in decimal megabytes
 
@@ -33,6 +39,13 @@ class Figure:
         if self.href is None:
             return f'<p class="missing">{esc(self.caption)}: not embedded (size budget) and not on disk to link</p>'
         return linked_image(self.href, self.caption)
+
+
+def file_figure(tier: str, path: Path, caption: str, width_px: int, out_dir: Path) -> Figure | str:
+    """A figure drawn to a PNG file, or the note that it was not drawn."""
+    if not path.is_file():
+        return missing_image(caption, path)
+    return Figure(tier, caption, width_px, relative_href(path, out_dir), path.read_bytes)
 
 
 class Note:
@@ -119,3 +132,20 @@ def budget_note(figures: list[Figure], embedded: Collection[Figure], max_mb: flo
         "the PNG file when this page is opened inside its results folder. A larger <code>report.max_mb</code> "
         "in the config (or <code>lidarfield report --max-mb</code>) embeds more.</p>"
     )
+
+
+def write_within_budget(parts: list, tiers: tuple[str, ...], title: str, out_html: Path, max_mb: float) -> Path:
+    """Write the page of ``parts``, its figures embedded tier by tier (in the order of ``tiers``)
+    while it stays within ``max_mb``, the others linked; log its size and both counts."""
+    figures = [p for p in parts if isinstance(p, Figure)]
+    by_tier = [[f for f in figures if f.tier == tier] for tier in tiers]
+    note = partial(budget_note, figures, max_mb=max_mb)
+    budget_bytes = int(max_mb * MB)
+    embedded = embed_tiers(by_tier, utf8_len(page(title, render(parts, {}, ""))), budget_bytes, note)
+    html = page(title, render(parts, embedded, note(embedded)))
+    write_text(out_html, html)
+    size = utf8_len(html)
+    log.info("%s: %.2f MB (budget %g MB), %d figures embedded, %d linked", out_html, size / MB, max_mb, len(embedded), len(figures) - len(embedded))
+    if size > budget_bytes:
+        log.warning("%s is over its %g MB budget even with every pair and stage figure linked", out_html, max_mb)
+    return out_html

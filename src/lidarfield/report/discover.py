@@ -20,18 +20,28 @@ from ..stages import level_of
 LIST_COLUMNS = ("rigid_translation_m",)
 
 
+def read_summary_frame(path: Path) -> pd.DataFrame:
+    """A summary table (``.parquet`` or ``.csv``) with at least its 'pair' and 'stage' columns."""
+    if not path.is_file():
+        raise InputError("file not found", path)
+    reader = pd.read_csv if path.suffix == ".csv" else pd.read_parquet
+    try:
+        df = reader(path)
+    except Exception as e:  # pyarrow and pandas raise many types for a bad file
+        raise InputError(f"not a readable summary table ({e})", path) from None
+    if not {"pair", "stage"} <= set(df.columns):
+        raise InputError(f"summary table without 'pair' and 'stage' columns (has {list(df.columns)})", path)
+    if "level" not in df.columns:
+        df["level"] = [level_of(str(s)) or 0 for s in df["stage"]]
+    return df
+
+
 def read_summary(folder: Path) -> list[dict] | None:
     """Rows of ``summary.parquet`` (or ``summary.csv``) in ``folder``; None when neither exists."""
-    for name, reader in (("summary.parquet", pd.read_parquet), ("summary.csv", pd.read_csv)):
+    for name in ("summary.parquet", "summary.csv"):
         path = folder / name
         if path.is_file():
-            try:
-                df = reader(path)
-            except Exception as e:  # pyarrow and pandas raise many types for a bad file
-                raise InputError(f"not a readable summary table ({e})", path) from None
-            if not {"pair", "stage"} <= set(df.columns):
-                raise InputError(f"summary table without 'pair' and 'stage' columns (has {list(df.columns)})", path)
-            return [_clean_row(r) for r in df.to_dict("records")]
+            return [_clean_row(r) for r in read_summary_frame(path).to_dict("records")]
     return None
 
 

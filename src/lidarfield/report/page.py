@@ -6,6 +6,7 @@ import base64
 import html
 import io
 import math
+import os
 from pathlib import Path
 
 from PIL import Image
@@ -26,13 +27,27 @@ figure { margin: 0; } figure img { max-width: 100%; height: auto; border: 1px so
 figcaption { font-size: 0.8em; color: #555; }
 figure.linked { border: 1px dashed #bbb; padding: 4px 8px; font-size: 0.9em; }
 details > summary { cursor: pointer; font-size: 1.15em; font-weight: 600; margin: 0.6em 0; }
+nav { font-size: 0.9em; margin-bottom: 0.5em; }
 .budget { background: #fff6d5; border: 1px solid #e0c96a; padding: 0.5em 0.8em; }
 .note { color: #666; font-size: 0.9em; } .missing { color: #a00; font-size: 0.85em; }
 """
 
 
+class Html(str):
+    """Text that is already HTML (a link in a table cell): not escaped again."""
+
+
 def esc(value) -> str:
-    return html.escape(str(value), quote=True)
+    return value if isinstance(value, Html) else html.escape(str(value), quote=True)
+
+
+def relative_href(path: Path, out_dir: Path) -> str:
+    """A link to ``path`` from a page in ``out_dir``: it works wherever the results folder is moved."""
+    return Path(os.path.relpath(path, out_dir)).as_posix()
+
+
+def link(href: str, text: str) -> Html:
+    return Html(f'<a href="{esc(href)}">{esc(text)}</a>')
 
 
 def page(title: str, body: list[str]) -> str:

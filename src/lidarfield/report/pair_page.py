@@ -1,0 +1,150 @@
+"""One pair's page (``results/{pair}/report.html``): its table of stages, its stage-by-stage
+figures, each stage's figures and the links to their 3-D views, and a link back to the study
+overview.
+
+The page is built from small functions, each returning a list of parts (HTML text, or a
+``Figure`` that the size budget embeds or links): a new section is one more such function in
+``pair_page_parts``. Stage figures come in tiers (``TIERS``): the page keeps the budget logic of
+``budget``, a whole tier embedded at a time while it fits ``report.max_mb``.
+"""
+
+from __future__ import annotations
+
+from functools import partial
+from pathlib import Path
+
+from .. import __version__
+from ..plots import stage_figures
+from ..plots.common import PlotSettings, plot_settings
+from ..plots.pair_stats import pair_figure_png
+from ..stages import level_of
+from .budget import Figure, Note, budget_mb, file_figure, write_within_budget
+from .page import esc, relative_href, table
+from .suggestions import stage_suggestions
+
+SUMMARY_COLUMNS = (
+    "pair", "stage", "level", "hypothesis", "n1", "n2", "removed1", "removed2", "voxels_valid",
+    "max_magnitude", "p95_magnitude", "mean_magnitude", "rms_magnitude", "paper_max_metric",
+    "rigid_translation_m", "rigid_rotation_deg", "rigid_energy_share", "mean_resultant_length",
+    "voxels_significant", "p_direction", "p_coherence", "verdict",
+    "registration_method", "registration_fitness",
+)  # fmt: skip
+STAGE_FIGURES = (
+    ("field_top", "field from above"),
+    ("before_after", "before / after (same axes, same colour scale)"),
+    ("removed_top", "removed points from above"),
+    ("top_voxels", "voxels with the largest vectors"),
+    ("field_perspective", "field in perspective"),
+    ("removed_perspective", "removed points in perspective"),
+)
+PAIR_FIGURES = (
+    ("stages", "magnitude stage by stage"),
+    ("rigid_randomness", "rigid part and randomness stage by stage"),
+    ("tags", "share of the field energy per voxel tag, stage by stage"),
+)
+PAIR_TIER = "pair figures"
+# The order in which figures are embedded while the page fits its budget: the pair's summary
+# first, then the stage figures that say most about a stage.
+TIERS = (PAIR_TIER, *(caption for _, caption in STAGE_FIGURES))
+WIDE = {"before_after": 1130, "top_voxels": 1130}  # two-panel figures take a whole row
+DPI = 110
+
+
+def registration_problem(row: dict) -> str:
+    """Why a summary row's registration is suspect ('' when it is not)."""
+    converged = row.get("registration_converged")
+    warning = row.get("registration_warning")
+    problems = []
+    if converged is False or (isinstance(converged, str) and converged.lower() == "false"):
+        problems.append("registration did not converge")
+    if isinstance(warning, str) and warning:
+        problems.append(f"warning: {warning}")
+    return "; ".join(problems)
+
+
+def stages_table(rows: list[dict]) -> str:
+    """One row per stage (rows in red: the registration did not converge or warned)."""
+    headers = [c for c in SUMMARY_COLUMNS if any(c in r for r in rows)]
+    body, classes = [], []
+    for r in rows:
+        problem = registration_problem(r)
+        body.append([r.get(c, "") for c in headers] + [problem])
+        classes.append("flag" if problem else "")
+    return table(headers + ["registration problem"], body, classes, text_columns=2)
+
+
+def pair_figures(name: str, pair_dir: Path | None, rows: list[dict], out_dir: Path) -> list[Figure | str]:
+    """The pair's stage-by-stage figures: its files, or drawn from its rows when there are none."""
+    figures = []
+    for stem, caption in PAIR_FIGURES:
+        path = pair_dir / "figures" / f"{stem}.png" if pair_dir else None
+        if path is not None and path.is_file():
+            figures.append(file_figure(PAIR_TIER, path, f"{name}: {caption}", 640, out_dir))
+        elif rows:
+            figures.append(Figure(PAIR_TIER, f"{name}: {caption}", 640, None, partial(pair_figure_png, stem, rows, DPI)))
+    return figures
+
+
+def stage_parts(name: str, stage_dir: Path, out_dir: Path, settings: PlotSettings, with_figures: bool = True) -> list[Figure | str]:
+    """A stage's heading, what to try next, and (``with_figures``) the link to its 3-D view
+    and the figures the settings draw for it."""
+    fig_dir = stage_dir / "figures"
+    parts = [f"<h3>{esc(name)} · stage {esc(stage_dir.name)}</h3>", stage_suggestions(stage_dir)]
+    if not with_figures:
+        return parts
+    view = fig_dir / "field_3d.html"
+    if view.is_file():
+        parts.append(f'<p><a href="{esc(relative_href(view, out_dir))}">interactive 3-D view of this stage</a></p>')
+    level = level_of(stage_dir.name) or 0
+    drawn = stage_figures(settings, level, has_previous=level > 0)
+    stems = [(s, c) for s, c in STAGE_FIGURES if s in drawn]
+    figures = [file_figure(c, fig_dir / f"{s}.png", f"{stage_dir.name}: {c}", WIDE.get(s, 560), out_dir) for s, c in stems]
+    return parts + ['<div class="figures">', *figures, "</div>"]
+
+
+def not_drawn_note(on_demand: str | None) -> str:
+    how = (f"<code>snakemake --cores 2 {esc(on_demand)}</code> draws them and writes that page, this one with every stage's figures"
+           if on_demand else "<code>lidarfield plot STAGE_DIR --out STAGE_DIR/figures</code> draws a stage's figures")
+    return f'<p class="note">The stage figures of this pair are not drawn (the config\'s <code>plots.pairs</code> leaves it out): {how}.</p>'
+
+
+def header_parts(name: str, stage_dirs: list[Path], overview_href: str | None) -> list:
+    parts = [f'<nav><a href="{esc(overview_href)}">← study overview</a></nav>'] if overview_href else []
+    return parts + [
+        f"<h1>pair {esc(name)}</h1>",
+        f'<p class="note">lidarfield {esc(__version__)} · {len(stage_dirs)} stage(s). Vectors run from the mean of cloud 1 '
+        "to the mean of cloud 2 in each voxel; a hypothesis that explains part of the discrepancy shrinks the field and "
+        "breaks its pattern.</p>",
+        Note(),
+    ]
+
+
+def pair_page_parts(name: str, stage_dirs: list[Path], rows: list[dict], out_dir: Path, settings: PlotSettings,
+                    with_stage_figures: bool = True, overview_href: str | None = None, on_demand: str | None = None) -> list:
+    """The pair's page as parts (its figures still to be embedded or linked)."""
+    pair_dir = stage_dirs[0].parent.parent if stage_dirs else None
+    parts = header_parts(name, stage_dirs, overview_href)
+    parts += ["<h2>Stages</h2>", stages_table(rows)]
+    parts += ["<h2>Stage by stage</h2>", '<div class="figures">', *pair_figures(name, pair_dir, rows, out_dir), "</div>"]
+    parts += ["<h2>Each stage: what to try next, and its figures</h2>"]
+    if not with_stage_figures:
+        parts.append(not_drawn_note(on_demand))
+    for stage_dir in stage_dirs:
+        parts += stage_parts(name, stage_dir, out_dir, settings, with_stage_figures)
+    return parts
+
+
+def write_pair_page(name: str, stage_dirs: list[str | Path], rows: list[dict], out_html: str | Path, plots: dict | None = None,
+                    with_stage_figures: bool = True, overview_href: str | None = None, on_demand: str | None = None,
+                    max_mb: float | None = None) -> Path:
+    """Write one pair's page; returns its path.
+
+    ``rows`` are the pair's summary rows; ``plots`` the config's ``plots`` section (which
+    figures a stage has: a drawn one that is missing is flagged); ``with_stage_figures`` False
+    for a pair that ``plots.pairs`` leaves out (``on_demand``: the target that draws them);
+    ``max_mb``: the page's size budget (default: the schema's ``report.max_mb``)."""
+    out_html = Path(out_html)
+    rows = sorted(rows, key=lambda r: float(r.get("level", 0)))
+    parts = pair_page_parts(name, [Path(d) for d in stage_dirs], rows, out_html.parent, plot_settings(plots),
+                            with_stage_figures, overview_href, on_demand)
+    return write_within_budget(parts, TIERS, f"lidarfield: pair {name}", out_html, budget_mb(None, max_mb))

@@ -48,6 +48,7 @@ PRELOAD = (
     "lidarfield.stack",
     "lidarfield.report",
     "lidarfield.suggest",
+    "lidarfield.study",
     "pandas",  # the summary job's
 )
 # Numeric libraries start as many threads as these say; jobs run with threads: 1.

@@ -81,6 +81,12 @@ def test_report_writes_an_overview_and_a_page_per_pair(study, tmp_path):
     assert html.index("The study level") < html.index("Pairs ranked") < html.index("<details><summary>the config")
     assert "<script>alert(1)</script>" not in html and "&lt;script&gt;alert(1)&lt;/script&gt;" in html
     assert "<script" not in html  # one static page: no script at all
+    # The ranking gives each pair's last-stage verdict and significant voxels.
+    ranking = html.split("Pairs ranked", 1)[1].split("</table>", 1)[0]
+    assert "<th>verdict</th>" in ranking
+    for r in rows:
+        if r["level"] == max(x["level"] for x in rows if x["pair"] == r["pair"]):
+            assert f"<td>{r['verdict']}</td>" in ranking and f"<td>{r['voxels_significant']}</td>" in ranking
     for name, dirs in pairs.items():
         assert f'<a href="{name}/report.html">{name}</a>' in html
         page = pair_page(tmp_path, name)

@@ -170,7 +170,7 @@ def rank_pairs(summary):
     first = s.groupby("pair").head(1).set_index("pair")
     last = s.groupby("pair").tail(1).set_index("pair")
     keep = ["stage", "level", "hypothesis", *METRICS, "voxels_valid"]
-    keep += [c for c in ("registration_converged", "registration_warning") if c in last]
+    keep += [c for c in ("voxels_significant", "verdict", "registration_converged", "registration_warning") if c in last]
     out = last[keep].copy()
     out["p95_magnitude_stage0"] = first["p95_magnitude"].astype(float)
     out = out.sort_values(["p95_magnitude", "max_magnitude"], ascending=False, na_position="last").reset_index()

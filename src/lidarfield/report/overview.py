@@ -91,12 +91,14 @@ def study_level_parts(tables: StudyTables, figures_dir: Path | None) -> list[str
 
 def ranking_table(pairs, stage_figures: set[str]) -> str:
     """One row per pair, ranked; the pair's name links to its page."""
-    headers = ["rank", "pair", "last stage", "p95 (m)", "max (m)", "rms (m)", "valid voxels", "p95 at stage 00 (m)", "stage figures", "registration problem"]
+    headers = ["rank", "pair", "last stage", "p95 (m)", "max (m)", "rms (m)", "valid voxels", "significant (|z| ≥ z_min)", "verdict",
+               "p95 at stage 00 (m)", "stage figures", "registration problem"]
     body, classes = [], []
     for r in pairs.to_dict("records"):
         problem = registration_problem(r)
         body.append([int(r["rank"]), link(PAIR_PAGE.format(pair=quote(str(r["pair"]))), str(r["pair"])), f"{int(r['level']):02d} {r['hypothesis']}",
-                     r["p95_magnitude"], r["max_magnitude"], r["rms_magnitude"], r["voxels_valid"], r["p95_magnitude_stage0"],
+                     r["p95_magnitude"], r["max_magnitude"], r["rms_magnitude"], r["voxels_valid"], r.get("voxels_significant", ""),
+                     r.get("verdict", ""), r["p95_magnitude_stage0"],
                      "drawn" if r["pair"] in stage_figures else "", problem])
         classes.append("flag" if problem else "")
     return table(headers, body, classes, text_columns=3)

@@ -57,7 +57,7 @@ def main() -> None:
             if cluster:
                 subprocess.run([str(ROOT / "scripts" / "slurm-cluster.sh"), "stop", str(cluster)], check=True)
     print(machine())
-    print(f"smoke study (20 jobs), local --cores 2: {local:.1f} s")
+    print(f"smoke study, local --cores 2:        {local:.1f} s")
     print(f"smoke study through profiles/slurm:      {slurm:.1f} s ({slurm / local:.2f}x local)")
 
 

@@ -91,8 +91,8 @@ def test_the_smoke_study_through_slurm_matches_the_local_run(slurm_env, tmp_path
     assert cluster.returncode == 0, cluster.stderr
     summary = Path("results/smoke/summary.csv")
     assert (tmp_path / "slurm" / summary).read_bytes() == (tmp_path / "local" / summary).read_bytes()
-    # 4 scans, then one submission per pair for its whole chain, then one for summary and
-    # report: 7 submissions for 20 jobs.
+    # 4 scans, then one submission per pair for its whole chain, then one for the study-wide
+    # jobs: 7 submissions for 32 jobs.
     assert submissions(cluster.stderr) == 7, cluster.stderr
 
 

@@ -15,7 +15,7 @@ test: setup-test
 setup: .setup.stamp
 .setup.stamp: pyproject.toml
 	scripts/system-deps.sh
-	$(PYTHON) -m pip install --quiet --disable-pip-version-check -e ".[test]"
+	$(PYTHON) -m pip install --quiet --disable-pip-version-check -e ".[test,slurm]"
 	@touch $@
 
 setup-test: setup

@@ -36,7 +36,9 @@ rule plot_stage:
         " --out {output:q} > {log:q} 2>&1"
 
 
-# One plotly.js for the study's 3-D views, which load it by relative path.
+# One plotly.js for the study's 3-D views, which load it by relative path. A copy of a file from
+# the plotly package: on a cluster it runs where Snakemake runs, and so keeps the pairs' job
+# groups (profiles/slurm) from waiting for a submission of its own.
 rule plotly_js:
     output:
         f"{RESULTS}/assets/plotly.min.js",
@@ -44,6 +46,7 @@ rule plotly_js:
         f"{RESULTS}/logs/plotly_js.log",
     benchmark:
         f"{RESULTS}/benchmarks/plotly_js.tsv"
+    localrule: True
     conda:
         "../envs/lidarfield.yaml"
     threads: 1

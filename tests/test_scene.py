@@ -100,6 +100,8 @@ def test_mesh_file_that_does_not_load_names_the_file(tmp_path):
         ({"kind": "box", "size": [1, -1, 1]}, "must be positive"),
         ({"kind": "box", "size": [1, 1]}, "size needs 3"),
         ({"kind": "box", "size": [1, 1, 1], "center": [0, 0, 0], "transform": {"translation": [1, 0, 0]}}, "either center"),
+        ({"kind": "box", "size": [1, 1, 1], "frame": "vehicle"}, "frame must be one of"),
+        ({"kind": "box", "size": [1, 1, 1], "frame": "sensor", "velocity_mps": [1, 0, 0]}, "carries has no velocity"),
     ],
 )
 def test_bad_scene_objects_say_what_is_wrong(obj, message):

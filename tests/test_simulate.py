@@ -225,3 +225,24 @@ def test_paper_pair_by_true_pose_agrees_on_the_building_faces(paper, scan1):
     assert _surface_distance(mesh_in_frame1, in_frame1[buildings]).max() < 1e-3
     # and a wrong pose (scan 2 left where it is) does not agree: the check can fail
     assert np.median(_surface_distance(mesh_in_frame1, scan2.xyz[buildings])) > 0.1
+
+
+def test_a_carried_body_is_at_the_same_place_in_every_scan_and_hides_what_is_behind_it():
+    """The ego-truck scene: the cargo body moves with the sensor (frame: sensor)."""
+    truck, paper = load_scene("paper-intersection-ego-truck"), load_scene("paper-intersection")
+    sensor = SensorModel("test-16", elevation_deg=tuple(np.linspace(-22, 9.6, 16)), azimuth_resolution_deg=1.0)
+    assert len(truck.mesh_at(0.0).faces) == len(paper.mesh_at(0.0).faces)  # the world holds no truck
+    body_min, body_max = np.array([-5.3, -1.1, -2.8]), np.array([-0.3, 1.1, 0.4])
+    on_body = []
+    for pose in (POSE1, POSE2, pose_from_values([3, -2, 3, 0.02, 0, 1.0])):
+        scan = simulate_scan(truck, sensor, pose)
+        inside = np.all((scan.xyz >= body_min - 1e-6) & (scan.xyz <= body_max + 1e-6), axis=1)
+        on_body.append(scan.xyz[inside])
+        # every ray the body does not stop sees the scene as it is without the body
+        open_scene = simulate_scan(paper, sensor, pose)
+        seen = {(r, t): p for r, t, p in zip(open_scene.attributes["ring"], open_scene.attributes["time"], open_scene.xyz)}
+        rays = zip(scan.attributes["ring"][~inside], scan.attributes["time"][~inside], scan.xyz[~inside])
+        assert all(np.array_equal(seen[(r, t)], p) for r, t, p in rays)
+    assert len(on_body[0]) > 0.3 * 16 * 360  # the sensor's rear view, behind a 0.3 m gap
+    for other in on_body[1:]:
+        assert np.array_equal(other, on_body[0])

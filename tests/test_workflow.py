@@ -192,6 +192,13 @@ def test_a_pair_left_out_of_plots_pairs_gets_its_figures_on_demand(study_dir):
     assert re.search(r"^plot_stage\s+3\s*$", proc.stdout, re.M) and re.search(r"^pair_report\s+1\s*$", proc.stdout, re.M)
 
 
+def test_asking_for_rematch_plans_rematch_jobs_and_what_reads_them(study_dir):
+    # The field jobs do not depend on rematching: only the summary, pair figures and report rerun.
+    planned = planned_after(study_dir, lambda s: s.update(rematch={"methods": ["icp"], "trials": 1}))
+    assert planned["rematch"] == 6 and planned["summary"] == 1 and planned["plot_pair"] == 2 and planned["pair_report"] == 2
+    assert not {"simulate", "register", "mitigate", "field", "suggest", "plot_stage"} & set(planned)
+
+
 def test_editing_a_plugin_source_replans_its_stage_and_later(study_dir):
     study = tiny_study()
     # plugin as stage 1, field_of_view as stage 2: run it once, then edit the plugin's source.

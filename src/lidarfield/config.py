@@ -62,6 +62,7 @@ class Study:
     scans: dict[str, ScanSpec] = field(default_factory=dict)
     suggest: list[dict] | None = None  # the config's candidates, normalised; None: the default
     plot_pairs: list[str] = field(default_factory=list)  # the pairs that get per-stage figures
+    rematch: dict | None = None  # the validated rematch section; None: no rematching
 
     def stage_ids(self, pair: str) -> list[str]:
         return stage_ids(self.pairs[pair].inputs(), self.hypotheses, self.base_dir)
@@ -162,6 +163,8 @@ def validate_config(
     _check_schema(config, source)
     try:
         grid_from_config(config["grid"])
+        if "rematch" in config:
+            _check_rematch(config["rematch"])
         hypotheses = validate_stack(config["hypotheses"], base_dir, study_grid=config["grid"])
         suggest = None
         if config["suggest"] is not None:
@@ -188,7 +191,7 @@ def validate_config(
         scans[pair.scan1.id] = pair.scan1
         scans[pair.scan2.id] = pair.scan2
     plotted = plot_pairs(config["plots"]["pairs"], sorted(pairs), source)
-    return Study(config, base_dir, pairs, config["grid"], hypotheses, config["plots"], scans, suggest, plotted)
+    return Study(config, base_dir, pairs, config["grid"], hypotheses, config["plots"], scans, suggest, plotted, config.get("rematch"))
 
 
 # A study of up to this many pairs gets every pair's stage figures by default; a larger one
@@ -212,6 +215,19 @@ def plot_pairs(setting: str | list[str], names: list[str], source: str = "config
     if unknown and names:
         raise ConfigError(f"config key plots.pairs: unknown pair(s) {unknown}; the study's pairs are {names[:20]}", source)
     return [name for name in names if name in setting]
+
+
+def _check_rematch(section: dict) -> None:
+    """The rematch parameters are those of a register method: checked by the same parser."""
+    from .registration.settings import parse_settings
+
+    if {"method", "guess"} & set(section["parameters"]):
+        raise ConfigError("rematch.parameters: method and guess are not parameters (see rematch.methods)")
+    try:
+        parse_settings({"method": section["methods"][0], **section["parameters"]})
+    except LidarfieldError as e:
+        message = str(e).replace("register: ", "").replace("register.", "")
+        raise ConfigError(f"rematch.parameters: {message}") from None
 
 
 # --- pairs -------------------------------------------------------------------------------------

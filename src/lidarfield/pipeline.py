@@ -108,22 +108,31 @@ def summary_row(pair_name: str, pair: RegisteredPair, meta: dict, removed_cloud:
     return row
 
 
-def read_stats(stats_paths: list[str | Path]) -> list[dict]:
-    """The summary rows of the given ``stats.json`` files."""
+def read_stats(stats_paths: list[str | Path], rematch_paths: list[str | Path] = ()) -> list[dict]:
+    """The summary rows of the given ``stats.json`` files, each joined with the rematch columns
+    of the ``rematch.parquet`` among ``rematch_paths`` in the same stage folder (the field and
+    rematch jobs of a stage are independent; the summary brings them together)."""
+    from .rematch import rematch_row
+
+    rematched = {Path(path).parent: rematch_row(path) for path in rematch_paths}
     rows = []
     for path in stats_paths:
         try:
-            rows.append(json.loads(Path(path).read_text()))
+            row = json.loads(Path(path).read_text())
         except ValueError as e:
             raise InputError(f"not valid JSON ({e})", path) from None
+        rows.append({**row, **rematched.get(Path(path).parent, {})})
     return rows
 
 
-def write_summary(stats_paths: list[str | Path], out_parquet: str | Path, out_csv: str | Path) -> None:
-    """The summary table of the given ``stats.json`` rows, as Parquet and CSV (lists as JSON)."""
+def write_summary(
+    stats_paths: list[str | Path], out_parquet: str | Path, out_csv: str | Path, rematch_paths: list[str | Path] = ()
+) -> None:
+    """The summary table of the given ``stats.json`` rows (joined with their stages' rematch
+    columns), as Parquet and CSV (lists as JSON)."""
     import pandas as pd  # half a second to import: only the summary job needs it
 
-    table = pd.DataFrame(read_stats(stats_paths))
+    table = pd.DataFrame(read_stats(stats_paths, rematch_paths))
     with atomic_path(out_parquet) as tmp:
         table.to_parquet(tmp, index=False)
     flat = table.copy()
@@ -217,14 +226,19 @@ def run_pair(
     write_scan(scans[1], out_dir / "scan2.parquet")
     write_pair(out_dir / "registered.parquet", pair)
     pair_name = out_dir.resolve().name
-    rows = []
-    for stage, stage_id, table in zip(stages, ids, tables):
-        folder = out_dir / "stages" / stage_id
+    folders = [out_dir / "stages" / stage_id for stage_id in ids]
+    for stage, stage_id, folder, table in zip(stages, ids, folders, tables):
         write_stage(stage, stage_id, folder / "points.parquet", folder / "removed.parquet")
-        rows.append(field_stage(
+        field_stage(
             folder / "points.parquet", folder / "removed.parquet", study.grid, pair_name,
             folder / "field.parquet", folder / "stats.json",
-        ))  # fmt: skip
+        )  # fmt: skip
         write_suggestions(folder / "suggestions.parquet", table, stage_id, candidates[stage.level], study.grid)
-    write_summary([out_dir / "stages" / i / "stats.json" for i in ids], out_dir / "summary.parquet", out_dir / "summary.csv")
-    return rows
+        if study.rematch:
+            from .rematch import rematch_stage
+
+            rematch_stage(folder / "points.parquet", study.rematch, folder / "rematch.parquet")
+    stats = [folder / "stats.json" for folder in folders]
+    rematched = [folder / "rematch.parquet" for folder in folders] if study.rematch else []
+    write_summary(stats, out_dir / "summary.parquet", out_dir / "summary.csv", rematched)
+    return read_stats(stats, rematched)

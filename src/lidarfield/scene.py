@@ -11,11 +11,14 @@ A scene YAML::
       - {kind: cylinder, radius: 0.3, height: 5, center: [3, 3, 2.5], sections: 32}
       - {kind: mesh, file: car.glb, transform: {translation: [5, -2, 0], rpy: [0, 0, 1.57]},
          velocity_mps: [-3, 0, 0]}
+      - {kind: box, size: [5, 2, 2.3], center: [-1.5, 0, -1.65], frame: sensor}   # own vehicle body
 
 Primitives are centred on their own origin; ``center`` (primitives only) and
 ``transform: {translation, rpy}`` (radians, R = Rz(yaw) Ry(pitch) Rx(roll)) place them, and
 ``scale`` scales a mesh file before the transform. Mesh files (OBJ, STL, PLY, GLB, ...) are
-read by trimesh, relative to the YAML file.
+read by trimesh, relative to the YAML file. An object with ``frame: sensor`` is placed in the
+sensor's frame and moves with it (the vehicle that carries the sensor): every scan sees it at the
+same place, whatever the sensor's pose.
 """
 
 from __future__ import annotations
@@ -37,17 +40,24 @@ _KEYS = {
     "plane": {"size"},
     "mesh": {"file", "scale"},
 }
-_COMMON_KEYS = {"name", "kind", "center", "transform", "velocity_mps"}
+_COMMON_KEYS = {"name", "kind", "center", "transform", "velocity_mps", "frame"}
+FRAMES = ("world", "sensor")
 _REQUIRED = {"box": {"size"}, "cylinder": {"radius", "height"}, "plane": {"size"}, "mesh": {"file"}}
 
 
 @dataclass(frozen=True)
 class SceneObject:
-    """One rigid object: its triangle mesh in the world frame at time 0, and its velocity."""
+    """One rigid object: its triangle mesh at time 0 and its velocity, in the world frame, or
+    in the sensor's frame for an object the sensor carries (``frame == "sensor"``)."""
 
     name: str
     mesh: trimesh.Trimesh
     velocity_mps: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    frame: str = "world"
+
+    @property
+    def carried(self) -> bool:
+        return self.frame == "sensor"
 
     @property
     def moving(self) -> bool:
@@ -67,8 +77,8 @@ class Scene:
     source: str  # "builtin:NAME" or the YAML path
 
     def mesh_at(self, time_s: float = 0.0) -> trimesh.Trimesh:
-        """All objects as one mesh, each where it is at ``time_s``."""
-        return trimesh.util.concatenate([o.mesh_at(time_s) for o in self.objects])
+        """The world's objects (not those the sensor carries) as one mesh, each where it is at ``time_s``."""
+        return trimesh.util.concatenate([o.mesh_at(time_s) for o in self.objects if not o.carried])
 
 
 def builtin_scenes() -> list[str]:
@@ -137,7 +147,10 @@ def _build_object(spec: dict, index: int, base_dir: Path, where: str) -> SceneOb
         velocity = np.asarray(spec.get("velocity_mps", (0.0, 0.0, 0.0)), dtype=float).reshape(3)
     except (TypeError, ValueError) as e:
         raise ConfigError(f"{label} ({kind}): {e}", where) from None
-    return SceneObject(str(spec.get("name", f"{kind}-{index}")), mesh, velocity)
+    frame = spec.get("frame", "world")
+    if frame not in FRAMES or (frame == "sensor" and np.any(velocity != 0)):
+        raise ConfigError(f"{label} ({kind}): frame must be one of {list(FRAMES)}, and an object the sensor carries has no velocity", where)
+    return SceneObject(str(spec.get("name", f"{kind}-{index}")), mesh, velocity, frame)
 
 
 def _primitive_mesh(kind: str, spec: dict, base_dir: Path) -> trimesh.Trimesh:

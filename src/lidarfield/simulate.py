@@ -136,6 +136,7 @@ def simulate_scan(
     ray_time = np.repeat(motion_time, sensor.channels)
 
     distance = _scene_hits(scene, time_s, origins, world_dirs, ray_time)
+    distance = np.minimum(distance, _carried_hits(scene, local.reshape(-1, 3)))
     keep = np.isfinite(distance) & (distance >= sensor.min_range_m) & (distance <= limit)
     rng = np.random.default_rng(seed)
     if dropout > 0:
@@ -156,14 +157,24 @@ def _scene_hits(scene: Scene, time_s: float, origins: np.ndarray, directions: np
     """Distance to the first hit over all objects. A moving object is cast once at its place
     at ``time_s``, with each ray's origin shifted by -velocity x (the ray's own time offset):
     the same as moving the object, per ray."""
-    static = [o.mesh for o in scene.objects if not o.moving]
+    static = [o.mesh for o in scene.objects if not o.moving and not o.carried]
     distance = np.full(len(origins), np.inf)
     if static:
         distance = first_hits(trimesh.util.concatenate(static), origins, directions)[0]
-    for obj in (o for o in scene.objects if o.moving):
+    for obj in (o for o in scene.objects if o.moving and not o.carried):
         shifted = origins - ray_time[:, None] * obj.velocity_mps
         distance = np.minimum(distance, first_hits(obj.mesh_at(time_s), shifted, directions)[0])
     return distance
+
+
+def _carried_hits(scene: Scene, local_directions: np.ndarray) -> np.ndarray:
+    """Distance to the first hit on the objects the sensor carries, cast in the sensor frame of
+    each firing (where they do not move, rolling shutter or not)."""
+    carried = [o.mesh for o in scene.objects if o.carried]
+    if not carried:
+        return np.full(len(local_directions), np.inf)
+    origins = np.zeros_like(local_directions)
+    return first_hits(trimesh.util.concatenate(carried), origins, local_directions)[0]
 
 
 def _checked_max_range(sensor: SensorModel, max_range_m: float | None) -> float:

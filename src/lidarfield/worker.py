@@ -43,6 +43,7 @@ PRELOAD = (
     "lidarfield.pipeline",
     "lidarfield.plots",
     "lidarfield.registration.matching",  # Open3D
+    "lidarfield.rematch",
     "lidarfield.simulate",
     "lidarfield.scene",
     "lidarfield.stack",

@@ -183,5 +183,18 @@ def on_demand_page(wildcards):
     return f"{RESULTS}/{wildcards.pair}/stages.html"
 
 
+def rematch_files(wildcards=None):
+    """The stages' rematch tables, when the study asks for rematching (else none: no job)."""
+    if not STUDY.rematch:
+        return []
+    if wildcards is not None and "pair" in wildcards.keys():
+        return [
+            f"{stage_dir(wildcards.pair, s)}/rematch.parquet"
+            for s in STAGES[wildcards.pair]
+        ]
+    return all_stage_files("rematch.parquet")
+
+
 GRID = canonical_json(STUDY.grid)
+REMATCH = canonical_json(STUDY.rematch)
 PLOTS = canonical_json(figure_settings(STUDY.plots))

@@ -58,7 +58,8 @@ rule plotly_js:
 
 rule plot_pair:
     input:
-        pair_stats,
+        stats=pair_stats,
+        rematch=rematch_files,
     output:
         report(
             directory(f"{RESULTS}/{{pair}}/figures"),
@@ -76,4 +77,5 @@ rule plot_pair:
     resources:
         mem_mb=2000,
     shell:
-        "lidarfield job plot-pair --stats {input:q} --out {output:q} > {log:q} 2>&1"
+        "lidarfield job plot-pair --stats {input.stats:q} --rematch {input.rematch:q}"
+        " --out {output:q} > {log:q} 2>&1"

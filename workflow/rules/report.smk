@@ -3,7 +3,8 @@
 
 rule summary:
     input:
-        all_stage_files("stats.json"),
+        stats=all_stage_files("stats.json"),
+        rematch=rematch_files,
     output:
         parquet=f"{RESULTS}/summary.parquet",
         csv=report(
@@ -19,7 +20,8 @@ rule summary:
     resources:
         mem_mb=2000,
     shell:
-        "lidarfield job summary --stats {input:q} --parquet {output.parquet:q}"
+        "lidarfield job summary --stats {input.stats:q} --rematch {input.rematch:q}"
+        " --parquet {output.parquet:q}"
         " --csv {output.csv:q} > {log:q} 2>&1"
 
 
@@ -28,6 +30,7 @@ rule summary:
 rule pair_report:
     input:
         stats=pair_stats,
+        rematch=rematch_files,
         suggestions=pair_suggestions,
         pair_figures=f"{RESULTS}/{{pair}}/figures",
         stage_figures=pair_page_stage_figures,
@@ -50,6 +53,7 @@ rule pair_report:
         max_mb=config["report"]["max_mb"],
     shell:
         "lidarfield job pair-report --pair {wildcards.pair} --stats {input.stats:q}"
+        " --rematch {input.rematch:q}"
         " --stage-dirs {params.stage_dirs:q} --plots {params.plots:q} {params.stage_figures}"
         " --on-demand {params.on_demand:q} --max-mb {params.max_mb} --out {output:q} > {log:q} 2>&1"
 

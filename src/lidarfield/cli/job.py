@@ -55,6 +55,11 @@ def add_parser(subparsers) -> None:
     p.add_argument("--grid", type=_json, required=True)
     p.add_argument("--out", required=True)
     p.set_defaults(func=_suggest)
+    p = jobs.add_parser("rematch")
+    p.add_argument("--points", required=True)
+    p.add_argument("--settings", type=_json, required=True, help="the validated rematch section")
+    p.add_argument("--out", required=True)
+    p.set_defaults(func=_rematch)
 
     p = jobs.add_parser("plot-stage")
     p.add_argument("--stage-dir", required=True)
@@ -70,11 +75,13 @@ def add_parser(subparsers) -> None:
 
     p = jobs.add_parser("plot-pair")
     p.add_argument("--stats", nargs="+", required=True)
+    p.add_argument("--rematch", nargs="*", default=[], help="the stages' rematch.parquet files (rematch studies)")
     p.add_argument("--out", required=True)
     p.set_defaults(func=_plot_pair)
 
     p = jobs.add_parser("summary")
     p.add_argument("--stats", nargs="+", required=True)
+    p.add_argument("--rematch", nargs="*", default=[], help="the stages' rematch.parquet files (rematch studies)")
     p.add_argument("--parquet", required=True)
     p.add_argument("--csv", required=True)
     p.set_defaults(func=_summary)
@@ -99,6 +106,7 @@ def add_parser(subparsers) -> None:
     p = jobs.add_parser("pair-report")
     p.add_argument("--pair", required=True)
     p.add_argument("--stats", nargs="+", required=True)
+    p.add_argument("--rematch", nargs="*", default=[], help="the stages' rematch.parquet files (rematch studies)")
     p.add_argument("--stage-dirs", nargs="+", required=True)
     p.add_argument("--plots", type=_json, required=True)
     p.add_argument("--stage-figures", action=argparse.BooleanOptionalAction, required=True)
@@ -146,6 +154,10 @@ def _suggest(args: argparse.Namespace) -> None:
     from ..suggest import suggest_stage
 
     suggest_stage(args.points, args.candidates, args.grid, args.out)
+def _rematch(args: argparse.Namespace) -> None:
+    from ..rematch import rematch_stage
+
+    rematch_stage(args.points, args.settings, args.out)
 
 
 def _plot_stage(args: argparse.Namespace) -> None:
@@ -165,12 +177,16 @@ def _plot_pair(args: argparse.Namespace) -> None:
     from ..plots import plot_pair
 
     plot_pair(read_stats(args.stats), args.out)
+    if args.rematch:
+        from ..plots.rematch import plot_pair_rematch
+
+        plot_pair_rematch(args.rematch, args.out)
 
 
 def _summary(args: argparse.Namespace) -> None:
     from ..pipeline import write_summary
 
-    write_summary(args.stats, args.parquet, args.csv)
+    write_summary(args.stats, args.parquet, args.csv, args.rematch)
 
 
 def _study_voxels(args: argparse.Namespace) -> None:
@@ -197,7 +213,7 @@ def _pair_report(args: argparse.Namespace) -> None:
     from ..pipeline import read_stats
     from ..report import write_pair_page
 
-    write_pair_page(args.pair, args.stage_dirs, read_stats(args.stats), args.out, args.plots, args.stage_figures,
+    write_pair_page(args.pair, args.stage_dirs, read_stats(args.stats, args.rematch), args.out, args.plots, args.stage_figures,
                     overview_href="../report.html", on_demand=args.on_demand, max_mb=args.max_mb)
 
 

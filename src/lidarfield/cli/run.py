@@ -16,11 +16,12 @@ def add_parser(subparsers) -> None:
         "run",
         help="run one pair through the config's hypothesis stack (no Snakemake)",
         description="Read two scans, register them, apply every hypothesis of the config's stack and write, "
-        "per stage, the points, the removed points, the field and a summary row, plus DIR/summary.parquet/.csv.",
+        "per stage, the points, the removed points, the field, a summary row and, with rematch:, the pose error "
+        "of rematching the stage (rematch.parquet), plus DIR/summary.parquet/.csv.",
     )
     parser.add_argument("scan1", help="scan 1 (its sensor frame is the frame of the results)")
     parser.add_argument("scan2", help="scan 2")
-    parser.add_argument("--config", required=True, help="study YAML: its grid and hypotheses are used")
+    parser.add_argument("--config", required=True, help="study YAML: its grid, hypotheses and rematch section are used")
     parser.add_argument("--out", required=True, metavar="DIR", help="output folder (new, empty, or from an earlier run)")
     how = parser.add_mutually_exclusive_group()
     how.add_argument("--register", metavar="METHOD", help="identity (default), truth, icp, icp_point_to_plane, gicp or ndt")
@@ -35,10 +36,15 @@ def add_parser(subparsers) -> None:
 
 def _run(args: argparse.Namespace) -> int:
     from ..pipeline import run_pair
+    from ..rematch import METHOD_COLUMNS, method_rows
 
     poses = None if args.poses is None else {"topic": args.poses, **({"frame": args.pose_frame} if args.pose_frame else {})}
     rows = run_pair(args.scan1, args.scan2, args.config, args.out, args.register, args.transform, args.sensor, poses)
     print(format_table(rows))
+    rematched = method_rows(rows)
+    if rematched:
+        print("\nrematch: pose error of each method from the stage's survivors (median and 90th percentile over trials)")
+        print(format_table(rematched, METHOD_COLUMNS))
     print(format_next_steps(rows, args.out))
     print(f"wrote {args.out}/stages/*/ and {args.out}/summary.parquet, summary.csv")
     return 0
@@ -64,11 +70,11 @@ def format_next_steps(rows: list[dict], out_dir) -> str:
     return "\n".join(lines)
 
 
-def format_table(rows: list[dict]) -> str:
-    """The stages as an aligned text table (magnitudes in metres, 3 decimals)."""
-    cells = [[_cell(row.get(column)) for column in TABLE_COLUMNS] for row in rows]
-    widths = [max(len(c), *(len(r[i]) for r in cells)) for i, c in enumerate(TABLE_COLUMNS)]
-    lines = ["  ".join(c.ljust(w) if i < 2 else c.rjust(w) for i, (c, w) in enumerate(zip(line, widths))) for line in [list(TABLE_COLUMNS), *cells]]
+def format_table(rows: list[dict], columns: tuple[str, ...] = TABLE_COLUMNS) -> str:
+    """The rows as an aligned text table (floats with 3 decimals; the first two columns text)."""
+    cells = [[_cell(row.get(column)) for column in columns] for row in rows]
+    widths = [max(len(c), *(len(r[i]) for r in cells)) for i, c in enumerate(columns)]
+    lines = ["  ".join(c.ljust(w) if i < 2 else c.rjust(w) for i, (c, w) in enumerate(zip(line, widths))) for line in [list(columns), *cells]]
     return "\n".join(lines)
 
 

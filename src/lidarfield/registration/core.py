@@ -32,21 +32,19 @@ def register_pair(
     s = parse_settings(settings, base_dir)
     reference = _reference(scan1, scan2)
     p = s.params
-    source = matching.point_cloud(scan2.xyz, p["voxel_m"], p["min_range_m"])
-    target = matching.point_cloud(scan1.xyz, p["voxel_m"], p["min_range_m"])
-    record: dict = {"method": s.method}
+    clouds = matching.prepare(s.method, scan1.xyz, scan2.xyz, p)
     if s.method in MATCHING_METHODS:
-        T, record = _scan_match(s, scan1, scan2, source, target, reference)
+        guess = _require_reference(reference, scan1, scan2, "guess 'truth'") if isinstance(s.guess, str) else s.guess
+        require_points(s.method, clouds)
+        T, record = scan_match(s.method, clouds, guess, p)
+        record.update(guess=s.guess_given, guess_T_1_2=np.asarray(guess).tolist(), parameters=dict(p))
     else:
         T = _fixed_transform(s, scan1, scan2, reference)
-        record["converged"] = True  # nothing to converge; fitness still says how well it fits
+        record = {"method": s.method, "converged": True}  # nothing to converge; fitness still says how well it fits
         if s.method == "transform":
             record["transform_file"] = str(s.transform_file)
-    fitness, rmse = matching.evaluate(source, target, T, p["fitness_distance_m"])
-    record.update(fitness=fitness, inlier_rmse=rmse, fitness_distance_m=p["fitness_distance_m"])
-    record["min_fitness"] = p["min_fitness"]
-    record["points_used"] = [len(target.points), len(source.points)]
-    _judge(record, T, s.method in MATCHING_METHODS)
+        _judge(record, clouds, T, p, matched=False)
+    record["points_used"] = [len(clouds.target.points), len(clouds.source.points)]
     if reference is not None:
         translation_error, rotation_error = pose_error(T, reference)
         record.update(translation_error_m=translation_error, rotation_error_deg=rotation_error)
@@ -84,41 +82,46 @@ def _fixed_transform(s: RegistrationSettings, scan1: Scan, scan2: Scan, referenc
     return read_pose(s.transform_file)
 
 
-def _scan_match(s: RegistrationSettings, scan1, scan2, source, target, reference):
-    from . import matching
-
-    p = s.params
-    guess = _require_reference(reference, scan1, scan2, "guess 'truth'") if isinstance(s.guess, str) else s.guess
-    for k, cloud in ((1, target), (2, source)):
+def require_points(method: str, clouds: matching.Clouds) -> None:
+    """Raise ``RegistrationError`` when a cloud is too small to constrain a pose."""
+    for k, cloud in ((1, clouds.target), (2, clouds.source)):
         if len(cloud.points) < _MIN_POINTS:
             raise RegistrationError(
-                f"{s.method}: scan {k} has {len(cloud.points)} point(s) after min_range_m and voxel_m: too few to match"
+                f"{method}: scan {k} has {len(cloud.points)} point(s) after min_range_m and voxel_m: too few to match"
             )
-    # NDT models scan 1 with its own cells: give it every point, not the downsampled cloud.
-    ndt_target = matching.point_cloud(scan1.xyz, 0.0, p["min_range_m"]) if s.method == "ndt" else target
-    result = matching.match(s.method, source, ndt_target, guess, p)
-    record = {
-        "method": s.method,
-        "guess": s.guess_given,
-        "guess_T_1_2": np.asarray(guess).tolist(),
-        "parameters": dict(p),
-    }
+
+
+def scan_match(method: str, clouds: matching.Clouds, guess: np.ndarray, p: dict) -> tuple[np.ndarray, dict]:
+    """One scan matching of scan 2 to scan 1 from ``guess``: the estimate of ``T_1_2`` and its
+    record (``failure`` when Open3D did not run, ``fitness``, ``inlier_rmse``, ``converged``,
+    ``warning``). A failure or a poor fit is recorded, never raised."""
+    from . import matching
+
+    result = matching.match(method, clouds, guess, p)
+    record: dict = {"method": method}
     if result.failure:
         record["failure"] = f"Open3D refused the input: {result.failure}"
     elif np.array_equal(result.T, guess):
         # Open3D's NDT returns its guess untouched when too few residuals survive (cells
         # too small for the data); a good guess would then pass the fitness check unnoticed.
         record["failure"] = "Open3D returned the guess unchanged: no iteration took place"
+    _judge(record, clouds, result.T, p, matched=True)
     return result.T, record
 
 
-def _judge(record: dict, T: np.ndarray, matched: bool) -> None:
-    """Set ``converged`` (scan matching only) and ``warning`` from the fitness and the estimate.
+def _judge(record: dict, clouds: matching.Clouds, T: np.ndarray, p: dict, matched: bool) -> None:
+    """Measure the fitness of ``T``, and set ``converged`` (scan matching only) and ``warning``
+    from the fitness and the estimate.
 
     Converged means: Open3D ran, the estimate is a finite rigid pose, and the fitness reaches
     ``min_fitness``. Open3D 0.20 does not report iteration counts or whether its own stopping
     criteria were met, so these are the checks available.
     """
+    from . import matching
+
+    fitness, rmse = matching.evaluate(clouds.source, clouds.target, T, p["fitness_distance_m"])
+    record.update(fitness=fitness, inlier_rmse=rmse, fitness_distance_m=p["fitness_distance_m"])
+    record["min_fitness"] = p["min_fitness"]
     problems = []
     if record.get("failure"):
         problems.append(f"{record['failure']}; T_1_2 is the guess")

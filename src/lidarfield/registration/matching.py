@@ -29,13 +29,37 @@ def point_cloud(xyz: np.ndarray, voxel_m: float, min_range_m: float) -> o3d.geom
     return cloud.voxel_down_sample(voxel_m) if voxel_m > 0 else cloud
 
 
-def match(method: str, source, target, guess: np.ndarray, p: dict) -> MatchResult:
+@dataclass
+class Clouds:
+    """Both clouds as a method needs them: scan 2 (source, its sensor frame) and scan 1 (target)."""
+
+    source: o3d.geometry.PointCloud
+    target: o3d.geometry.PointCloud  # what the fitness is measured against (downsampled scan 1)
+    model: o3d.geometry.PointCloud  # what the method matches against (NDT: every scan-1 point)
+
+
+def prepare(method: str, xyz1: np.ndarray, xyz2: np.ndarray, p: dict) -> Clouds:
+    """Downsample both clouds and give them the normals the method uses, once for any number
+    of runs from different guesses."""
+    source = point_cloud(xyz2, p["voxel_m"], p["min_range_m"])
+    target = point_cloud(xyz1, p["voxel_m"], p["min_range_m"])
+    if method in ("icp_point_to_plane", "gicp"):
+        # Point-to-plane needs target normals; Open3D's GICP builds its covariances from normals.
+        search = o3d.geometry.KDTreeSearchParamHybrid(radius=p["normal_radius_m"], max_nn=p["normal_max_nn"])
+        for cloud in (source, target):
+            cloud.estimate_normals(search)
+    # NDT models scan 1 with its own cells: give it every point, not the downsampled cloud.
+    model = point_cloud(xyz1, 0.0, p["min_range_m"]) if method == "ndt" else target
+    return Clouds(source, target, model)
+
+
+def match(method: str, clouds: Clouds, guess: np.ndarray, p: dict) -> MatchResult:
     """Run ``method`` from ``guess``; Open3D refusing the input (too few points or NDT cells)
     gives the guess back with the reason instead of raising."""
     try:
         if method == "ndt":
-            return MatchResult(_ndt(source, target, guess, p))
-        return MatchResult(_icp_family(method, source, target, guess, p))
+            return MatchResult(_ndt(clouds.source, clouds.model, guess, p))
+        return MatchResult(_icp_family(method, clouds.source, clouds.model, guess, p))
     except RuntimeError as e:
         return MatchResult(np.array(guess, dtype=np.float64), _open3d_message(e))
 
@@ -45,16 +69,12 @@ def _icp_family(method: str, source, target, guess: np.ndarray, p: dict) -> np.n
     distance = p["max_correspondence_m"]
     if method == "icp":
         estimation = reg.TransformationEstimationPointToPoint()
-        return reg.registration_icp(source, target, distance, guess, estimation, criteria).transformation
-    # Point-to-plane needs target normals; GICP computes its own covariances from neighbours.
-    search = o3d.geometry.KDTreeSearchParamHybrid(radius=p["normal_radius_m"], max_nn=p["normal_max_nn"])
-    for cloud in (source, target):
-        cloud.estimate_normals(search)
-    if method == "icp_point_to_plane":
+    elif method == "icp_point_to_plane":
         estimation = reg.TransformationEstimationPointToPlane()
-        return reg.registration_icp(source, target, distance, guess, estimation, criteria).transformation
-    estimation = reg.TransformationEstimationForGeneralizedICP(p["gicp_epsilon"])
-    return reg.registration_generalized_icp(source, target, distance, guess, estimation, criteria).transformation
+    else:
+        estimation = reg.TransformationEstimationForGeneralizedICP(p["gicp_epsilon"])
+        return reg.registration_generalized_icp(source, target, distance, guess, estimation, criteria).transformation
+    return reg.registration_icp(source, target, distance, guess, estimation, criteria).transformation
 
 
 def _ndt(source, target, guess: np.ndarray, p: dict) -> np.ndarray:

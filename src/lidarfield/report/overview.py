@@ -23,7 +23,8 @@ from ..plots.study import StudyFigure, study_figures
 from ..study import StudyTables
 from .budget import MB, budget_mb, utf8_len
 from .page import esc, image, link, page, table
-from .pair_page import registration_problem
+from .pair_page import DPI, registration_problem
+from .rematch import study_rematch_parts
 from .suggestions import study_suggestions
 
 log = logging.getLogger(__name__)
@@ -132,7 +133,8 @@ def config_parts(config: dict | None) -> list[str]:
 
 
 def overview_parts(config: dict | None, tables: StudyTables, figures_dir: Path | None, stage_figures: set[str], last_stages: dict[str, Path]) -> list[str]:
-    return [*header_parts(tables), *study_level_parts(tables, figures_dir), *next_steps_parts(tables, last_stages),
+    return [*header_parts(tables), *study_level_parts(tables, figures_dir), *study_rematch_parts(tables.summary.to_dict("records"), DPI),
+            *next_steps_parts(tables, last_stages),
             *ranking_parts(tables, stage_figures), *config_parts(config)]
 
 

@@ -20,6 +20,7 @@ from ..plots.pair_stats import pair_figure_png
 from ..stages import level_of
 from .budget import Figure, Note, budget_mb, file_figure, write_within_budget
 from .page import esc, relative_href, table
+from .rematch import pair_rematch_table
 from .suggestions import stage_suggestions
 
 SUMMARY_COLUMNS = (
@@ -37,6 +38,7 @@ STAGE_FIGURES = (
     ("field_perspective", "field in perspective"),
     ("removed_perspective", "removed points in perspective"),
 )
+REMATCH_FIGURE = ("pose_error", "pose error of rematching, stage by stage")  # only in studies with rematch
 PAIR_FIGURES = (
     ("stages", "magnitude stage by stage"),
     ("rigid_randomness", "rigid part and randomness stage by stage"),
@@ -82,6 +84,9 @@ def pair_figures(name: str, pair_dir: Path | None, rows: list[dict], out_dir: Pa
             figures.append(file_figure(PAIR_TIER, path, f"{name}: {caption}", 640, out_dir))
         elif rows:
             figures.append(Figure(PAIR_TIER, f"{name}: {caption}", 640, None, partial(pair_figure_png, stem, rows, DPI)))
+    stem, caption = REMATCH_FIGURE
+    if pair_dir is not None and (pair_dir / "figures" / f"{stem}.png").is_file():
+        figures.append(file_figure(PAIR_TIER, pair_dir / "figures" / f"{stem}.png", f"{name}: {caption}", 640, out_dir))
     return figures
 
 
@@ -124,7 +129,7 @@ def pair_page_parts(name: str, stage_dirs: list[Path], rows: list[dict], out_dir
     """The pair's page as parts (its figures still to be embedded or linked)."""
     pair_dir = stage_dirs[0].parent.parent if stage_dirs else None
     parts = header_parts(name, stage_dirs, overview_href)
-    parts += ["<h2>Stages</h2>", stages_table(rows)]
+    parts += ["<h2>Stages</h2>", stages_table(rows), pair_rematch_table(rows)]
     parts += ["<h2>Stage by stage</h2>", '<div class="figures">', *pair_figures(name, pair_dir, rows, out_dir), "</div>"]
     parts += ["<h2>Each stage: what to try next, and its figures</h2>"]
     if not with_stage_figures:

@@ -1,0 +1,25 @@
+# Does a stage's mitigation help scan matching? Register its survivors again with each method of
+# the config's rematch section, from the reference pose moved by seeded offsets, and measure the
+# pose error. Requested only when the config has `rematch:`; its params are the rematch settings,
+# so it reruns when they or its stage change, and never because of the grid or the plots.
+
+
+rule rematch:
+    input:
+        points=f"{RESULTS}/{{pair}}/stages/{{stage}}/points.parquet",
+    output:
+        f"{RESULTS}/{{pair}}/stages/{{stage}}/rematch.parquet",
+    log:
+        f"{RESULTS}/logs/rematch/{{pair}}/{{stage}}.log",
+    benchmark:
+        f"{RESULTS}/benchmarks/rematch/{{pair}}/{{stage}}.tsv"
+    conda:
+        "../envs/lidarfield.yaml"
+    threads: 1
+    resources:
+        mem_mb=4000,
+    params:
+        settings=REMATCH,
+    shell:
+        "lidarfield job rematch --points {input.points:q} --settings {params.settings:q}"
+        " --out {output:q} > {log:q} 2>&1"

@@ -39,6 +39,8 @@ def _run(args: argparse.Namespace) -> int:
     poses = None if args.poses is None else {"topic": args.poses, **({"frame": args.pose_frame} if args.pose_frame else {})}
     rows = run_pair(args.scan1, args.scan2, args.config, args.out, args.register, args.transform, args.sensor, poses)
     print(format_table(rows))
+    for line in findings_lines(rows):
+        print(line)
     print(format_next_steps(rows, args.out))
     print(f"wrote {args.out}/stages/*/ and {args.out}/summary.parquet, summary.csv")
     return 0
@@ -70,6 +72,17 @@ def format_table(rows: list[dict]) -> str:
     widths = [max(len(c), *(len(r[i]) for r in cells)) for i, c in enumerate(TABLE_COLUMNS)]
     lines = ["  ".join(c.ljust(w) if i < 2 else c.rjust(w) for i, (c, w) in enumerate(zip(line, widths))) for line in [list(TABLE_COLUMNS), *cells]]
     return "\n".join(lines)
+
+
+def findings_lines(rows: list[dict]) -> list[str]:
+    """What the table does not say plainly: the registration's and the scans' warnings, and
+    each stage's findings (lidarfield.findings)."""
+    from ..findings import pair_findings, stage_findings
+
+    lines = [f"registration: {rows[0]['registration_warning']}"] if rows and rows[0].get("registration_warning") else []
+    lines += [f"sensor model: {text}" for text in (pair_findings(rows[0]) if rows else [])]
+    lines += [f"{row['stage']}: {text}" for row in rows for text in stage_findings(row)]
+    return lines
 
 
 def _cell(value) -> str:

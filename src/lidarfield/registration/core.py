@@ -10,6 +10,7 @@ from ..errors import RegistrationError
 from ..pair import RegisteredPair
 from ..poses import apply_pose, pose_error, read_pose, relative_pose
 from ..scan import Scan
+from ..sensor_fit import sensor_fit
 from .settings import MATCHING_METHODS, RegistrationSettings, parse_settings
 
 # Fewer points than this after downsampling cannot constrain six degrees of freedom robustly.
@@ -39,7 +40,6 @@ def register_pair(
         T, record = _scan_match(s, scan1, scan2, source, target, reference)
     else:
         T = _fixed_transform(s, scan1, scan2, reference)
-        record["converged"] = True  # nothing to converge; fitness still says how well it fits
         if s.method == "transform":
             record["transform_file"] = str(s.transform_file)
     fitness, rmse = matching.evaluate(source, target, T, p["fitness_distance_m"])
@@ -60,6 +60,7 @@ def register_pair(
         dict(scan1.attributes),
         dict(scan2.attributes),
         record,
+        {"1": sensor_fit(scan1.xyz, scan1.sensor), "2": sensor_fit(scan2.xyz, scan2.sensor)},
     )
 
 
@@ -113,11 +114,12 @@ def _scan_match(s: RegistrationSettings, scan1, scan2, source, target, reference
 
 
 def _judge(record: dict, T: np.ndarray, matched: bool) -> None:
-    """Set ``converged`` (scan matching only) and ``warning`` from the fitness and the estimate.
+    """Set ``converged`` and ``warning`` from the fitness and the estimate.
 
-    Converged means: Open3D ran, the estimate is a finite rigid pose, and the fitness reaches
-    ``min_fitness``. Open3D 0.20 does not report iteration counts or whether its own stopping
-    criteria were met, so these are the checks available.
+    Converged means: the estimate is a finite rigid pose and the fitness reaches
+    ``min_fitness``, and, for scan matching, Open3D ran and left its guess. Open3D 0.20 does
+    not report iteration counts or whether its own stopping criteria were met, so these are
+    the checks available.
     """
     problems = []
     if record.get("failure"):
@@ -129,9 +131,10 @@ def _judge(record: dict, T: np.ndarray, matched: bool) -> None:
             f"poor fitness {record['fitness']:.3f} < min_fitness {record['min_fitness']} "
             f"(share of scan-2 points within {record['fitness_distance_m']} m of scan 1)"
         )
-    if matched:
-        record["converged"] = not problems
-        if problems:
-            problems.insert(0, f"{record['method']} did not converge")
+    # A fixed transform has nothing to iterate, but one that fits poorly (a zero-overlap pair:
+    # fitness 0) is no more a converged registration than a scan matching that fits poorly.
+    record["converged"] = not problems
+    if matched and problems:
+        problems.insert(0, f"{record['method']} did not converge")
     if problems:
         record["warning"] = "; ".join(problems)

@@ -102,7 +102,9 @@ def test_a_pair_without_overlap_says_so_and_is_not_converged(tmp_path, capsys):
     for name, rows in (("one.txt", "1 0 0\n"), ("far.txt", "100 0 0\n101 0 0\n100 1 0\n")):
         (tmp_path / name).write_text(rows)
     config = tmp_path / "study.yaml"
-    config.write_text(yaml.safe_dump({"grid": {"min_points": 1}, "hypotheses": [{"crop": {"max_range_m": 50.0}}]}))
+    # No suggestions: the default candidates include field_of_view, which needs a sensor model.
+    study = {"grid": {"min_points": 1}, "hypotheses": [{"crop": {"max_range_m": 50.0}}], "suggest": []}
+    config.write_text(yaml.safe_dump(study))
     rows = run_pair(tmp_path / "one.txt", tmp_path / "far.txt", config, tmp_path / "out")
     assert [r["registration_converged"] for r in rows] == [False, False]
     assert rows[0]["registration_fitness"] == 0.0 and "poor fitness 0.000" in rows[0]["registration_warning"]
@@ -112,6 +114,6 @@ def test_a_pair_without_overlap_says_so_and_is_not_converged(tmp_path, capsys):
     summary = pd.read_parquet(tmp_path / "out" / "summary.parquet")
     assert list(summary["field_warning"]) == ["", "no valid voxel: cloud 2 has no point left"]
     # The clouds 100 m apart share no voxel holding min_points of both.
-    config.write_text(yaml.safe_dump({"grid": {"min_points": 2}}))
+    config.write_text(yaml.safe_dump({"grid": {"min_points": 2}, "suggest": []}))
     (row,) = run_pair(tmp_path / "far.txt", tmp_path / "one.txt", config, tmp_path / "out2")
     assert row["field_warning"].startswith("no valid voxel: no voxel of the grid holds min_points of both clouds (3 and 1")

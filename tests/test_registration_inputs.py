@@ -84,8 +84,10 @@ def test_identity_on_a_displaced_pair_warns_of_poor_fitness(synthetic_pair):
     scan1, scan2 = synthetic_pair
     far = Scan(scan2.xyz + [0, 0, 5.0])
     reg = register_pair(scan1, far, "identity").registration
-    assert reg["converged"] is True  # nothing was iterated
+    # Nothing was iterated, but a transform that fits this poorly is not a registration.
+    assert reg["converged"] is False
     assert reg["fitness"] < 0.1 and "poor fitness" in reg["warning"]
+    assert register_pair(scan1, scan2, "identity").registration["converged"] is True
 
 
 def test_transform_file_sets_T_1_2(synthetic_pair, tmp_path):

@@ -165,6 +165,23 @@ def test_report_flags_a_registration_that_did_not_converge(study, tmp_path):
     assert pair_page(tmp_path, "pair-00").count('<tr class="flag">') == 1 and "fitness below 0.3" in pair_page(tmp_path, "pair-00")
 
 
+def test_pair_page_states_the_findings_and_flags_their_stages(study, tmp_path):
+    root, pairs = study
+    found, rows = discover(root)
+    pair = rows[0]["pair"]
+    rows = [dict(r) for r in rows if r["pair"] == pair]
+    assert "<h2>Findings</h2>" not in write_pair_page(pair, found[pair], rows, tmp_path / "clean.html").read_text()
+    for r in rows:
+        r["sensor_warning"] = "scan 1: 54.5% of the points do not fit sensor model 'os1-128'"
+    rows[1].update(removed1=600, n1=400, field_warning="no valid voxel: cloud 2 has no point left")
+    html = write_pair_page(pair, found[pair], rows, tmp_path / "r.html").read_text()
+    findings = html.split("<h2>Findings</h2>", 1)[1].split("</ul>", 1)[0]
+    assert findings.count("<li>") == 3  # the sensor once for the pair, two for the stage
+    assert f"pair {pair}: scan 1: 54.5% of the points do not fit sensor model &#x27;os1-128&#x27;" in findings
+    assert "removed 60% of cloud 1 (600 of 1000 points)" in findings and "no valid voxel" in findings
+    assert html.count('<tr class="flag">') == 1
+
+
 def test_discover_takes_the_stages_of_the_summary_only(study, tmp_path):
     root, pairs = study
     copy = tmp_path / "results"

@@ -15,6 +15,7 @@ import numpy as np
 from .io import read_scan, write_scan
 from .pair import write_pair
 from .scan import Scan
+from .sensor_fit import log_fit
 from .sensors import sensor_model
 
 log = logging.getLogger(__name__)
@@ -51,6 +52,7 @@ def recorded_scan(spec: dict) -> Scan:
 def scan_job(kind: str, spec: dict, out: str | Path) -> None:
     scan = simulated_scan(spec) if kind == "simulated" else recorded_scan(spec)
     log.info("%s scan: %d points (%d invalid rows dropped) -> %s", kind, len(scan), scan.dropped_invalid, out)
+    log_fit(scan, spec.get("path") or str(out))
     write_scan(scan, out)
 
 

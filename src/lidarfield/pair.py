@@ -27,6 +27,8 @@ class RegisteredPair:
     attributes2: dict[str, np.ndarray] = field(default_factory=dict)
     # method, fitness, inlier_rmse, converged, errors against reference poses, ...
     registration: dict = field(default_factory=dict)
+    # How each scan fitted its sensor model at ingest ({"1": ..., "2": ...}: sensor_fit.sensor_fit).
+    sensor_fit: dict = field(default_factory=dict)
 
     def __post_init__(self):
         self.xyz1 = np.ascontiguousarray(self.xyz1, dtype=np.float64).reshape(-1, 3)
@@ -52,6 +54,7 @@ class RegisteredPair:
             {k: v[keep1] for k, v in self.attributes1.items()},
             {k: v[keep2] for k, v in self.attributes2.items()},
             self.registration,
+            self.sensor_fit,
         )
 
     # --- the points table -------------------------------------------------------------
@@ -78,6 +81,7 @@ class RegisteredPair:
             "sensor1": None if self.sensor1 is None else self.sensor1.to_dict(),
             "sensor2": None if self.sensor2 is None else self.sensor2.to_dict(),
             "registration": self.registration,
+            "sensor_fit": self.sensor_fit,
         }
 
     @classmethod
@@ -95,6 +99,7 @@ class RegisteredPair:
             {k: v[in1] for k, v in attrs.items()},
             {k: v[in2] for k, v in attrs.items()},
             meta.get("registration", {}),
+            meta.get("sensor_fit", {}),
         )
 
 

@@ -21,6 +21,7 @@ from .io import read_scan, write_scan
 from .io.atomic import atomic_path, write_text
 from .io.parquet_table import read_table, write_table
 from .pair import RegisteredPair, read_pair, write_pair
+from .sensor_fit import fit_warning, log_fit
 from .stack import Stage, apply_stack, initial_stage, next_stage
 from .stages import stage_ids
 from .suggest import suggestions, write_suggestions
@@ -105,7 +106,26 @@ def summary_row(pair_name: str, pair: RegisteredPair, meta: dict, removed_cloud:
     row["registration_fitness"] = registration.get("fitness")
     row["registration_converged"] = registration.get("converged")
     row["registration_warning"] = registration.get("warning", "")  # a column in every summary
+    row["field_warning"] = field_warning(row)
+    fits = meta.get("sensor_fit") or {}
+    for k in ("1", "2"):
+        row[f"sensor_outside{k}"] = (fits.get(k) or {}).get("outside")  # None: no sensor model
+    row["sensor_warning"] = "; ".join(filter(None, (fit_warning(fits.get(k), f"scan {k}") for k in ("1", "2"))))
     return row
+
+
+def field_warning(row: dict) -> str:
+    """Why a stage's field has no valid voxel, in words ('' when it has one): its statistics
+    are then NaN, which a reader of the summary should not have to decode."""
+    if row["voxels_valid"]:
+        return ""
+    if not row["n1"] or not row["n2"]:
+        empty = " and ".join(f"cloud {k}" for k in (1, 2) if not row[f"n{k}"])
+        return f"no valid voxel: {empty} has no point left"
+    return (
+        f"no valid voxel: no voxel of the grid holds min_points of both clouds ({row['n1']} and {row['n2']} "
+        "points): the clouds do not overlap on the grid, or are too sparse for it"
+    )
 
 
 def read_stats(stats_paths: list[str | Path], rematch_paths: list[str | Path] = ()) -> list[dict]:
@@ -196,6 +216,7 @@ def run_pair(
     scans = [read_scan(path, sensor=sensor, poses=poses) for path in (scan1, scan2)]
     for path, scan in zip((scan1, scan2), scans):
         log.info("read %s: %d points (%d invalid rows dropped)", path, len(scan), scan.dropped_invalid)
+        log_fit(scan, str(path))
     from .registration import register_pair  # imports Open3D: only where a pair is registered
 
     pair = register_pair(scans[0], scans[1], settings)

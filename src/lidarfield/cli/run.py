@@ -41,6 +41,8 @@ def _run(args: argparse.Namespace) -> int:
     poses = None if args.poses is None else {"topic": args.poses, **({"frame": args.pose_frame} if args.pose_frame else {})}
     rows = run_pair(args.scan1, args.scan2, args.config, args.out, args.register, args.transform, args.sensor, poses)
     print(format_table(rows))
+    for line in findings_lines(rows):
+        print(line)
     rematched = method_rows(rows)
     if rematched:
         print("\nrematch: pose error of each method from the stage's survivors (median and 90th percentile over trials)")
@@ -76,6 +78,17 @@ def format_table(rows: list[dict], columns: tuple[str, ...] = TABLE_COLUMNS) -> 
     widths = [max(len(c), *(len(r[i]) for r in cells)) for i, c in enumerate(columns)]
     lines = ["  ".join(c.ljust(w) if i < 2 else c.rjust(w) for i, (c, w) in enumerate(zip(line, widths))) for line in [list(columns), *cells]]
     return "\n".join(lines)
+
+
+def findings_lines(rows: list[dict]) -> list[str]:
+    """What the table does not say plainly: the registration's and the scans' warnings, and
+    each stage's findings (lidarfield.findings)."""
+    from ..findings import pair_findings, stage_findings
+
+    lines = [f"registration: {rows[0]['registration_warning']}"] if rows and rows[0].get("registration_warning") else []
+    lines += [f"sensor model: {text}" for text in (pair_findings(rows[0]) if rows else [])]
+    lines += [f"{row['stage']}: {text}" for row in rows for text in stage_findings(row)]
+    return lines
 
 
 def _cell(value) -> str:

@@ -10,6 +10,7 @@ from ..errors import RegistrationError
 from ..pair import RegisteredPair
 from ..poses import apply_pose, pose_error, read_pose, relative_pose
 from ..scan import Scan
+from ..sensor_fit import sensor_fit
 from .settings import MATCHING_METHODS, RegistrationSettings, parse_settings
 
 # Fewer points than this after downsampling cannot constrain six degrees of freedom robustly.
@@ -40,7 +41,7 @@ def register_pair(
         record.update(guess=s.guess_given, guess_T_1_2=np.asarray(guess).tolist(), parameters=dict(p))
     else:
         T = _fixed_transform(s, scan1, scan2, reference)
-        record = {"method": s.method, "converged": True}  # nothing to converge; fitness still says how well it fits
+        record = {"method": s.method}
         if s.method == "transform":
             record["transform_file"] = str(s.transform_file)
         _judge(record, clouds, T, p, matched=False)
@@ -58,6 +59,7 @@ def register_pair(
         dict(scan1.attributes),
         dict(scan2.attributes),
         record,
+        {"1": sensor_fit(scan1.xyz, scan1.sensor), "2": sensor_fit(scan2.xyz, scan2.sensor)},
     )
 
 
@@ -110,12 +112,13 @@ def scan_match(method: str, clouds: matching.Clouds, guess: np.ndarray, p: dict)
 
 
 def _judge(record: dict, clouds: matching.Clouds, T: np.ndarray, p: dict, matched: bool) -> None:
-    """Measure the fitness of ``T``, and set ``converged`` (scan matching only) and ``warning``
-    from the fitness and the estimate.
+    """Measure the fitness of ``T``, and set ``converged`` and ``warning`` from the fitness and
+    the estimate.
 
-    Converged means: Open3D ran, the estimate is a finite rigid pose, and the fitness reaches
-    ``min_fitness``. Open3D 0.20 does not report iteration counts or whether its own stopping
-    criteria were met, so these are the checks available.
+    Converged means: the estimate is a finite rigid pose and the fitness reaches
+    ``min_fitness``, and, for scan matching, Open3D ran and left its guess. Open3D 0.20 does
+    not report iteration counts or whether its own stopping criteria were met, so these are
+    the checks available.
     """
     from . import matching
 
@@ -132,9 +135,10 @@ def _judge(record: dict, clouds: matching.Clouds, T: np.ndarray, p: dict, matche
             f"poor fitness {record['fitness']:.3f} < min_fitness {record['min_fitness']} "
             f"(share of scan-2 points within {record['fitness_distance_m']} m of scan 1)"
         )
-    if matched:
-        record["converged"] = not problems
-        if problems:
-            problems.insert(0, f"{record['method']} did not converge")
+    # A fixed transform has nothing to iterate, but one that fits poorly (a zero-overlap pair:
+    # fitness 0) is no more a converged registration than a scan matching that fits poorly.
+    record["converged"] = not problems
+    if matched and problems:
+        problems.insert(0, f"{record['method']} did not converge")
     if problems:
         record["warning"] = "; ".join(problems)

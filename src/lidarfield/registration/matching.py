@@ -98,7 +98,15 @@ def evaluate(source, target, T: np.ndarray, distance_m: float) -> tuple[float, f
     if len(source.points) == 0 or len(target.points) == 0 or not np.isfinite(T).all():
         return 0.0, None
     result = reg.evaluate_registration(source, target, distance_m, T)
-    return float(result.fitness), float(result.inlier_rmse) if result.fitness > 0 else None
+    if result.fitness == 0:
+        return 0.0, None
+    # The RMSE from the pairs in source order: Open3D sums them in parallel, in an order that
+    # changes its last digits from run to run, and the registered pair's files should not.
+    pairs = np.asarray(result.correspondence_set)
+    pairs = pairs[np.argsort(pairs[:, 0], kind="stable")]
+    mapped = np.asarray(source.points)[pairs[:, 0]] @ T[:3, :3].T + T[:3, 3]
+    squared = np.sum((mapped - np.asarray(target.points)[pairs[:, 1]]) ** 2, axis=1)
+    return float(result.fitness), float(np.sqrt(np.mean(squared)))
 
 
 def _open3d_message(error: RuntimeError) -> str:

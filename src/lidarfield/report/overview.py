@@ -23,7 +23,7 @@ from ..plots.study import StudyFigure, study_figures
 from ..study import StudyTables
 from .budget import MB, budget_mb, utf8_len
 from .page import esc, image, link, page, table
-from .pair_page import DPI, registration_problem
+from .pair_page import DPI, findings_parts, registration_problem
 from .rematch import study_rematch_parts
 from .suggestions import study_suggestions
 
@@ -133,8 +133,9 @@ def config_parts(config: dict | None) -> list[str]:
 
 
 def overview_parts(config: dict | None, tables: StudyTables, figures_dir: Path | None, stage_figures: set[str], last_stages: dict[str, Path]) -> list[str]:
-    return [*header_parts(tables), *study_level_parts(tables, figures_dir), *study_rematch_parts(tables.summary.to_dict("records"), DPI),
-            *next_steps_parts(tables, last_stages),
+    rows = tables.summary.to_dict("records")
+    return [*header_parts(tables), *findings_parts(rows), *study_level_parts(tables, figures_dir),
+            *study_rematch_parts(rows, DPI), *next_steps_parts(tables, last_stages),
             *ranking_parts(tables, stage_figures), *config_parts(config)]
 
 

@@ -20,6 +20,7 @@ table { border-collapse: collapse; font-size: 0.85em; margin: 0.6em 0; }
 th, td { border: 1px solid #ccc; padding: 2px 6px; text-align: right; white-space: nowrap; }
 th { background: #f0f0f0; position: sticky; top: 0; } td.text, th.text { text-align: left; }
 tr.flag td { background: #fde2e2; color: #a00; font-weight: 600; }
+ul.findings li { color: #a00; font-weight: 600; }
 td.better { color: #17741b; } td.worse { color: #b00; }
 pre { background: #f7f7f7; border: 1px solid #ddd; padding: 0.8em; overflow-x: auto; font-size: 0.85em; }
 .figures { display: flex; flex-wrap: wrap; gap: 10px; align-items: flex-start; }

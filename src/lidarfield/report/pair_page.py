@@ -14,6 +14,7 @@ from functools import partial
 from pathlib import Path
 
 from .. import __version__
+from ..findings import findings_items, stage_findings
 from ..plots import stage_figures
 from ..plots.common import PlotSettings, plot_settings
 from ..plots.pair_stats import pair_figure_png
@@ -69,10 +70,19 @@ def stages_table(rows: list[dict]) -> str:
     headers = [c for c in SUMMARY_COLUMNS if any(c in r for r in rows)]
     body, classes = [], []
     for r in rows:
-        problem = registration_problem(r)
-        body.append([r.get(c, "") for c in headers] + [problem])
-        classes.append("flag" if problem else "")
-    return table(headers + ["registration problem"], body, classes, text_columns=2)
+        problem, found = registration_problem(r), "; ".join(stage_findings(r))
+        body.append([r.get(c, "") for c in headers] + [problem, found])
+        classes.append("flag" if problem or found else "")
+    return table(headers + ["registration problem", "findings"], body, classes, text_columns=2)
+
+
+def findings_parts(rows: list[dict]) -> list[str]:
+    """What a reader should not miss (lidarfield.findings: a scan that does not fit its sensor
+    model, a stage removing most of a cloud, a field without a valid voxel); nothing when none."""
+    items = findings_items(rows)
+    if not items:
+        return []
+    return ["<h2>Findings</h2>", '<ul class="findings">' + "".join(f"<li>{esc(i)}</li>" for i in items) + "</ul>"]
 
 
 def pair_figures(name: str, pair_dir: Path | None, rows: list[dict], out_dir: Path) -> list[Figure | str]:
@@ -128,7 +138,7 @@ def pair_page_parts(name: str, stage_dirs: list[Path], rows: list[dict], out_dir
                     with_stage_figures: bool = True, overview_href: str | None = None, on_demand: str | None = None) -> list:
     """The pair's page as parts (its figures still to be embedded or linked)."""
     pair_dir = stage_dirs[0].parent.parent if stage_dirs else None
-    parts = header_parts(name, stage_dirs, overview_href)
+    parts = header_parts(name, stage_dirs, overview_href) + findings_parts(rows)
     parts += ["<h2>Stages</h2>", stages_table(rows), pair_rematch_table(rows)]
     parts += ["<h2>Stage by stage</h2>", '<div class="figures">', *pair_figures(name, pair_dir, rows, out_dir), "</div>"]
     parts += ["<h2>Each stage: what to try next, and its figures</h2>"]

@@ -1,31 +1,56 @@
 # The two commands of the README: `make run` (the default study, report in results/report.html)
-# and `make test`. Both install what they need first; nothing else is needed on a fresh machine.
+# and `make test`. Both set up what they need first; nothing else is needed on a fresh machine.
+#
+# Everything is installed into a virtual environment, $(VENV), made with $(PYTHON): never into
+# the interpreter's own site-packages. Another interpreter gets its own environment, e.g.
+#   make test PYTHON=python3.13 VENV=.venv-3.13
+# The exact versions come from requirements.lock (`make lock` regenerates it from pyproject.toml).
 PYTHON ?= python3
+VENV ?= .venv
 CORES ?= 2
+# The extras the lock holds and the set-up installs (ouster is left out: it pins an old click).
+LOCK_EXTRAS ?= test slurm
+UV_VERSION ?= 0.13.9
 
-.PHONY: run test setup setup-test bench lint
+BIN := $(abspath $(VENV))/bin
+# Recipes run inside the environment, as if it were activated: the workflow's rules call
+# `lidarfield` from PATH.
+export PATH := $(BIN):$(PATH)
+export VIRTUAL_ENV := $(abspath $(VENV))
+
+.PHONY: run test setup setup-test bench lint lock
 
 run: setup
 	snakemake --cores $(CORES)
 
 test: setup-test
-	$(PYTHON) -m pytest
+	python -m pytest
 
-# pip is re-run only when pyproject.toml changes.
-setup: .setup.stamp
-.setup.stamp: pyproject.toml
-	scripts/system-deps.sh
-	$(PYTHON) -m pip install --quiet --disable-pip-version-check -e ".[test,slurm]"
+# pip is re-run only when the lock or pyproject.toml changes.
+setup: $(VENV)/.setup.stamp
+$(VENV)/.setup.stamp: requirements.lock pyproject.toml
+	PYTHON="$(PYTHON)" scripts/system-deps.sh
+	PYTHON="$(PYTHON)" scripts/venv.sh "$(VENV)"
+	python -m pip install --quiet --disable-pip-version-check -r requirements.lock
+	python -m pip install --quiet --disable-pip-version-check --no-deps -e .
 	@touch $@
 
 setup-test: setup
 	scripts/system-deps.sh --test
 
 bench: setup
-	$(PYTHON) bench/field_kernel.py
-	$(PYTHON) bench/hypotheses.py
-	$(PYTHON) bench/raycast.py
+	python bench/field_kernel.py
+	python bench/hypotheses.py
+	python bench/raycast.py
 
 lint: setup
 	snakemake --lint
 	snakefmt --check Snakefile workflow/rules
+
+# One lock for every supported Python and platform (environment markers), preferring the
+# versions already in it: add a dependency to pyproject.toml, run `make lock`, commit both.
+lock:
+	PYTHON="$(PYTHON)" scripts/venv.sh "$(VENV)"
+	python -m pip install --quiet --disable-pip-version-check uv==$(UV_VERSION)
+	uv pip compile pyproject.toml --universal --python-version 3.11 \
+	  $(foreach extra,$(LOCK_EXTRAS),--extra $(extra)) -o requirements.lock

@@ -1,11 +1,16 @@
 #!/usr/bin/env bash
-# Install the system libraries lidarfield needs that pip cannot: libusb-1.0-0 (Open3D loads it)
-# and, with --test, Chromium for the browser tests. Installs with apt-get when run as root on
+# Install the system libraries lidarfield needs that pip cannot: libusb-1.0-0 (Open3D loads it),
+# Debian's venv module for $PYTHON when it lacks one (python3.X-venv), and, with --test,
+# Chromium for the browser tests. Installs with apt-get when run as root on
 # Debian/Ubuntu; otherwise stops with the exact command to run.
 set -euo pipefail
 
 packages=()
 ldconfig -p 2>/dev/null | grep -q 'libusb-1.0.so.0' || packages+=(libusb-1.0-0)
+python=${PYTHON:-python3}
+if ! "$python" -c 'import ensurepip, venv' 2>/dev/null; then
+  packages+=("$("$python" -c 'import sys; print("python%d.%d-venv" % sys.version_info[:2])')")
+fi
 if [[ "${1:-}" == "--test" ]]; then
   command -v chromium >/dev/null 2>&1 || packages+=(chromium chromium-driver)
 fi

@@ -3,11 +3,15 @@
 from __future__ import annotations
 
 import os
+import sys
 from pathlib import Path
 
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
+# The commands the tests start (snakemake's rules call `lidarfield`; snakefmt) come from the
+# environment running the tests, also when it is a virtual environment that is not activated.
+os.environ["PATH"] = f"{Path(sys.executable).parent}{os.pathsep}{os.environ.get('PATH', '')}"
 SHARED_DATA = Path(os.environ.get("LIDARFIELD_DATA", ROOT.parent / "shared" / "data"))
 
 

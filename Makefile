@@ -12,6 +12,11 @@ CORES ?= 2
 LOCK_EXTRAS ?= test slurm
 UV_VERSION ?= 0.13.9
 
+# The lock is the whole environment (--no-deps: lock-excludes.txt leaves out packages that a
+# dependency declares but lidarfield never uses). --no-compile: Python compiles a module to
+# bytecode when it is first imported, rather than pip compiling all 9,500 modules (200 MB).
+PIP_INSTALL := --quiet --disable-pip-version-check --no-deps --no-compile
+
 BIN := $(abspath $(VENV))/bin
 # Recipes run inside the environment, as if it were activated: the workflow's rules call
 # `lidarfield` from PATH.
@@ -31,8 +36,8 @@ setup: $(VENV)/.setup.stamp
 $(VENV)/.setup.stamp: requirements.lock pyproject.toml
 	PYTHON="$(PYTHON)" scripts/system-deps.sh
 	PYTHON="$(PYTHON)" scripts/venv.sh "$(VENV)"
-	python -m pip install --quiet --disable-pip-version-check -r requirements.lock
-	python -m pip install --quiet --disable-pip-version-check --no-deps -e .
+	python -m pip install $(PIP_INSTALL) -r requirements.lock
+	python -m pip install $(PIP_INSTALL) -e .
 	@touch $@
 
 setup-test: setup
@@ -49,8 +54,9 @@ lint: setup
 
 # One lock for every supported Python and platform (environment markers), preferring the
 # versions already in it: add a dependency to pyproject.toml, run `make lock`, commit both.
+# uv, not pip-compile: pip-compile resolves for the running interpreter and platform only.
 lock:
 	PYTHON="$(PYTHON)" scripts/venv.sh "$(VENV)"
 	python -m pip install --quiet --disable-pip-version-check uv==$(UV_VERSION)
 	uv pip compile pyproject.toml --universal --python-version 3.11 \
-	  $(foreach extra,$(LOCK_EXTRAS),--extra $(extra)) -o requirements.lock
+	  $(foreach extra,$(LOCK_EXTRAS),--extra $(extra)) --excludes lock-excludes.txt -o requirements.lock

@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 import pytest
+import yaml
 
-from lidarfield.config import SCHEMA_PATH, load_config, validate_config
+from lidarfield.config import SCHEMA_PATH, load_config, schema, validate_config
 from lidarfield.errors import InputError, LidarfieldError
+from lidarfield.scene import builtin_scenes
 
 from conftest import ROOT
 
@@ -75,3 +77,51 @@ def test_bad_configs_say_what_is_wrong(config, message):
 def test_the_report_budget_is_read_or_defaults_to_20_mb():
     assert validate_config({"report": {"max_mb": 5}}, require_pairs=False).config["report"] == {"max_mb": 5}
     assert validate_config({}, require_pairs=False).config["report"] == {"max_mb": 20}
+
+
+def _simulated(**changes) -> dict:
+    simulate = {"scene": "paper-intersection", "sensor": "vlp16", "pose1": [0, 0, 3, 0, 0, 0], "pose2": [1, 0, 3, 0, 0, 0]}
+    return {"pairs": {"a": {"simulate": {**simulate, **changes}}}}
+
+
+@pytest.mark.parametrize(
+    "changes, message",
+    [
+        ({"sensor": {"name": "mine"}}, "pairs.a.simulate.sensor: sensor model: needs at least 'name' and 'elevation_deg'"),
+        ({"sensor": "vlp17"}, "pairs.a.simulate.sensor: unknown sensor 'vlp17'"),
+        ({"sensor": "mine.yaml"}, "pairs.a.simulate.sensor: file not found: "),
+        ({"scene": "mall"}, "config key pairs.a.simulate.scene: 'mall' is not one of"),
+        ({"scene": "mall.yaml"}, "pairs.a.simulate.scene: file not found: "),
+        ({"pose1": [0, 0, float("nan"), 0, 0, 0]}, "config key pairs.a.simulate.pose1.2: NaN or infinite"),
+    ],
+)
+def test_a_bad_scene_sensor_or_pose_fails_at_validation_naming_the_config(tmp_path, changes, message):
+    config = tmp_path / "study.yaml"
+    config.write_text(yaml.safe_dump(_simulated(**changes)))
+    with pytest.raises(LidarfieldError) as caught:
+        load_config(config, base_dir=tmp_path)
+    assert str(caught.value).startswith(f"{config}: ") and message in str(caught.value), caught.value
+    assert "\n" not in str(caught.value)
+
+
+def test_a_sensor_yaml_error_names_the_config_and_the_sensor_file(tmp_path):
+    (tmp_path / "mine.yaml").write_text("name: mine\n")
+    with pytest.raises(LidarfieldError) as caught:
+        validate_config(_simulated(sensor="mine.yaml"), base_dir=tmp_path, source="study.yaml")
+    assert str(caught.value) == (
+        f"study.yaml: pairs.a.simulate.sensor: {tmp_path / 'mine.yaml'}: sensor model: needs at least 'name' and 'elevation_deg'"
+    )
+
+
+def test_a_yaml_syntax_error_is_one_line_with_its_place(tmp_path):
+    config = tmp_path / "study.yaml"
+    config.write_text("grid:\n  azimuth_bins: 36\n  elevation_deg: [-20, 20\nhypotheses: []\n")
+    with pytest.raises(LidarfieldError) as caught:
+        load_config(config)
+    assert str(caught.value) == (
+        f"{config}: not valid YAML: line 4, column 11: expected ',' or ']', but got ':' (while parsing a flow sequence)"
+    )
+
+
+def test_the_schema_lists_the_builtin_scenes():
+    assert schema()["definitions"]["scene"]["anyOf"][0]["enum"] == builtin_scenes()

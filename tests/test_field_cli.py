@@ -4,12 +4,15 @@ from __future__ import annotations
 
 import json
 import math
+import subprocess
+import sys
 
 import numpy as np
 import pytest
 
 from lidarfield.cli import main
 from lidarfield.field import read_field
+from lidarfield.io import read_scan, write_scan
 
 
 def test_field_of_the_expd_pair(expd, tmp_path, capsys):
@@ -70,4 +73,41 @@ def test_bad_input_is_one_line_and_writes_nothing(problem, expd, tmp_path, capsy
     assert main(["field", scan1, scan2, "--out", str(out), *extra]) != 0
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and culprit in err
+    assert not out.exists()
+
+
+BAD_TEXT = {"grid.yaml": "grid:\n  azimuth_bins: [36\n", "pose.txt": "1 0 0 nan\n0 1 0 0\n0 0 1 0\n0 0 0 1\n"}
+
+
+def _bad_file(tmp_path, expd, name: str) -> str:
+    path = tmp_path / name
+    if name.endswith(".laz"):  # a real scan, cut in the middle of its compressed points
+        write_scan(read_scan(expd / "Cloud10_ExpD.txt"), path)
+        path.write_bytes(path.read_bytes()[: path.stat().st_size // 2])
+    else:
+        path.write_text(BAD_TEXT[name])
+    return str(path)
+
+
+@pytest.mark.parametrize(
+    "option, name, expected",
+    [
+        ("scan2", "cut.laz", "not a readable LAS/LAZ file"),
+        ("--grid", "grid.yaml", "not valid YAML: line 3, column 1: expected ',' or ']', but got '<stream end>'"),
+        ("--transform", "pose.txt", "not a rigid pose: NaN or infinite value(s) in the translation"),
+    ],
+    ids=["truncated LAZ", "YAML syntax error", "NaN translation"],
+)
+def test_bad_input_is_one_line_from_the_command(option, name, expected, expd, tmp_path):
+    """In a process of its own, as a user runs it: no library's logging or multi-line message
+    gets past the one line (pytest's log capture would hide them in-process)."""
+    culprit = _bad_file(tmp_path, expd, name)
+    scans = [str(expd / "Cloud1_ExpD.txt"), culprit if option == "scan2" else str(expd / "Cloud10Aligned_ExpD.txt")]
+    extra = [] if option == "scan2" else [option, culprit]
+    out = tmp_path / "out"
+    done = subprocess.run([sys.executable, "-m", "lidarfield", "field", *scans, "--out", str(out), *extra],
+                          capture_output=True, text=True)
+    assert done.returncode == 2
+    assert done.stderr.startswith(f"lidarfield field: error: {culprit}: "), done.stderr
+    assert len(done.stderr.strip().splitlines()) == 1 and expected in done.stderr, done.stderr
     assert not out.exists()

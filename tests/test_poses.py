@@ -119,7 +119,13 @@ def test_parse_pose_arg(text, expected):
 
 @pytest.mark.parametrize(
     "text, words",
-    [("1,2,3,4,5", "5 numbers"), ("1,2,x,0,0,0", "not a list of numbers"), (",".join(["2"] * 12), "not a rotation")],
+    [
+        ("1,2,3,4,5", "5 numbers"),
+        ("1,2,x,0,0,0", "not a list of numbers"),
+        (",".join(["2"] * 12), "not a rotation"),
+        ("nan,0,3,0,0,0", r"NaN or infinite value\(s\) in the translation$"),
+        ("0,0,3,inf,0,0", r"NaN or infinite value\(s\) in the rotation$"),
+    ],
 )
 def test_parse_pose_arg_errors(text, words):
     with pytest.raises(InputError, match=words):
@@ -135,6 +141,9 @@ def test_parse_pose_arg_errors(text, words):
         ("", "empty pose file"),
         ("1 0 0 0\n0 1 0 0\n0 0 1 0\n1 1 0 1\n", "bottom row"),
         ("2 0 0 0\n0 1 0 0\n0 0 1 0\n", "not a rotation"),
+        ("1 0 0 nan\n0 1 0 0\n0 0 1 0\n", r"NaN or infinite value\(s\) in the translation$"),
+        ("1 0 0 0\n0 1 0 0\n0 0 1 0\n0 0 inf 1\n", r"in the bottom row$"),
+        ("nan 0 0 0\n0 1 0 0\n0 0 1 inf\n", r"in the rotation and the translation$"),
     ],
 )
 def test_bad_pose_files(tmp_path, content, words):

@@ -63,3 +63,18 @@ def test_mesh_that_does_not_load(tmp_path, capsys):
 
 def test_velocity_without_rolling_shutter_is_refused(tmp_path, capsys):
     _fails([*BASE, "--pose", "0,0,3,0,0,0", "--velocity", "1,0,0"], tmp_path, capsys, "--rolling-shutter")
+
+
+@pytest.mark.parametrize(
+    "content, expected",
+    [
+        ("name: mine\n", "sensor model: needs at least 'name' and 'elevation_deg'"),
+        ("name: mine\nelevation_deg: [-15, 15\n", "not valid YAML: line 3, column 1: expected ',' or ']'"),
+        ("- 15\n", "a sensor model is a mapping"),
+    ],
+)
+def test_a_bad_sensor_yaml_is_named(tmp_path, capsys, content, expected):
+    sensor = tmp_path / "mine.yaml"
+    sensor.write_text(content)
+    _fails(["simulate", "--scene", "paper-intersection", "--sensor", str(sensor), "--pose", "0,0,3,0,0,0"],
+           tmp_path, capsys, f"{sensor}: ", expected)

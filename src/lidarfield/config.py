@@ -24,6 +24,7 @@ import yaml
 from .errors import ConfigError, LidarfieldError
 from .poses import pose_from_xyzrpy
 from .stages import stage_ids
+from .yaml_file import read_yaml
 
 SCHEMA_PATH = Path(__file__).parent / "schemas" / "config.schema.yaml"
 # The results folder's own subfolders, beside one folder per pair: no pair may take their names.
@@ -122,10 +123,26 @@ def _error_location(error: jsonschema.ValidationError) -> str:
     return ".".join(str(p) for p in error.absolute_path) or "(top level)"
 
 
+def _non_finite_key(node, key: str = "") -> str | None:
+    """The first key holding NaN or an infinity (JSON Schema's numbers admit them; the stage
+    ids' canonical JSON cannot hold them)."""
+    if isinstance(node, float) and not np.isfinite(node):
+        return key or "(top level)"
+    children = node.items() if isinstance(node, dict) else enumerate(node) if isinstance(node, list) else ()
+    for name, child in children:
+        found = _non_finite_key(child, f"{key}.{name}" if key else str(name))
+        if found:
+            return found
+    return None
+
+
 def _check_schema(config: dict, source: str) -> None:
     validator = jsonschema.Draft7Validator(schema())
     errors = sorted(validator.iter_errors(config), key=lambda e: list(e.absolute_path))
     if not errors:
+        key = _non_finite_key(config)
+        if key:
+            raise ConfigError(f"config key {key}: NaN or infinite; a finite number is needed", source)
         _fill_defaults(config, schema(), validator)
         return
     # oneOf failures bury the useful message: report the deepest one.
@@ -141,12 +158,7 @@ def load_config(path: str | Path, base_dir: str | Path | None = None, require_pa
     ``require_pairs=False`` accepts a config without pairs (``lidarfield run`` takes its pair
     from the command line and uses only the grid, the hypotheses and the plots)."""
     path = Path(path)
-    if not path.is_file():
-        raise ConfigError("config file not found", path)
-    try:
-        config = yaml.safe_load(path.read_text())
-    except yaml.YAMLError as e:
-        raise ConfigError(f"not valid YAML: {e}", path) from None
+    config = read_yaml(path, "config")
     if not isinstance(config, dict):
         raise ConfigError("a study config is a YAML mapping (pairs, grid, hypotheses, ...)", path)
     return validate_config(config, base_dir, source=str(path), require_pairs=require_pairs)
@@ -243,6 +255,20 @@ def _existing_file(path: str, key: str, base_dir: Path) -> str:
     return path
 
 
+def _sensor(setting, key: str, base_dir: Path):
+    """A scan's sensor setting (preset, YAML file, model, or none), checked now so that a bad
+    one fails before any job."""
+    from .sensors import sensor_model
+
+    if isinstance(setting, str) and setting.endswith((".yaml", ".yml")):
+        _existing_file(setting, f"{key}.sensor", base_dir)
+        setting = str(base_dir / setting)
+    try:
+        sensor_model(setting)
+    except LidarfieldError as e:
+        raise ConfigError(f"{key}.sensor: {e}") from None
+
+
 def _register(setting, key: str, base_dir: Path):
     """A pair's ``register`` setting, checked now so that a bad one fails before any job."""
     from .registration.settings import parse_settings
@@ -284,7 +310,7 @@ def _recorded_scan(scan_id: str, entry: dict, path: str, pose=None) -> ScanSpec:
 def _pair(name: str, entry: dict, base_dir: Path) -> PairSpec:
     key = f"pairs.{name}"
     if "simulate" in entry:
-        sim = entry["simulate"]
+        sim = _checked_simulation(entry["simulate"], f"{key}.simulate", base_dir)
         still = [[0.0, 0.0, 0.0]] * 2
         scans = [
             _simulated_scan(
@@ -298,6 +324,7 @@ def _pair(name: str, entry: dict, base_dir: Path) -> PairSpec:
             for i in (0, 1)
         ]
     else:
+        _sensor(entry.get("sensor"), key, base_dir)
         scans = [
             _recorded_scan(f"{name}-{i}", entry, _existing_file(entry[f"scan{i}"], f"{key}.scan{i}", base_dir))
             for i in (1, 2)
@@ -305,9 +332,20 @@ def _pair(name: str, entry: dict, base_dir: Path) -> PairSpec:
     return PairSpec(name, scans[0], scans[1], _register(entry["register"], key, base_dir))
 
 
+def _checked_simulation(sim: dict, key: str, base_dir: Path) -> dict:
+    """A ``simulate`` section whose sensor and scene file (a built-in scene is the schema's
+    business) are checked."""
+    _sensor(sim["sensor"], key, base_dir)
+    if sim["scene"].endswith((".yaml", ".yml")):
+        _existing_file(sim["scene"], f"{key}.scene", base_dir)
+    return sim
+
+
 def _sequence_pairs(name: str, entry: dict, base_dir: Path) -> list[PairSpec]:
     key = f"sequences.{name}"
-    scans = _simulated_sequence(name, entry) if "simulate" in entry else _recorded_sequence(name, entry, base_dir)
+    scans = (
+        _simulated_sequence(name, entry, base_dir) if "simulate" in entry else _recorded_sequence(name, entry, base_dir)
+    )
     register = _register(entry["register"], key, base_dir)
     stride = entry["stride"]
     return [
@@ -316,10 +354,10 @@ def _sequence_pairs(name: str, entry: dict, base_dir: Path) -> list[PairSpec]:
     ]
 
 
-def _simulated_sequence(name: str, entry: dict) -> list[ScanSpec]:
+def _simulated_sequence(name: str, entry: dict, base_dir: Path) -> list[ScanSpec]:
     from .trajectory import arc_trajectory
 
-    sim = entry["simulate"]
+    sim = _checked_simulation(entry["simulate"], f"sequences.{name}.simulate", base_dir)
     rate_hz = sim["trajectory"]["rate_hz"]
     # The schema's trajectory keys are arc_trajectory's parameters.
     return [
@@ -333,6 +371,7 @@ def _recorded_sequence(name: str, entry: dict, base_dir: Path) -> list[ScanSpec]
     from .poses import read_kitti_poses
 
     key = f"sequences.{name}.scans"
+    _sensor(entry.get("sensor"), f"sequences.{name}", base_dir)
     scans = entry["scans"]
     if isinstance(scans, list):
         files = [_existing_file(s, key, base_dir) for s in scans]

@@ -118,7 +118,10 @@ def parse_pose_arg(text: str) -> np.ndarray:
     except ValueError:
         raise InputError(f"pose {text!r} is not a list of numbers") from None
     if len(numbers) == 6:
-        return pose_from_xyzrpy(numbers)
+        with np.errstate(invalid="ignore"):  # cos(inf): reported below as a NaN in the rotation
+            T = pose_from_xyzrpy(numbers)
+        _finite(T, f"pose {text!r}")
+        return T
     if len(numbers) in (12, 16):
         return _rigid(_from_numbers(numbers), f"pose {text!r}")
     raise InputError(
@@ -133,12 +136,21 @@ def _from_numbers(numbers: np.ndarray) -> np.ndarray:
 
 
 def _rigid(T: np.ndarray, where) -> np.ndarray:
+    _finite(T, where)
     R = T[:3, :3]
     if not np.allclose(T[3], [0, 0, 0, 1], atol=1e-9):
         raise InputError(f"not a rigid pose: bottom row is {T[3].tolist()}, expected [0, 0, 0, 1]", where)
-    if not np.isfinite(T).all() or np.abs(R.T @ R - np.eye(3)).max() > _ORTHONORMAL_TOLERANCE or np.linalg.det(R) <= 0:
+    if np.abs(R.T @ R - np.eye(3)).max() > _ORTHONORMAL_TOLERANCE or np.linalg.det(R) <= 0:
         raise InputError("not a rigid pose: the 3x3 block is not a rotation", where)
     return T
+
+
+def _finite(T: np.ndarray, where) -> None:
+    """A pose holds finite numbers only: the error says in which part it does not."""
+    parts = {"rotation": T[:3, :3], "translation": T[:3, 3], "bottom row": T[3]}
+    bad = [name for name, values in parts.items() if not np.isfinite(values).all()]
+    if bad:
+        raise InputError(f"not a rigid pose: NaN or infinite value(s) in the {' and the '.join(bad)}", where)
 
 
 # --- algebra ----------------------------------------------------------------------------------

@@ -29,10 +29,10 @@ from pathlib import Path
 
 import numpy as np
 import trimesh
-import yaml
 
 from .errors import ConfigError, InputError
 from .poses import pose_from_xyzrpy
+from .yaml_file import read_yaml
 
 _KEYS = {
     "box": {"size"},
@@ -102,10 +102,7 @@ def load_scene(name_or_path: str | Path) -> Scene:
 
 
 def _scene_from_file(path: Path, source: str) -> Scene:
-    try:
-        spec = yaml.safe_load(path.read_text())
-    except yaml.YAMLError as e:
-        raise ConfigError(f"not valid YAML: {e}", path) from None
+    spec = read_yaml(path, "scene")
     return scene_from_dict(spec, base_dir=path.parent, name=path.stem, source=source)
 
 

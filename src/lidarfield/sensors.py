@@ -10,9 +10,9 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
-import yaml
 
 from .errors import ConfigError
+from .yaml_file import read_yaml
 
 
 @dataclass(frozen=True)
@@ -101,10 +101,13 @@ def sensor_model(spec: str | dict | SensorModel | None) -> SensorModel | None:
         return PRESETS[spec]
     path = Path(spec)
     if path.suffix in (".yaml", ".yml"):
-        if not path.is_file():
-            raise ConfigError("sensor model file not found", path)
+        model = read_yaml(path, "sensor model")
+        if not isinstance(model, dict):
+            raise ConfigError("a sensor model is a mapping with at least 'name' and 'elevation_deg'", path)
         try:
-            return SensorModel.from_dict(yaml.safe_load(path.read_text()))
-        except (yaml.YAMLError, TypeError) as e:
+            return SensorModel.from_dict(model)
+        except ConfigError as e:
+            raise ConfigError(str(e), path) from None
+        except (TypeError, ValueError) as e:
             raise ConfigError(f"not a sensor model: {e}", path) from None
     raise ConfigError(f"unknown sensor {spec!r}; available presets: {', '.join(sorted(PRESETS))} (or a YAML file)")

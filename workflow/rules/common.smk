@@ -1,4 +1,5 @@
 # Config validation and the input/params functions of every rule.
+import sys
 from pathlib import Path
 
 from snakemake.utils import min_version
@@ -19,12 +20,17 @@ if not config:
 
 # Validated once against workflow/schemas/config.schema.yaml, with defaults filled in: the
 # same function validates the config of `lidarfield run`. Relative paths are relative to the
-# working directory.
-STUDY = lidarfield.config.validate_config(
-    config,
-    base_dir=Path.cwd(),
-    source=", ".join(map(str, workflow.configfiles)) or "config",
-)
+# working directory. An invalid config is one line and exit status 2, as in the CLI (raised,
+# Snakemake would add the stack frames of this file and of the package).
+try:
+    STUDY = lidarfield.config.validate_config(
+        config,
+        base_dir=Path.cwd(),
+        source=", ".join(map(str, workflow.configfiles)) or "config",
+    )
+except lidarfield.errors.LidarfieldError as error:
+    print(f"lidarfield: error: {error}", file=sys.stderr)
+    sys.exit(2)
 RESULTS = config["results"]
 PAIRS = sorted(STUDY.pairs)
 STAGES = {pair: STUDY.stage_ids(pair) for pair in PAIRS}

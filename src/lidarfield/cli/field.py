@@ -6,9 +6,9 @@ import json
 from pathlib import Path
 
 import numpy as np
-import yaml
 
 from ..errors import ConfigError, InputError
+from ..yaml_file import read_yaml
 
 # CLI flag -> grid config key (the same keys as the study config's ``grid`` section).
 _GRID_FLAGS = {
@@ -102,12 +102,7 @@ def _grid_config(args) -> dict:
     """The grid section: the --grid YAML (top level or under 'grid:'), overridden by flags."""
     config: dict = {}
     if args.grid is not None:
-        if not args.grid.is_file():
-            raise ConfigError("grid file not found", args.grid)
-        try:
-            loaded = yaml.safe_load(args.grid.read_text())
-        except yaml.YAMLError as e:
-            raise ConfigError(f"not valid YAML ({str(e).splitlines()[0]})", args.grid) from None
+        loaded = read_yaml(args.grid, "grid")
         if isinstance(loaded, dict) and isinstance(loaded.get("grid"), dict):
             loaded = loaded["grid"]
         if not isinstance(loaded, dict):

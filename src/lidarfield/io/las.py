@@ -10,6 +10,8 @@ field: it is written to the extra dimension ``float_intensity`` and read back as
 
 from __future__ import annotations
 
+import logging
+from contextlib import contextmanager
 from pathlib import Path
 
 import laspy
@@ -25,9 +27,22 @@ SCALE_M = 0.00005  # coordinate resolution: 0.05 mm (error at most 0.025 mm)
 _FLOAT_INTENSITY = "float_intensity"
 
 
+@contextmanager
+def _laspy_silenced():
+    """laspy logs the errors it raises (a truncated LAZ: twice); the raised one is reported."""
+    logger = logging.getLogger("laspy")
+    level = logger.level
+    logger.setLevel(logging.CRITICAL)
+    try:
+        yield
+    finally:
+        logger.setLevel(level)
+
+
 def read_las(path: Path, index: int = 0, sensor: SensorModel | None = None) -> Scan:
     try:
-        las = laspy.read(path)
+        with _laspy_silenced():
+            las = laspy.read(path)
         xyz = np.column_stack([np.asarray(las.x), np.asarray(las.y), np.asarray(las.z)])
         attributes = {"intensity": np.asarray(las.intensity)}
         if "gps_time" in las.point_format.dimension_names:

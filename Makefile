@@ -13,9 +13,8 @@ LOCK_EXTRAS ?= test slurm
 UV_VERSION ?= 0.13.9
 
 # The lock is the whole environment (--no-deps: lock-excludes.txt leaves out packages that a
-# dependency declares but lidarfield never uses). --no-compile: Python compiles a module to
-# bytecode when it is first imported, rather than pip compiling all 9,500 modules (200 MB).
-PIP_INSTALL := --quiet --disable-pip-version-check --no-deps --no-compile
+# dependency declares but lidarfield never uses).
+PIP_INSTALL := --quiet --disable-pip-version-check --no-deps
 
 BIN := $(abspath $(VENV))/bin
 # Recipes run inside the environment, as if it were activated: the workflow's rules call
@@ -38,6 +37,9 @@ $(VENV)/.setup.stamp: requirements.lock pyproject.toml
 	PYTHON="$(PYTHON)" scripts/venv.sh "$(VENV)"
 	python -m pip install $(PIP_INSTALL) -r requirements.lock
 	python -m pip install $(PIP_INSTALL) -e .
+	@# Bytecode up front, on all cores: where PYTHONDONTWRITEBYTECODE is set (as on CI machines)
+	@# Python never caches it, and every job would compile matplotlib & co. again (1.4 s a job).
+	python -m compileall -q -j 0 "$$(python -c 'import sysconfig; print(sysconfig.get_path("purelib"))')" src > /dev/null
 	@touch $@
 
 setup-test: setup

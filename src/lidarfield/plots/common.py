@@ -19,6 +19,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from matplotlib.cm import ScalarMappable  # noqa: E402
 from matplotlib.colors import Normalize  # noqa: E402
+from matplotlib.ticker import MaxNLocator  # noqa: E402
 
 from ..errors import ConfigError, InputError  # noqa: E402
 from ..io.atomic import atomic_path  # noqa: E402
@@ -327,6 +328,11 @@ def set_equal_3d(ax, limits: np.ndarray, min_z_share: float = 0.3) -> None:
     ax.set_xlabel("x (m)")
     ax.set_ylabel("y (m)")
     ax.set_zlabel("z (m)")
+    # Matplotlib's automatic ticks crowd a foreshortened 3-D axis (z had 9 labels in 4 cm),
+    # and every tick is an object drawn at save time: fewer ticks read better and cost less.
+    ax.xaxis.set_major_locator(MaxNLocator(nbins=6, steps=[1, 2, 2.5, 5, 10]))
+    ax.yaxis.set_major_locator(MaxNLocator(nbins=6, steps=[1, 2, 2.5, 5, 10]))
+    ax.zaxis.set_major_locator(MaxNLocator(nbins=4, steps=[1, 2, 2.5, 5, 10]))
     for axis in (ax.xaxis, ax.yaxis, ax.zaxis):
         axis.set_pane_color((1.0, 1.0, 1.0, 0.0))
 
@@ -340,13 +346,17 @@ def set_top_axes(ax, limits: np.ndarray) -> None:
     ax.grid(True, lw=0.3, alpha=0.5)
 
 
+# zlib level 1 instead of 6: a fifth of a stage's plotting time less for 10% larger files.
+PNG_OPTIONS = {"png": {"pil_kwargs": {"compress_level": 1}}}
+
+
 def save(fig, out_dir: Path, stem: str, settings: PlotSettings) -> list[Path]:
     """Write ``stem.png`` (and ``stem.svg`` when asked and small enough) atomically; close."""
     written = []
     try:
         for fmt in settings.formats:
             buf = io.BytesIO()
-            fig.savefig(buf, format=fmt, dpi=settings.dpi)
+            fig.savefig(buf, format=fmt, dpi=settings.dpi, **PNG_OPTIONS.get(fmt, {}))
             data = buf.getvalue()
             if fmt == "svg" and len(data) > SVG_MAX_BYTES:
                 continue
@@ -363,7 +373,7 @@ def png_bytes(fig, dpi: int) -> bytes:
     """The figure as PNG bytes (for embedding in a report); closes the figure."""
     buf = io.BytesIO()
     try:
-        fig.savefig(buf, format="png", dpi=dpi)
+        fig.savefig(buf, format="png", dpi=dpi, **PNG_OPTIONS["png"])
     finally:
         plt.close(fig)
     return buf.getvalue()

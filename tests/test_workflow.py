@@ -52,7 +52,7 @@ def tiny_study() -> dict:
             {"field_of_view": {}},
         ],
         "plots": {"background_points": 2000, "interactive": False},
-        # Not the default candidates: outliers imports Open3D (seconds per job on a busy machine).
+        # Not the default candidates: three check the rule; outliers' neighbour searches only add time.
         "suggest": [{"ego_vehicle": {}}, {"field_of_view": {}}, {"shadow": {}}],
     }
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from scipy.spatial.transform import Rotation
 
 from lidarfield.errors import InputError
 from lidarfield.poses import (
@@ -185,3 +186,16 @@ def test_interpolate_pose_linear_translation_slerp_rotation():
     np.testing.assert_array_equal(interpolate_pose(stamps, poses, 10.4), poses[1])
     np.testing.assert_array_equal(interpolate_pose(stamps, poses, 11.0), poses[2])
     assert interpolate_pose(stamps, poses, 9.999) is None and interpolate_pose(stamps, poses, 11.001) is None
+
+
+@pytest.mark.parametrize("dtype", [np.float64, np.float32])
+def test_apply_pose_matches_homogeneous_coordinates(dtype):
+    rng = np.random.default_rng(7)
+    T = np.eye(4)
+    T[:3, :3] = Rotation.from_rotvec([0.3, -0.2, 1.1]).as_matrix()
+    T[:3, 3] = [5.0, -2.0, 0.5]
+    xyz = rng.normal(scale=30, size=(1000, 3)).astype(dtype)
+    reference = (np.column_stack([xyz.astype(np.float64), np.ones(len(xyz))]) @ T.T)[:, :3]
+    out = apply_pose(T, xyz)
+    assert out.dtype == np.float64 and out.shape == (1000, 3)
+    np.testing.assert_allclose(out, reference, rtol=0, atol=1e-12)

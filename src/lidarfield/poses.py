@@ -157,7 +157,13 @@ def _finite(T: np.ndarray, where) -> None:
 def apply_pose(T: np.ndarray, xyz: np.ndarray) -> np.ndarray:
     """Points (N, 3) mapped by the pose: ``R @ p + t`` for each point."""
     T = np.asarray(T, dtype=np.float64)
-    return np.asarray(xyz, dtype=np.float64) @ T[:3, :3].T + T[:3, 3]
+    xyz = np.asarray(xyz)
+    # Column by column: numpy's (N, 3) @ (3, 3) does not reach BLAS and was 10x slower (7 ms
+    # for 60,000 points, 30 ms from float32), a tenth of a hypothesis job.
+    out = np.empty((len(xyz), 3), dtype=np.float64)
+    for i in range(3):
+        out[:, i] = T[i, 0] * xyz[:, 0] + T[i, 1] * xyz[:, 1] + T[i, 2] * xyz[:, 2] + T[i, 3]
+    return out
 
 
 def invert_pose(T: np.ndarray) -> np.ndarray:

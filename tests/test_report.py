@@ -133,14 +133,14 @@ def test_pair_page_shows_only_the_figures_the_config_draws_and_flags_a_lost_one(
     assert 'class="missing"' not in pair_page(lost, "pair-00")
 
 
-def test_a_pair_without_stage_figures_says_how_to_draw_them(study, tmp_path):
+def test_a_pair_without_figures_says_how_to_draw_them(study, tmp_path):
     root, pairs = study
     found, rows = discover(root)
     rows = [r for r in rows if r["pair"] == "pair-01"]
     out = write_pair_page("pair-01", found["pair-01"], rows, tmp_path / "pair-01" / "report.html",
-                          with_stage_figures=False, on_demand="results/pair-01/stages.html")
+                          with_figures=False, on_demand="results/pair-01/stages.html")
     page = out.read_text()
-    assert image_count(page) == N_PAIR_FIGURES and 'class="missing"' not in page
+    assert image_count(page) == 0 and 'class="missing"' not in page
     assert "snakemake --cores 2 results/pair-01/stages.html" in page and "plots.pairs" in page
 
 

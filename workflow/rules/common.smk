@@ -167,22 +167,26 @@ def pair_stage_dirs(wildcards):
     return [stage_dir(wildcards.pair, stage) for stage in STAGES[wildcards.pair]]
 
 
-def page_has_stage_figures(wildcards):
-    """A pair's report.html shows its stage figures when plots.pairs selects it; its
+def page_has_figures(wildcards):
+    """A pair's report.html shows its pair and stage figures when plots.pairs selects it; its
     stages.html (asked for on demand) always does."""
     return wildcards.page == "stages" or wildcards.pair in PLOT_PAIRS
 
 
+def pair_page_pair_figures(wildcards):
+    if not page_has_figures(wildcards):
+        return []
+    return f"{RESULTS}/{wildcards.pair}/figures"
+
+
 def pair_page_stage_figures(wildcards):
-    if not page_has_stage_figures(wildcards):
+    if not page_has_figures(wildcards):
         return []
     return [f"{d}/figures" for d in pair_stage_dirs(wildcards)]
 
 
-def stage_figures_flag(wildcards):
-    return (
-        "--stage-figures" if page_has_stage_figures(wildcards) else "--no-stage-figures"
-    )
+def figures_flag(wildcards):
+    return "--figures" if page_has_figures(wildcards) else "--no-figures"
 
 
 def on_demand_page(wildcards):

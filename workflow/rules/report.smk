@@ -25,14 +25,14 @@ rule summary:
         " --csv {output.csv:q} > {log:q} 2>&1"
 
 
-# A pair's page: report.html for every pair (with its stage figures when plots.pairs selects
-# it), stages.html on demand (always with them: asking for it draws them).
+# A pair's page: report.html for every pair (with its pair and stage figures when plots.pairs
+# selects it), stages.html on demand (always with them: asking for it draws them).
 rule pair_report:
     input:
         stats=pair_stats,
         rematch=rematch_files,
         suggestions=pair_suggestions,
-        pair_figures=f"{RESULTS}/{{pair}}/figures",
+        pair_figures=pair_page_pair_figures,
         stage_figures=pair_page_stage_figures,
     output:
         f"{RESULTS}/{{pair}}/{{page}}.html",
@@ -48,13 +48,13 @@ rule pair_report:
     params:
         stage_dirs=pair_stage_dirs,
         plots=PLOTS,
-        stage_figures=stage_figures_flag,
+        figures=figures_flag,
         on_demand=on_demand_page,
         max_mb=config["report"]["max_mb"],
     shell:
         "lidarfield job pair-report --pair {wildcards.pair} --stats {input.stats:q}"
         " --rematch {input.rematch:q}"
-        " --stage-dirs {params.stage_dirs:q} --plots {params.plots:q} {params.stage_figures}"
+        " --stage-dirs {params.stage_dirs:q} --plots {params.plots:q} {params.figures}"
         " --on-demand {params.on_demand:q} --max-mb {params.max_mb} --out {output:q} > {log:q} 2>&1"
 
 

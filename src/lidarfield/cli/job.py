@@ -109,8 +109,8 @@ def add_parser(subparsers) -> None:
     p.add_argument("--rematch", nargs="*", default=[], help="the stages' rematch.parquet files (rematch studies)")
     p.add_argument("--stage-dirs", nargs="+", required=True)
     p.add_argument("--plots", type=_json, required=True)
-    p.add_argument("--stage-figures", action=argparse.BooleanOptionalAction, required=True)
-    p.add_argument("--on-demand", help="the target that draws the stage figures of a pair without them")
+    p.add_argument("--figures", action=argparse.BooleanOptionalAction, required=True, help="the pair and stage figures")
+    p.add_argument("--on-demand", help="the target that draws the figures of a pair without them")
     p.add_argument("--max-mb", type=float, required=True)
     p.add_argument("--out", required=True)
     p.set_defaults(func=_pair_report)
@@ -213,7 +213,7 @@ def _pair_report(args: argparse.Namespace) -> None:
     from ..pipeline import read_stats
     from ..report import write_pair_page
 
-    write_pair_page(args.pair, args.stage_dirs, read_stats(args.stats, args.rematch), args.out, args.plots, args.stage_figures,
+    write_pair_page(args.pair, args.stage_dirs, read_stats(args.stats, args.rematch), args.out, args.plots, args.figures,
                     overview_href="../report.html", on_demand=args.on_demand, max_mb=args.max_mb)
 
 

@@ -42,7 +42,7 @@ def write_report(study: dict, pairs: dict[str, list[Path]], summary_rows: list[d
     for name, dirs in pairs.items():
         rows = [r for r in summary_rows if str(r.get("pair")) == name]
         write_pair_page(name, dirs, rows, out_html.parent / PAIR_PAGE.format(pair=name), (study or {}).get("plots"),
-                        with_stage_figures=name in plotted, overview_href=f"../{out_html.name}", max_mb=max_mb)
+                        with_figures=name in plotted, overview_href=f"../{out_html.name}", max_mb=max_mb)
     tables = compute_study_tables(pairs, summary_rows)
     last_stages = {name: dirs[-1] for name, dirs in pairs.items() if dirs}
     return write_overview(study, tables, out_html, stage_figures=plotted, last_stages=last_stages, max_mb=max_mb)

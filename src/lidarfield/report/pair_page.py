@@ -118,9 +118,9 @@ def stage_parts(name: str, stage_dir: Path, out_dir: Path, settings: PlotSetting
 
 
 def not_drawn_note(on_demand: str | None) -> str:
-    how = (f"<code>snakemake --cores 2 {esc(on_demand)}</code> draws them and writes that page, this one with every stage's figures"
+    how = (f"<code>snakemake --cores 2 {esc(on_demand)}</code> draws them and writes that page, this one with its figures"
            if on_demand else "<code>lidarfield plot STAGE_DIR --out STAGE_DIR/figures</code> draws a stage's figures")
-    return f'<p class="note">The stage figures of this pair are not drawn (the config\'s <code>plots.pairs</code> leaves it out): {how}.</p>'
+    return f'<p class="note">The figures of this pair are not drawn (the config\'s <code>plots.pairs</code> leaves it out): {how}.</p>'
 
 
 def header_parts(name: str, stage_dirs: list[Path], overview_href: str | None) -> list:
@@ -135,31 +135,33 @@ def header_parts(name: str, stage_dirs: list[Path], overview_href: str | None) -
 
 
 def pair_page_parts(name: str, stage_dirs: list[Path], rows: list[dict], out_dir: Path, settings: PlotSettings,
-                    with_stage_figures: bool = True, overview_href: str | None = None, on_demand: str | None = None) -> list:
+                    with_figures: bool = True, overview_href: str | None = None, on_demand: str | None = None) -> list:
     """The pair's page as parts (its figures still to be embedded or linked)."""
     pair_dir = stage_dirs[0].parent.parent if stage_dirs else None
     parts = header_parts(name, stage_dirs, overview_href) + findings_parts(rows)
     parts += ["<h2>Stages</h2>", stages_table(rows), pair_rematch_table(rows)]
-    parts += ["<h2>Stage by stage</h2>", '<div class="figures">', *pair_figures(name, pair_dir, rows, out_dir), "</div>"]
-    parts += ["<h2>Each stage: what to try next, and its figures</h2>"]
-    if not with_stage_figures:
+    if with_figures:
+        parts += ["<h2>Stage by stage</h2>", '<div class="figures">', *pair_figures(name, pair_dir, rows, out_dir), "</div>"]
+    parts += ["<h2>Each stage: what to try next" + (", and its figures</h2>" if with_figures else "</h2>")]
+    if not with_figures:
         parts.append(not_drawn_note(on_demand))
     for stage_dir in stage_dirs:
-        parts += stage_parts(name, stage_dir, out_dir, settings, with_stage_figures)
+        parts += stage_parts(name, stage_dir, out_dir, settings, with_figures)
     return parts
 
 
 def write_pair_page(name: str, stage_dirs: list[str | Path], rows: list[dict], out_html: str | Path, plots: dict | None = None,
-                    with_stage_figures: bool = True, overview_href: str | None = None, on_demand: str | None = None,
+                    with_figures: bool = True, overview_href: str | None = None, on_demand: str | None = None,
                     max_mb: float | None = None) -> Path:
     """Write one pair's page; returns its path.
 
     ``rows`` are the pair's summary rows; ``plots`` the config's ``plots`` section (which
-    figures a stage has: a drawn one that is missing is flagged); ``with_stage_figures`` False
-    for a pair that ``plots.pairs`` leaves out (``on_demand``: the target that draws them);
+    figures a stage has: a drawn one that is missing is flagged); ``with_figures`` False for a
+    pair that ``plots.pairs`` leaves out: no pair or stage figures (``on_demand``: the target
+    that draws them);
     ``max_mb``: the page's size budget (default: the schema's ``report.max_mb``)."""
     out_html = Path(out_html)
     rows = sorted(rows, key=lambda r: float(r.get("level", 0)))
     parts = pair_page_parts(name, [Path(d) for d in stage_dirs], rows, out_html.parent, plot_settings(plots),
-                            with_stage_figures, overview_href, on_demand)
+                            with_figures, overview_href, on_demand)
     return write_within_budget(parts, TIERS, f"lidarfield: pair {name}", out_html, budget_mb(None, max_mb))

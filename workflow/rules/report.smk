@@ -86,7 +86,8 @@ rule report:
         plotted=canonical_json(PLOT_PAIRS),
         study_dir=study_dir,
     shell:
-        "lidarfield job report --config {params.config:q} --summary {input.summary:q}"
+        # The config through stdin (printf is a shell builtin: no argument length limit).
+        "printf '%s' {params.config:q} | lidarfield job report --config - --summary {input.summary:q}"
         " --study-dir {params.study_dir:q} --figures {input.figures:q}"
         " --plotted {params.plotted:q} --suggestions {input.suggestions:q}"
         " --out {output:q} > {log:q} 2>&1"

@@ -8,10 +8,17 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 
 
 def _json(text: str):
     return json.loads(text)
+
+
+def _json_or_stdin(text: str):
+    """JSON, or ``-``: JSON read from stdin (a study's whole config can outgrow the 128 kB that
+    Linux allows one command-line argument)."""
+    return json.loads(sys.stdin.read() if text == "-" else text)
 
 
 def add_parser(subparsers) -> None:
@@ -116,7 +123,7 @@ def add_parser(subparsers) -> None:
     p.set_defaults(func=_pair_report)
 
     p = jobs.add_parser("report")
-    p.add_argument("--config", type=_json, required=True, help="the study's config, folded at the end of the page")
+    p.add_argument("--config", type=_json_or_stdin, required=True, help="the study's config (JSON, or - for stdin), folded at the end of the page")
     p.add_argument("--summary", required=True)
     p.add_argument("--study-dir", required=True)
     p.add_argument("--figures", required=True, help="the study figures' folder")

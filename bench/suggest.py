@@ -4,7 +4,9 @@ Target: under 1 s per candidate on one core. Each candidate's time is split into
 hypothesis itself (``apply_step``) and the rest (its field from the voxel ids binned once, and
 the comparison); the baseline, in the same run, is the same candidate with both fields
 recomputed from scratch by the pandas reference (``field_reference``), i.e. without binning
-once. The pair is the street scene of ``bench/hypotheses.py`` (VLP-16 limits, sensor 2 3 m
+once. For ``outliers`` the hypothesis is also timed with Open3D's ``remove_statistical_outlier``
+(its previous implementation, same keep-masks), Open3D imported beforehand, and the import of
+Open3D and of scipy's k-d tree are timed in fresh processes. The pair is the street scene of ``bench/hypotheses.py`` (VLP-16 limits, sensor 2 3 m
 away), the study grid 36 x 5 over -20..20 deg.
 
 Run: ``python bench/suggest.py [points_per_cloud]``. Pin to one core with ``taskset -c 0``.
@@ -12,6 +14,7 @@ Run: ``python bench/suggest.py [points_per_cloud]``. Pin to one core with ``task
 
 from __future__ import annotations
 
+import subprocess
 import sys
 import time
 
@@ -48,6 +51,21 @@ def main(n: int) -> None:
         baseline = best_time(lambda: _baseline(pair, settings, spec), repeat=1)[0]
         print(f"{name:15s} {total:7.3f}s {hypothesis:10.3f}s {total - hypothesis:7.3f}s | {baseline:8.3f}s {baseline / total:5.1f}x"
               f"   energy reduction {table['energy_reduction'][0]:+.3f}")  # fmt: skip
+        if name == "outliers":
+            previous, previous_masks = best_time(lambda: [_open3d_inliers(xyz, **spec[name]) for xyz in (pair.xyz1, pair.xyz2)])
+            assert all(np.array_equal(a, b) for a, b in zip(masks, previous_masks))
+            print(f"{'':15s} {'':8s} {previous:10.3f}s with Open3D (imported): {previous / hypothesis:.2f}x the k-d tree's time")
+    for module in ("open3d", "scipy.spatial"):
+        code = f"import time; t = time.perf_counter(); import {module}; print(time.perf_counter() - t)"
+        seconds = min(float(subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout) for _ in range(3))
+        print(f"import {module}: {seconds:.2f} s in a fresh process (best of 3)")
+
+
+def _open3d_inliers(xyz, nb_neighbors, std_ratio):
+    import open3d as o3d
+
+    _, index = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(xyz)).remove_statistical_outlier(nb_neighbors, std_ratio)
+    return np.isin(np.arange(len(xyz)), np.asarray(index))
 
 
 def _baseline(pair, settings, spec):

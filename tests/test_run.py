@@ -14,7 +14,7 @@ import yaml
 from lidarfield.cli import main
 from lidarfield.config import load_config
 from lidarfield.errors import InputError
-from lidarfield.io import write_scan
+from lidarfield.io import read_scan, write_scan
 from lidarfield.io.parquet_table import read_table
 from lidarfield.pair import RegisteredPair, read_pair, write_pair
 from lidarfield.pipeline import field_stage, mitigate_stage, run_pair, write_summary
@@ -154,6 +154,36 @@ def test_failing_plugin_is_one_error_and_no_output(tmp_path, paper_scans, capsys
     assert len(error.splitlines()) == 1
     assert "bad.py: plugin hypothesis 'remove'" in error
     assert ("raised RuntimeError: boom" if plugin_source else "plugin file not found") in error
+    assert not out.exists()
+
+
+def test_run_on_text_scans_without_a_sensor_skips_the_defaults_that_need_one(tmp_path, paper_scans, caplog, capsys):
+    """Text scans carry no sensor model: the default candidate field_of_view cannot apply, so it
+    is skipped with a logged reason; configured explicitly, it is one error naming it."""
+    texts = []
+    for i, path in enumerate(paper_scans, start=1):
+        scan = read_scan(path)
+        texts.append(tmp_path / f"scan{i}.txt")
+        write_scan(scan.subset(np.arange(0, len(scan), 4)), texts[-1])
+    config = _study(tmp_path, texts, [{"ego_vehicle": {}}])
+    out = tmp_path / "out"
+    argv = ["run", str(texts[0]), str(texts[1]), "--config", str(config), "--out", str(out)]
+    with caplog.at_level("INFO", logger="lidarfield.suggest"):
+        assert main(argv) == 0
+    skipped = [r.getMessage() for r in caplog.records if "skipped" in r.getMessage()]
+    assert len(skipped) == 2  # one per stage
+    assert all(m.startswith("candidate field_of_view skipped") and "no sensor model" in m for m in skipped)
+    ids = list(pd.read_parquet(out / "summary.parquet")["stage"])
+    assert set(pd.read_parquet(out / "stages" / ids[0] / "suggestions.parquet")["hypothesis"]) == {"ego_vehicle", "shadow", "crop", "outliers"}
+    assert set(pd.read_parquet(out / "stages" / ids[1] / "suggestions.parquet")["hypothesis"]) == {"shadow", "crop", "outliers"}
+
+    capsys.readouterr()
+    explicit = yaml.safe_load(config.read_text()) | {"suggest": [{"crop": {}}, {"field_of_view": {}}]}
+    config.write_text(yaml.safe_dump(explicit))
+    out = tmp_path / "explicit"
+    assert main(["run", str(texts[0]), str(texts[1]), "--config", str(config), "--out", str(out)]) == 2
+    error = capsys.readouterr().err.strip()
+    assert len(error.splitlines()) == 1 and "suggest entry 2: field_of_view: sensor 1 has no sensor model" in error
     assert not out.exists()
 
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import math
 
 import numpy as np
@@ -102,3 +103,25 @@ def test_a_plugin_candidate_runs_from_its_file(tmp_path):
     assert table["energy_reduction"][0] == pytest.approx(ego["energy_reduction"][0], rel=1e-12)
     with pytest.raises(HypothesisError, match="suggest entry 1"):
         candidate_steps([{"plugin": {"file": "missing.py", "function": "remove"}}], [], tmp_path)
+
+
+def test_the_suggest_job_skips_default_candidates_that_cannot_apply(tmp_path, capsys):
+    """The workflow's job: with --default-candidates, field_of_view on a pair without sensor
+    models is skipped; without it (a configured list), it is an error naming the entry."""
+    from lidarfield.cli import run_in_process
+    from lidarfield.io.parquet_table import read_table
+    from lidarfield.pair import write_pair
+
+    vehicle, _ = with_vehicle()
+    write_pair(tmp_path / "points.parquet", RegisteredPair(targets(60, 1), np.vstack([targets(60, 2), vehicle])))
+    candidates = candidate_steps(None, [], ".", GRID)
+    argv = ["job", "suggest", "--points", str(tmp_path / "points.parquet"), "--candidates", json.dumps(candidates),
+            "--grid", json.dumps(GRID), "--out", str(tmp_path / "suggestions.parquet")]  # fmt: skip
+    assert run_in_process([*argv, "--default-candidates"]) == 0
+    table, _ = read_table(tmp_path / "suggestions.parquet")
+    assert set(table["hypothesis"]) == {"ego_vehicle", "shadow", "crop", "outliers"}
+    assert table["hypothesis"][0] == "ego_vehicle" and table["energy_reduction"][0] > 0.95
+    (tmp_path / "suggestions.parquet").unlink()
+    assert run_in_process(argv) == 2
+    assert "suggest entry 2: field_of_view: sensor 1 has no sensor model" in capsys.readouterr().err
+    assert not (tmp_path / "suggestions.parquet").exists()

@@ -30,5 +30,10 @@ class HypothesisError(LidarfieldError):
     """A hypothesis that is unknown, badly parameterised, or fails when applied."""
 
 
+class NotApplicableError(HypothesisError):
+    """A hypothesis that cannot apply to this pair as it is (e.g. ``field_of_view`` without
+    sensor models): an error in a stack, a skipped default candidate in the suggestions."""
+
+
 class RegistrationError(LidarfieldError):
     """A registration method that cannot run on its input."""

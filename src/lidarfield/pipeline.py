@@ -229,7 +229,7 @@ def run_pair(
         log.info("stage %d (%s): removed %d + %d points", stage.level, stage.name, stage.removed1, stage.removed2)
         stages.append(stage)
         # Candidates run before any file is written too (a plugin candidate can fail).
-        tables.append(suggestions(stage.pair, field_settings, candidates[stage.level], study.base_dir, study.grid))
+        tables.append(suggestions(stage.pair, field_settings, candidates[stage.level], study.base_dir, study.grid, study.suggest is None))
 
     # The same inputs as a config pair {scan1, scan2, sensor, register}: equal stage ids.
     scan_specs = [{"path": str(p), "format": None, "sensor": sensor, "pose": None} for p in (scan1, scan2)]

@@ -14,7 +14,9 @@ binned once) and compared with the stage's field:
 
 ``rank`` 1 is the largest energy reduction (ties: fewer points removed; undefined reductions
 last). Candidates are the config's ``suggest`` list, or by default every built-in hypothesis
-the stack has not applied up to that stage, with its defaults.
+the stack has not applied up to that stage, with its defaults. A default candidate that cannot
+apply to the pair (``NotApplicableError``: ``field_of_view`` without sensor models) is skipped
+with a logged line; a configured one is an error naming it.
 """
 
 from __future__ import annotations
@@ -26,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import HypothesisError
+from .errors import HypothesisError, NotApplicableError
 from .field import field_from_voxel_ids
 from .grid import FieldSettings, field_settings_from_config
 from .hypotheses import BUILTINS, apply_step, validate_step
@@ -68,15 +70,26 @@ def suggestions(
     candidates: list[dict],
     base_dir: str | Path = ".",
     study_grid: dict | None = None,
+    defaults: bool = False,
 ) -> dict[str, np.ndarray]:
-    """The suggestion table (``SUGGESTION_COLUMNS``, one row per candidate, sorted by rank)."""
+    """The suggestion table (``SUGGESTION_COLUMNS``, one row per candidate, sorted by rank).
+
+    ``defaults``: the candidates are the default ones, so one that cannot apply to this pair is
+    skipped (and logged) rather than an error.
+    """
     ids1, ids2 = settings.grid.assign(pair.xyz1), settings.grid.assign(pair.xyz2)
     before = field_from_voxel_ids(ids1, pair.xyz1, ids2, pair.xyz2, settings)
     total = len(pair.xyz1) + len(pair.xyz2)
     rows = []
-    for spec in candidates:
+    for k, spec in enumerate(candidates, start=1):
         start = time.perf_counter()
-        keep1, keep2 = apply_step(pair, spec, base_dir, study_grid)
+        try:
+            keep1, keep2 = apply_step(pair, spec, base_dir, study_grid)
+        except NotApplicableError as e:
+            if not defaults:
+                raise HypothesisError(f"suggest entry {k}: {e}") from None
+            log.info("candidate %s skipped: it does not apply to this pair (%s)", step_name(spec), e)
+            continue
         after = field_from_voxel_ids(ids1[keep1], pair.xyz1[keep1], ids2[keep2], pair.xyz2[keep2], settings)
         removed1, removed2 = int(np.count_nonzero(~keep1)), int(np.count_nonzero(~keep2))
         row = {
@@ -136,10 +149,11 @@ def suggest_stage(
     grid_section: dict,
     out: str | Path,
     base_dir: str | Path = ".",
+    defaults: bool = False,
 ) -> dict[str, np.ndarray]:
     """``suggestions.parquet`` of a stage from its ``points.parquet``; returns the table."""
     pair, meta = read_pair(points_path)
-    table = suggestions(pair, field_settings_from_config(grid_section), candidates, base_dir, grid_section)
+    table = suggestions(pair, field_settings_from_config(grid_section), candidates, base_dir, grid_section, defaults)
     write_suggestions(out, table, meta.get("stage"), candidates, grid_section)
     return table
 

@@ -51,6 +51,7 @@ PRELOAD = (
     "lidarfield.suggest",
     "lidarfield.study",
     "pandas",  # the summary job's
+    "scipy.spatial",  # the outliers hypothesis' k-d tree (mitigate and suggest jobs)
 )
 # Numeric libraries start as many threads as these say; jobs run with threads: 1.
 THREAD_VARS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMEXPR_NUM_THREADS")

@@ -37,6 +37,8 @@ STAGES = {pair: STUDY.stage_ids(pair) for pair in PAIRS}
 # Each stage level's suggestion candidates, validated once here rather than in every job's
 # params (that was 8% of planning a 300-pair study).
 CANDIDATES = [STUDY.candidates(level) for level in range(len(STUDY.hypotheses) + 1)]
+# Default candidates (no suggest: section) that cannot apply to a pair are skipped, not errors.
+CANDIDATES_FLAG = "--default-candidates" if STUDY.suggest is None else ""
 # The pairs whose stage figures the study draws (plots.pairs); any other pair's are drawn on
 # demand, by asking for its page with them: results/{pair}/stages.html.
 PLOT_PAIRS = STUDY.plot_pairs

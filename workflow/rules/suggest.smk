@@ -20,7 +20,8 @@ rule suggest:
         mem_mb=4000,
     params:
         candidates=stage_candidates,
+        defaults=CANDIDATES_FLAG,
         grid=GRID,
     shell:
-        "lidarfield job suggest --points {input.points:q} --candidates {params.candidates:q}"
+        "lidarfield job suggest --points {input.points:q} --candidates {params.candidates:q} {params.defaults}"
         " --grid {params.grid:q} --out {output:q} > {log:q} 2>&1"

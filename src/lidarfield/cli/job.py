@@ -59,6 +59,7 @@ def add_parser(subparsers) -> None:
     p = jobs.add_parser("suggest")
     p.add_argument("--points", required=True)
     p.add_argument("--candidates", type=_json, required=True, help="normalised hypothesis entries")
+    p.add_argument("--default-candidates", action="store_true", help="skip the candidates that cannot apply to the pair")
     p.add_argument("--grid", type=_json, required=True)
     p.add_argument("--out", required=True)
     p.set_defaults(func=_suggest)
@@ -160,7 +161,7 @@ def _field(args: argparse.Namespace) -> None:
 def _suggest(args: argparse.Namespace) -> None:
     from ..suggest import suggest_stage
 
-    suggest_stage(args.points, args.candidates, args.grid, args.out)
+    suggest_stage(args.points, args.candidates, args.grid, args.out, defaults=args.default_candidates)
 def _rematch(args: argparse.Namespace) -> None:
     from ..rematch import rematch_stage
 

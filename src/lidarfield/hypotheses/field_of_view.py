@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..errors import HypothesisError
+from ..errors import NotApplicableError
 from ..pair import RegisteredPair
 from ..sensors import SensorModel
 from .geometry import in_sensor_frame, sensor_pose
@@ -57,7 +57,7 @@ class Limits:
 def sensor_limits(model: SensorModel | None, params: Params, sensor: int) -> Limits:
     """The limits of sensor 1 or 2: the parameters where given, else its model."""
     if params.elevation_deg is None and model is None:
-        raise HypothesisError(
+        raise NotApplicableError(
             f"field_of_view: sensor {sensor} has no sensor model, so its elevation limits are unknown: "
             "give the sensor (--sensor, or 'sensor' in the pair's config) or field_of_view's elevation_deg"
         )

@@ -20,7 +20,6 @@ import os
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from ..pair import RegisteredPair
 from .params import doc
@@ -47,6 +46,8 @@ def neighbour_threads() -> int:
 
 def mean_neighbour_distances(xyz: np.ndarray, nb_neighbors: int, workers: int = 1) -> np.ndarray:
     """Each point's mean distance to its ``nb_neighbors`` nearest points (itself included)."""
+    from scipy.spatial import cKDTree  # a third of a second: only when this hypothesis runs
+
     k = min(nb_neighbors, len(xyz))
     # An unbalanced tree (split at the midpoint) builds and answers faster on scans; exact all the same.
     distances, _ = cKDTree(xyz, balanced_tree=False).query(xyz, k=k, workers=workers)

@@ -90,8 +90,11 @@ def suggestions(
                 raise HypothesisError(f"suggest entry {k}: {e}") from None
             log.info("candidate %s skipped: it does not apply to this pair (%s)", step_name(spec), e)
             continue
-        after = field_from_voxel_ids(ids1[keep1], pair.xyz1[keep1], ids2[keep2], pair.xyz2[keep2], settings)
         removed1, removed2 = int(np.count_nonzero(~keep1)), int(np.count_nonzero(~keep2))
+        if removed1 or removed2:
+            after = field_from_voxel_ids(ids1[keep1], pair.xyz1[keep1], ids2[keep2], pair.xyz2[keep2], settings)
+        else:  # the same points: the same field (as a no-op ego_vehicle or crop often is)
+            after = before
         row = {
             "hypothesis": step_name(spec),
             "params": canonical_json(spec[step_name(spec)]),

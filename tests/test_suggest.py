@@ -125,3 +125,20 @@ def test_the_suggest_job_skips_default_candidates_that_cannot_apply(tmp_path, ca
     assert run_in_process(argv) == 2
     assert "suggest entry 2: field_of_view: sensor 1 has no sensor model" in capsys.readouterr().err
     assert not (tmp_path / "suggestions.parquet").exists()
+
+
+def test_a_candidate_that_removes_nothing_gets_the_row_of_a_recomputed_field():
+    """The job reuses the field before for such a candidate: the row must be what recomputing
+    the field from the same points gives, to the bit."""
+    from lidarfield.field import field_from_voxel_ids
+    from lidarfield.suggest import compare_fields
+
+    vehicle, _ = with_vehicle()
+    pair = RegisteredPair(targets(60, 1), np.vstack([targets(60, 2), vehicle]))
+    table = suggestions(pair, SETTINGS, candidate_steps([{"crop": {}}], []))
+    ids1, ids2 = SETTINGS.grid.assign(pair.xyz1), SETTINGS.grid.assign(pair.xyz2)
+    before = field_from_voxel_ids(ids1, pair.xyz1, ids2, pair.xyz2, SETTINGS)
+    recomputed = compare_fields(before, field_from_voxel_ids(ids1, pair.xyz1, ids2, pair.xyz2, SETTINGS))
+    assert table["removed1"][0] == table["removed2"][0] == 0
+    for name, value in recomputed.items():
+        assert table[name][0] == value or (math.isnan(table[name][0]) and math.isnan(value)), name

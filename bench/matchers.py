@@ -78,7 +78,7 @@ def small_gicp_runs(method, clouds, guesses, p, threads, epsilon):
 def main() -> int:
     from lidarfield.poses import pose_error
     from lidarfield.registration import DEFAULTS, matching
-    from lidarfield.rematch import perturbed, start_offsets
+    from lidarfield.analysis.rematch import perturbed, start_offsets
 
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--trials", type=int, default=8)

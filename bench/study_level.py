@@ -18,7 +18,7 @@ import pandas as pd
 from lidarfield.plots.study import plot_study
 from lidarfield.plots.synthetic import write_field_study
 from lidarfield.report import write_overview
-from lidarfield.study import read_study_tables, write_study_tables, write_study_voxels
+from lidarfield.analysis.study import read_study_tables, write_study_tables, write_study_voxels
 
 from timing import machine  # bench/timing.py
 

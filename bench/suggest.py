@@ -26,7 +26,7 @@ from lidarfield.hypotheses import apply_step
 from lidarfield.pair import RegisteredPair
 from lidarfield.poses import pose_from_xyzrpy
 from lidarfield.sensors import PRESETS
-from lidarfield.suggest import candidate_steps, compare_fields, suggestions
+from lidarfield.analysis.suggest import candidate_steps, compare_fields, suggestions
 
 from hypotheses import street_scan  # bench/hypotheses.py
 from timing import best_time, machine  # bench/timing.py

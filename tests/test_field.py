@@ -7,7 +7,7 @@ import pytest
 
 from lidarfield.field import discrepancy_field, field_columns, field_from_voxel_ids, read_field, write_field
 from lidarfield.field_reference import discrepancy_field_reference, field_from_voxel_ids_reference
-from lidarfield.field_stats import field_statistics
+from lidarfield.analysis.field_stats import field_statistics
 from lidarfield.grid import CartesianGrid, FieldSettings, SphericalGrid
 
 GRID = SphericalGrid()  # the experimental grid: 36 x 10 deg, 5 x 8 deg from -20 to +20

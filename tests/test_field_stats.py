@@ -8,7 +8,7 @@ import math
 import numpy as np
 
 from lidarfield.field import discrepancy_field
-from lidarfield.field_stats import field_statistics, summary_json_safe, weighted_rigid_transform
+from lidarfield.analysis.field_stats import field_statistics, summary_json_safe, weighted_rigid_transform
 from lidarfield.grid import FieldSettings, SphericalGrid
 
 from test_field import GRID, voxel_centre_clouds

@@ -14,7 +14,7 @@ from lidarfield.io import write_scan
 from lidarfield.pair import RegisteredPair
 from lidarfield.pipeline import read_stats
 from lidarfield.poses import apply_pose, invert_pose, pose_error, pose_from_xyzrpy, relative_pose
-from lidarfield.rematch import perturbed, read_rematch, rematch, start_offsets, summary_columns
+from lidarfield.analysis.rematch import perturbed, read_rematch, rematch, start_offsets, summary_columns
 from lidarfield.scene import load_scene
 from lidarfield.sensors import sensor_model
 from lidarfield.simulate import simulate_scan

@@ -168,7 +168,7 @@ def test_run_on_text_scans_without_a_sensor_skips_the_defaults_that_need_one(tmp
     config = _study(tmp_path, texts, [{"ego_vehicle": {}}])
     out = tmp_path / "out"
     argv = ["run", str(texts[0]), str(texts[1]), "--config", str(config), "--out", str(out)]
-    with caplog.at_level("INFO", logger="lidarfield.suggest"):
+    with caplog.at_level("INFO", logger="lidarfield.analysis.suggest"):
         assert main(argv) == 0
     skipped = [r.getMessage() for r in caplog.records if "skipped" in r.getMessage()]
     assert len(skipped) == 2  # one per stage

@@ -8,7 +8,7 @@ import pytest
 
 from lidarfield.errors import HypothesisError
 from lidarfield.field import discrepancy_field
-from lidarfield.field_stats import field_statistics
+from lidarfield.analysis.field_stats import field_statistics
 from lidarfield.grid import field_settings_from_config
 from lidarfield.pair import RegisteredPair
 from lidarfield.poses import pose_from_xyzrpy

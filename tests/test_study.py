@@ -18,7 +18,7 @@ from lidarfield.errors import ConfigError, InputError
 from lidarfield.plots import plot_pair
 from lidarfield.plots.study import _polar_cells, plot_study
 from lidarfield.plots.synthetic import write_field_study
-from lidarfield.study import group_medians, read_study_tables, write_study_tables, write_study_voxels
+from lidarfield.analysis.study import group_medians, read_study_tables, write_study_tables, write_study_voxels
 
 from layout import assert_fixed_layout
 

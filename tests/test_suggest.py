@@ -12,7 +12,7 @@ from lidarfield.config import load_config
 from lidarfield.errors import HypothesisError
 from lidarfield.grid import FieldSettings, SphericalGrid
 from lidarfield.pair import RegisteredPair
-from lidarfield.suggest import SUGGESTION_COLUMNS, candidate_steps, suggestions
+from lidarfield.analysis.suggest import SUGGESTION_COLUMNS, candidate_steps, suggestions
 
 from test_significance import targets
 
@@ -131,7 +131,7 @@ def test_a_candidate_that_removes_nothing_gets_the_row_of_a_recomputed_field():
     """The job reuses the field before for such a candidate: the row must be what recomputing
     the field from the same points gives, to the bit."""
     from lidarfield.field import field_from_voxel_ids
-    from lidarfield.suggest import compare_fields
+    from lidarfield.analysis.suggest import compare_fields
 
     vehicle, _ = with_vehicle()
     pair = RegisteredPair(targets(60, 1), np.vstack([targets(60, 2), vehicle]))

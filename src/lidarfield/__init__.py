@@ -51,9 +51,9 @@ _EXPORTS = {
     "read_field": "field",
     "write_field": "field",
     "discrepancy_field_reference": "field_reference",
-    "field_statistics": "field_stats",
-    "analyse_field": "field_stats",
-    "suggestions": "suggest",
+    "field_statistics": "analysis.field_stats",
+    "analyse_field": "analysis.field_stats",
+    "suggestions": "analysis.suggest",
     # simulation
     "load_scene": "scene",
     "builtin_scenes": "scene",

@@ -70,7 +70,7 @@ class Study:
 
     def candidates(self, level: int) -> list[dict]:
         """The normalised candidate hypotheses of stage ``level`` (see ``suggest``)."""
-        from .suggest import candidate_steps
+        from .analysis.suggest import candidate_steps
 
         return candidate_steps(self.suggest, self.hypotheses[:level], self.base_dir, self.grid)
 
@@ -180,7 +180,7 @@ def validate_config(
         hypotheses = validate_stack(config["hypotheses"], base_dir, study_grid=config["grid"])
         suggest = None
         if config["suggest"] is not None:
-            from .suggest import candidate_steps
+            from .analysis.suggest import candidate_steps
 
             suggest = candidate_steps(config["suggest"], hypotheses, base_dir, config["grid"])
         pairs: dict[str, PairSpec] = {}

@@ -17,7 +17,7 @@ import numpy as np
 from .errors import InputError
 from .grid import CARTESIAN_BITS, FieldSettings, Grid, SphericalGrid, relative_columns
 from .io.parquet_table import read_table, write_table
-from .significance import COVARIANCE_ENTRIES, covariance_from_sums, vector_standard_error, z_score
+from .analysis.significance import COVARIANCE_ENTRIES, covariance_from_sums, vector_standard_error, z_score
 
 GRID_COLUMNS = {"spherical": ("az_bin", "el_bin", "r_bin"), "cartesian": ("ix", "iy", "iz")}
 VALUE_COLUMNS = ("n1", "n2", "x1", "y1", "z1", "x2", "y2", "z2", "u", "v", "w", "magnitude", "se", "z", "valid")

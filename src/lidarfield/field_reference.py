@@ -13,7 +13,7 @@ import numpy as np
 import pandas as pd
 
 from .grid import CARTESIAN_BITS, CARTESIAN_OFFSET, CartesianGrid, FieldSettings, SphericalGrid
-from .significance import SPREAD_FLOOR_M, SPREAD_MIN_POINTS
+from .analysis.significance import SPREAD_FLOOR_M, SPREAD_MIN_POINTS
 
 
 def discrepancy_field_reference(

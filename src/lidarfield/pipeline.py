@@ -15,7 +15,7 @@ import numpy as np
 
 from .errors import ConfigError, InputError
 from .field import field_meta, write_field
-from .field_stats import analyse_field, summary_json_safe
+from .analysis.field_stats import analyse_field, summary_json_safe
 from .grid import field_settings_from_config
 from .io import read_scan, write_scan
 from .io.atomic import atomic_path, write_text
@@ -24,8 +24,8 @@ from .pair import RegisteredPair, read_pair, write_pair
 from .sensor_fit import fit_warning, log_fit
 from .stack import Stage, apply_stack, initial_stage, next_stage
 from .stages import stage_ids
-from .suggest import suggestions, write_suggestions
-from .tags import TAGS
+from .analysis.suggest import suggestions, write_suggestions
+from .analysis.tags import TAGS
 
 log = logging.getLogger(__name__)
 
@@ -132,7 +132,7 @@ def read_stats(stats_paths: list[str | Path], rematch_paths: list[str | Path] = 
     """The summary rows of the given ``stats.json`` files, each joined with the rematch columns
     of the ``rematch.parquet`` among ``rematch_paths`` in the same stage folder (the field and
     rematch jobs of a stage are independent; the summary brings them together)."""
-    from .rematch import rematch_row
+    from .analysis.rematch import rematch_row
 
     rematched = {Path(path).parent: rematch_row(path) for path in rematch_paths}
     rows = []
@@ -256,7 +256,7 @@ def run_pair(
         )  # fmt: skip
         write_suggestions(folder / "suggestions.parquet", table, stage_id, candidates[stage.level], study.grid)
         if study.rematch:
-            from .rematch import rematch_stage
+            from .analysis.rematch import rematch_stage
 
             rematch_stage(folder / "points.parquet", study.rematch, folder / "rematch.parquet")
     stats = [folder / "stats.json" for folder in folders]

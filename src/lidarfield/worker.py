@@ -43,13 +43,13 @@ PRELOAD = (
     "lidarfield.pipeline",
     "lidarfield.plots",
     "lidarfield.registration.matching",  # Open3D
-    "lidarfield.rematch",
+    "lidarfield.analysis.rematch",
     "lidarfield.simulate",
     "lidarfield.scene",
     "lidarfield.stack",
     "lidarfield.report",
-    "lidarfield.suggest",
-    "lidarfield.study",
+    "lidarfield.analysis.suggest",
+    "lidarfield.analysis.study",
     "pandas",  # the summary job's
     "scipy.spatial",  # the outliers hypothesis' k-d tree (mitigate and suggest jobs)
 )

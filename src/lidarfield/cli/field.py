@@ -57,7 +57,7 @@ def add_parser(subparsers) -> None:
 
 def run(args) -> int:
     from ..field import field_meta, write_field
-    from ..field_stats import analyse_field, summary_json_safe
+    from ..analysis.field_stats import analyse_field, summary_json_safe
     from ..grid import field_settings_from_config
     from ..io import read_scan
     from ..io.atomic import write_text

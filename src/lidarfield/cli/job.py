@@ -159,11 +159,11 @@ def _field(args: argparse.Namespace) -> None:
 
 
 def _suggest(args: argparse.Namespace) -> None:
-    from ..suggest import suggest_stage
+    from ..analysis.suggest import suggest_stage
 
     suggest_stage(args.points, args.candidates, args.grid, args.out, defaults=args.default_candidates)
 def _rematch(args: argparse.Namespace) -> None:
-    from ..rematch import rematch_stage
+    from ..analysis.rematch import rematch_stage
 
     rematch_stage(args.points, args.settings, args.out)
 
@@ -198,20 +198,20 @@ def _summary(args: argparse.Namespace) -> None:
 
 
 def _study_voxels(args: argparse.Namespace) -> None:
-    from ..study import write_study_voxels
+    from ..analysis.study import write_study_voxels
 
     write_study_voxels(args.fields, args.out)
 
 
 def _study_tables(args: argparse.Namespace) -> None:
-    from ..study import write_study_tables
+    from ..analysis.study import write_study_tables
 
     write_study_tables(args.summary, args.hypotheses_out, args.pairs_out)
 
 
 def _study_figures(args: argparse.Namespace) -> None:
     from ..plots.study import plot_study
-    from ..study import read_study_tables
+    from ..analysis.study import read_study_tables
 
     t = read_study_tables(args.summary, args.study_dir)
     plot_study(t.summary, t.voxels, t.hypotheses, t.pairs, t.grid, args.out)
@@ -229,7 +229,7 @@ def _report(args: argparse.Namespace) -> None:
     from pathlib import Path
 
     from ..report import write_overview
-    from ..study import read_study_tables
+    from ..analysis.study import read_study_tables
 
     tables = read_study_tables(args.summary, args.study_dir)
     # .../{pair}/stages/{stage}/suggestions.parquet

@@ -36,7 +36,7 @@ def add_parser(subparsers) -> None:
 
 def _run(args: argparse.Namespace) -> int:
     from ..pipeline import run_pair
-    from ..rematch import METHOD_COLUMNS, method_rows
+    from ..analysis.rematch import METHOD_COLUMNS, method_rows
 
     poses = None if args.poses is None else {"topic": args.poses, **({"frame": args.pose_frame} if args.pose_frame else {})}
     rows = run_pair(args.scan1, args.scan2, args.config, args.out, args.register, args.transform, args.sensor, poses)
@@ -82,8 +82,8 @@ def format_table(rows: list[dict], columns: tuple[str, ...] = TABLE_COLUMNS) -> 
 
 def findings_lines(rows: list[dict]) -> list[str]:
     """What the table does not say plainly: the registration's and the scans' warnings, and
-    each stage's findings (lidarfield.findings)."""
-    from ..findings import pair_findings, stage_findings
+    each stage's findings (lidarfield.analysis.findings)."""
+    from ..analysis.findings import pair_findings, stage_findings
 
     lines = [f"registration: {rows[0]['registration_warning']}"] if rows and rows[0].get("registration_warning") else []
     lines += [f"sensor model: {text}" for text in (pair_findings(rows[0]) if rows else [])]

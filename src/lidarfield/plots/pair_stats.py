@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..tags import TAGS
+from ..analysis.tags import TAGS
 from .common import Margins, PlotSettings, figure, legend_at_right, plot_settings, png_bytes, save
 
 MAGNITUDE_SERIES = (

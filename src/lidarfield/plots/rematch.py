@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..rematch import ERRORS, read_rematch
+from ..analysis.rematch import ERRORS, read_rematch
 from .common import Margins, figure, plot_settings, png_bytes, save
 from .pair_stats import column
 

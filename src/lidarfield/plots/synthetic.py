@@ -14,12 +14,12 @@ from pathlib import Path
 import numpy as np
 
 from ..field import field_meta, write_field
-from ..field_stats import analyse_field, field_statistics, summary_json_safe
+from ..analysis.field_stats import analyse_field, field_statistics, summary_json_safe
 from ..grid import FieldSettings, SphericalGrid
 from ..io.atomic import atomic_path, write_text
 from ..io.parquet_table import write_table
 from ..pair import RegisteredPair, write_pair
-from ..suggest import suggestions, write_suggestions
+from ..analysis.suggest import suggestions, write_suggestions
 
 SETTINGS = FieldSettings(SphericalGrid(36, 0.0, (-20.0, 20.0), 5), min_points=10)
 # The candidates of each stage's "what to try next" (the pair has no sensor models, so no

@@ -14,7 +14,7 @@ from functools import partial
 from pathlib import Path
 
 from .. import __version__
-from ..findings import findings_items, stage_findings
+from ..analysis.findings import findings_items, stage_findings
 from ..plots import stage_figures
 from ..plots.common import PlotSettings, plot_settings
 from ..plots.pair_stats import pair_figure_png
@@ -77,7 +77,7 @@ def stages_table(rows: list[dict]) -> str:
 
 
 def findings_parts(rows: list[dict]) -> list[str]:
-    """What a reader should not miss (lidarfield.findings: a scan that does not fit its sensor
+    """What a reader should not miss (lidarfield.analysis.findings: a scan that does not fit its sensor
     model, a stage removing most of a cloud, a field without a valid voxel); nothing when none."""
     items = findings_items(rows)
     if not items:

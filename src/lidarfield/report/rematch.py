@@ -6,7 +6,7 @@ from __future__ import annotations
 
 from ..plots.common import png_bytes
 from ..plots.rematch import RELATIVE_CHANGE, hypothesis_effects, study_rematch_figure
-from ..rematch import METHOD_COLUMNS, method_rows
+from ..analysis.rematch import METHOD_COLUMNS, method_rows
 from .page import image, table
 
 

@@ -20,10 +20,10 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import InputError
-from .io.atomic import atomic_path
-from .io.parquet_table import read_table, write_table
-from .stages import level_of
+from ..errors import InputError
+from ..io.atomic import atomic_path
+from ..io.parquet_table import read_table, write_table
+from ..stages import level_of
 
 log = logging.getLogger(__name__)
 
@@ -123,7 +123,7 @@ def field_grid(path: str | Path) -> dict:
 def voxels_table(fields: list[StageField]) -> tuple[dict[str, np.ndarray], dict]:
     """The voxels table with the grid's bin columns after ``voxel``, and the grid (from the
     first field's metadata: every field of a study is on the study's grid)."""
-    from .grid import grid_from_config
+    from ..grid import grid_from_config
 
     table = study_voxels(fields)
     grid = field_grid(fields[0].path)
@@ -180,7 +180,7 @@ def rank_pairs(summary):
 
 def write_study_tables(summary_path: str | Path, hypotheses_out: str | Path, pairs_out: str | Path) -> None:
     """``hypotheses.parquet`` and ``pairs.parquet`` from the study's ``summary.parquet``."""
-    from .report.discover import read_summary_frame
+    from ..report.discover import read_summary_frame
 
     summary = read_summary_frame(Path(summary_path))
     for table, out in ((hypothesis_changes(summary), hypotheses_out), (rank_pairs(summary), pairs_out)):
@@ -206,7 +206,7 @@ def read_study_tables(summary_path: str | Path, study_dir: str | Path) -> StudyT
     """The tables the workflow wrote: ``summary.parquet`` and ``study/*.parquet``."""
     import pandas as pd
 
-    from .report.discover import read_summary_frame
+    from ..report.discover import read_summary_frame
 
     study_dir = Path(study_dir)
     read = {}

@@ -15,10 +15,10 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import RegistrationError
-from .io.parquet_table import read_table, write_table
-from .pair import read_pair
-from .poses import apply_pose, invert_pose, pose_error
+from ..errors import RegistrationError
+from ..io.parquet_table import read_table, write_table
+from ..pair import read_pair
+from ..poses import apply_pose, invert_pose, pose_error
 
 log = logging.getLogger(__name__)
 
@@ -67,8 +67,8 @@ def rematch(xyz1: np.ndarray, xyz2_sensor: np.ndarray, reference: np.ndarray, se
     poorly gives rows with ``converged`` false and the reason in ``failure``, never an error;
     the errors of a trial where no estimate was made are NaN.
     """
-    from .registration import matching, parse_settings
-    from .registration.core import require_points, scan_match
+    from ..registration import matching, parse_settings
+    from ..registration.core import require_points, scan_match
 
     offsets = start_offsets(settings["trials"], settings["max_translation_m"], settings["max_rotation_deg"], settings["seed"])
     rows = []

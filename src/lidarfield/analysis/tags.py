@@ -31,9 +31,9 @@ import math
 
 import numpy as np
 
-from .errors import HypothesisError
-from .grid import FieldSettings, SphericalGrid
-from .pair import RegisteredPair
+from ..errors import HypothesisError
+from ..grid import FieldSettings, SphericalGrid
+from ..pair import RegisteredPair
 
 TAGS = ("fov_edge", "near_sensor", "depth_edge", "radial", "rigid", "count_imbalance")
 POINT_SHARE = 0.1
@@ -106,8 +106,8 @@ def _share(row: np.ndarray, flag: np.ndarray, count: np.ndarray) -> np.ndarray:
 
 
 def _near_fov_edge(pair: RegisteredPair) -> list[np.ndarray]:
-    from .hypotheses.field_of_view import Params, sensor_limits, visible
-    from .hypotheses.geometry import in_sensor_frame
+    from ..hypotheses.field_of_view import Params, sensor_limits, visible
+    from ..hypotheses.geometry import in_sensor_frame
 
     try:
         limits1, limits2 = (sensor_limits(model, Params(), k) for k, model in ((1, pair.sensor1), (2, pair.sensor2)))
@@ -124,7 +124,7 @@ def _near_a_sensor(xyz: np.ndarray, pair: RegisteredPair) -> np.ndarray:
 
 
 def _on_depth_edge(pair: RegisteredPair, settings: FieldSettings) -> list[np.ndarray]:
-    from .hypotheses.shadow import ANGULAR_KEYS, Params, shadow
+    from ..hypotheses.shadow import ANGULAR_KEYS, Params, shadow
 
     grid = settings.grid
     angular = {key: grid.to_config()[key] for key in ANGULAR_KEYS} if isinstance(grid, SphericalGrid) else None

@@ -23,10 +23,10 @@ import math
 
 import numpy as np
 
-from .field import discrepancy_field
-from .grid import FieldSettings
-from .pair import RegisteredPair
-from .poses import rotation_angle
+from ..field import discrepancy_field
+from ..grid import FieldSettings
+from ..pair import RegisteredPair
+from ..poses import rotation_angle
 from .randomness import neighbour_pairs, randomness_tests, unit_vectors
 from .tags import energy_shares, voxel_energy, voxel_tags
 

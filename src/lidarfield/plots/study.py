@@ -1,4 +1,4 @@
-"""Figures of the study level, drawn from its tables (``lidarfield.study``).
+"""Figures of the study level, drawn from its tables (``lidarfield.analysis.study``).
 
 - ``voxels_{level:02d}.png``: per stage level, polar maps (azimuth x elevation, forward up,
   seen from above) of the median magnitude and of the share of pairs above their median, so

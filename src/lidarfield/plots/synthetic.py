@@ -3,7 +3,7 @@
 The scene: a ground disc, two buildings and a car that moved between the scans, seen from
 two sensor positions; the vehicle's own body returns near each sensor. Stage 1 removes points
 within 3 m of their own sensor, stage 2 removes points above 10 deg elevation about the other
-sensor. Fields and statistics come from ``lidarfield.field`` and ``lidarfield.field_stats``.
+sensor. Fields and statistics come from ``lidarfield.field`` and ``lidarfield.analysis.field_stats``.
 """
 
 from __future__ import annotations
@@ -23,7 +23,7 @@ from ..analysis.suggest import suggestions, write_suggestions
 
 SETTINGS = FieldSettings(SphericalGrid(36, 0.0, (-20.0, 20.0), 5), min_points=10)
 # The candidates of each stage's "what to try next" (the pair has no sensor models, so no
-# field_of_view; no outliers, which imports Open3D).
+# field_of_view; no outliers, the slowest to compute).
 SUGGEST = [{"ego_vehicle": {"radius_m": 3.0, "box_m": None}}, {"crop": {"min_range_m": 0.0, "max_range_m": 15.0, "box_m": None}}]
 HYPOTHESES = ("none", "ego_vehicle", "field_of_view")
 

@@ -190,8 +190,12 @@ def test_a_hypothesis_that_shrinks_the_field_but_worsens_matching_is_shown_as_su
     # a change within 10% of the error is no change: not flagged
     slight = hypothesis_effects(_rows({"a": [(1.0, 0.100), (0.5, 0.105)]}), ["icp"])[0]
     assert slight["verdict"] == "no clear change" and not slight["worse_matching"]
+    # nor is +70% of 0.1 mm (0.07 mm): below a millimetre nothing is called a change
+    tiny = hypothesis_effects(_rows({"a": [(1.0, 0.0001), (0.5, 0.00017)]}), ["icp"])[0]
+    assert tiny["translation_relative_change"] == pytest.approx(0.7)
+    assert tiny["verdict"] == "no clear change" and not tiny["worse_matching"]
     fig = study_rematch_figure(rows, ["icp"], dpi=60)
-    bars = fig.axes[0].patches
+    bars = [bar for bars in fig.axes[0].containers for bar in bars]
     assert [bar.get_hatch() for bar in bars] == [None, "//"]
     assert_fixed_layout(fig)
     plt.close(fig)
@@ -217,3 +221,9 @@ def test_pose_error_figure_draws_every_stage_and_method(tmp_path, clean_pair):
     assert [t.get_text() for t in fig.axes[1].get_xticklabels()] == ["00\nnone", "01\nego_vehicle"]
     # stage 1 has no estimate: one x per method at the top of each panel
     assert sum(len(line.get_xdata()) for line in fig.axes[0].get_lines() if line.get_marker() == "x") == 2
+    # a diverged trial (1e11 m off) is a triangle at 10 m: the axes keep the estimates' scale
+    diverged = {**table, "translation_error_m": np.where(np.arange(len(table["trial"])) == 0, 1e11, table["translation_error_m"])}
+    fig = pose_error_figure([(0, "none", diverged)], "sim", dpi=60, reference="truth")
+    triangles = [line for line in fig.axes[0].get_lines() if line.get_marker() == "^"]
+    assert [list(line.get_ydata()) for line in triangles] == [[10.0]]
+    assert fig.axes[0].get_ylim()[1] < 100

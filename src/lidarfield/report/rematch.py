@@ -5,7 +5,7 @@ field but make matching worse shown as such."""
 from __future__ import annotations
 
 from ..plots.common import png_bytes
-from ..plots.rematch import RELATIVE_CHANGE, hypothesis_effects, study_rematch_figure
+from ..plots.rematch import ABSOLUTE_CHANGE_M, RELATIVE_CHANGE, hypothesis_effects, study_rematch_figure
 from ..analysis.rematch import METHOD_COLUMNS, method_rows
 from .page import image, table
 
@@ -37,15 +37,17 @@ def study_rematch_parts(rows: list[dict], dpi: int) -> list[str]:
     body, classes = [], []
     for e in effects:
         verdict = "field shrinks, matching worse" if e["worse_matching"] else e["verdict"]
+        # rounded to what the errors can mean (0.01 mm, 0.1 %, 1e-4 deg): not 1.6e-14 cm; + 0.0 turns -0 into 0
         body.append([f"{e['level']:02d}", e["hypothesis"], e["method"], e["pairs"], e["field_p95_change_m"],
-                     e["translation_change_m"] * 100, e["translation_relative_change"] * 100, e["rotation_change_deg"],
-                     verdict])  # fmt: skip
+                     round(e["translation_change_m"] * 100, 3) + 0.0, round(e["translation_relative_change"] * 100, 1) + 0.0,
+                     round(e["rotation_change_deg"], 4) + 0.0, verdict])  # fmt: skip
         classes.append("flag" if e["worse_matching"] else "")
     return [
         "<h2>Rematching: does each hypothesis help scan matching?</h2>",
         '<p class="note">Every stage registered again with each method from seeded starts about the reference '
         "pose (the truth when known, else the study's registration). Changes from stage k-1 to k, median over "
-        f"pairs; negative = smaller; a relative change within {RELATIVE_CHANGE:.0%} is no clear change. Rows in red: "
+        f"pairs; negative = smaller; a change within {RELATIVE_CHANGE:.0%} of the error or below "
+        f"{ABSOLUTE_CHANGE_M * 1000:g} mm is no clear change. Rows in red: "
         "the hypothesis shrinks the field but makes that method's matching worse.</p>",
         image(png_bytes(study_rematch_figure(rows, methods, dpi), dpi), "change in median pose error per hypothesis and method"),
         table(headers, body, classes, text_columns=3),

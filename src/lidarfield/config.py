@@ -211,6 +211,12 @@ def validate_config(
 AUTO_PLOT_PAIRS = 12
 
 
+def figure_settings(plots: dict | None) -> dict:
+    """The ``plots`` section without ``pairs``: which pairs get figures is the workflow's
+    choice, not a figure's setting, so changing it redraws no figure."""
+    return {k: v for k, v in (plots or {}).items() if k != "pairs"}
+
+
 def plot_pairs(setting: str | list[str], names: list[str], source: str = "config") -> list[str]:
     """The pairs that get per-stage figures, in name order, for the ``plots.pairs`` setting.
 

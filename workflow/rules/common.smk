@@ -5,7 +5,6 @@ from pathlib import Path
 from snakemake.utils import min_version
 
 import lidarfield.config
-from lidarfield.plots.common import figure_settings
 from lidarfield.stages import canonical_json
 
 min_version("9.0")
@@ -209,4 +208,4 @@ def rematch_files(wildcards=None):
 
 GRID = canonical_json(STUDY.grid)
 REMATCH = canonical_json(STUDY.rematch)
-PLOTS = canonical_json(figure_settings(STUDY.plots))
+PLOTS = canonical_json(lidarfield.config.figure_settings(STUDY.plots))

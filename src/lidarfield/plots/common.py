@@ -22,6 +22,7 @@ from matplotlib.colors import Normalize  # noqa: E402
 from matplotlib.ticker import MaxNLocator  # noqa: E402
 from PIL import Image  # noqa: E402
 
+from ..config import figure_settings  # noqa: E402
 from ..errors import ConfigError, InputError  # noqa: E402
 from ..io.atomic import atomic_path  # noqa: E402
 from ..io.parquet_table import read_table  # noqa: E402
@@ -58,12 +59,6 @@ class PlotSettings:
     formats: tuple[str, ...] = ("png",)  # "svg" adds an SVG where it stays small
     dpi: int = 120
     interactive: bool = True  # write field_3d.html
-
-
-def figure_settings(plots: dict | None) -> dict:
-    """The ``plots`` section without ``pairs``: which pairs get figures is the workflow's
-    choice, not a figure's setting, so changing it redraws no figure."""
-    return {k: v for k, v in (plots or {}).items() if k != "pairs"}
 
 
 def plot_settings(settings: dict | None) -> PlotSettings:

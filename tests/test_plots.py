@@ -244,29 +244,3 @@ def test_fixed_layout_keeps_axes_legends_and_titles_apart(stages, tmp_path, monk
         assert_fixed_layout(fig)
     monkeypatch.undo()
     plt.close("all")
-
-
-def test_figures_are_palette_pngs_close_to_the_full_colour_render(tmp_path):
-    """Written PNGs are 256-colour: the same picture as matplotlib's RGB one (mean error under
-    1% of the range, no pixel off by more than a colour step of a gradient), and a page embeds
-    them as they are."""
-    import io
-
-    import matplotlib.pyplot as plt
-
-    from lidarfield.plots.common import palette_png
-    from lidarfield.report.page import compact_png
-
-    fig, ax = plt.subplots(figsize=(4, 3), dpi=80)
-    x = np.linspace(0, 1, 200)
-    ax.scatter(x, np.sin(6 * x), c=x, cmap="viridis", s=8)
-    fig.colorbar(ax.collections[0], ax=ax, label="magnitude (m)")
-    reference = io.BytesIO()
-    fig.savefig(reference, format="png", dpi=80)
-    png = palette_png(fig, 80)
-    plt.close(fig)
-    with Image.open(io.BytesIO(png)) as im, Image.open(reference) as ref:
-        assert im.mode == "P" and im.size == ref.size == (320, 240)
-        diff = np.abs(np.asarray(im.convert("RGB"), float) - np.asarray(ref.convert("RGB"), float))
-    assert diff.mean() < 2.55 and diff.max() < 64
-    assert compact_png(png) is png

@@ -60,12 +60,8 @@ def page(title: str, body: list[str]) -> str:
 
 def compact_png(png: bytes, max_width: int = EMBED_MAX_WIDTH) -> bytes:
     """The PNG scaled down to ``max_width`` and reduced to a 256-colour palette: a figure
-    embedded in a page drops from a few hundred kB to well under a hundred. lidarfield's own
-    figures are palette PNGs already (``plots.common.palette_png``) and are embedded as they
-    are: decoding and re-encoding them was most of a page's time, for a few kB each."""
-    with Image.open(io.BytesIO(png)) as im:  # reads the header only
-        if im.mode == "P":
-            return png
+    embedded in a page drops from a few hundred kB to well under a hundred."""
+    with Image.open(io.BytesIO(png)) as im:
         im = im.convert("RGB")
         if im.width > max_width:
             im = im.resize((max_width, round(im.height * max_width / im.width)), Image.Resampling.LANCZOS)

@@ -150,9 +150,14 @@ def write_summary(
 ) -> None:
     """The summary table of the given ``stats.json`` rows (joined with their stages' rematch
     columns), as Parquet and CSV (lists as JSON)."""
+    write_summary_table(read_stats(stats_paths, rematch_paths), out_parquet, out_csv)
+
+
+def write_summary_table(rows: list[dict], out_parquet: str | Path, out_csv: str | Path) -> None:
+    """Summary rows as Parquet and CSV (list columns as JSON in the CSV)."""
     import pandas as pd  # half a second to import: only the summary job needs it
 
-    table = pd.DataFrame(read_stats(stats_paths, rematch_paths))
+    table = pd.DataFrame(rows)
     with atomic_path(out_parquet) as tmp:
         table.to_parquet(tmp, index=False)
     flat = table.copy()

@@ -16,9 +16,10 @@ import numpy as np
 from ..field import field_meta, write_field
 from ..analysis.field_stats import analyse_field, field_statistics, summary_json_safe
 from ..grid import FieldSettings, SphericalGrid
-from ..io.atomic import atomic_path, write_text
+from ..io.atomic import write_text
 from ..io.parquet_table import write_table
 from ..pair import RegisteredPair, write_pair
+from ..pipeline import write_summary_table
 from ..analysis.suggest import suggestions, write_suggestions
 
 SETTINGS = FieldSettings(SphericalGrid(36, 0.0, (-20.0, 20.0), 5), min_points=10)
@@ -112,14 +113,8 @@ def write_synthetic_pair(pair_dir: str | Path, pair_name: str, seed: int = 0, le
 
 
 def write_summary(folder: Path, rows: list[dict]) -> None:
-    """``summary.parquet`` and ``summary.csv`` of the rows (list columns as JSON in the CSV)."""
-    import pandas as pd
-
-    df = pd.DataFrame(rows)
-    with atomic_path(folder / "summary.parquet") as tmp:
-        df.to_parquet(tmp, index=False)
-    flat = df.assign(rigid_translation_m=df["rigid_translation_m"].map(json.dumps))
-    write_text(folder / "summary.csv", flat.to_csv(index=False))
+    """``summary.parquet`` and ``summary.csv`` of the rows, as the workflow writes them."""
+    write_summary_table(rows, folder / "summary.parquet", folder / "summary.csv")
 
 
 def write_synthetic_study(results_dir: str | Path, n_pairs: int = 2, levels: int = 3, n: int = 24000) -> dict[str, list[Path]]:

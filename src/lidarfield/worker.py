@@ -217,6 +217,9 @@ def preload() -> None:
             importlib.import_module(module)
         except ImportError as e:  # the jobs that need it will fail with the same error
             log.warning("could not preload %s: %s", module, e)
+    from .cli import build_parser
+
+    build_parser()  # cached: every job parses its argv with this one
 
 
 def serve(socket_path: str, parent_pid: int, idle_timeout_s: float = IDLE_TIMEOUT_S) -> None:

@@ -29,6 +29,9 @@ class RegisteredPair:
     registration: dict = field(default_factory=dict)
     # How each scan fitted its sensor model at ingest ({"1": ..., "2": ...}: sensor_fit.sensor_fit).
     sensor_fit: dict = field(default_factory=dict)
+    # What hypotheses derived from the clouds and may reuse, e.g. ``outliers``' neighbour
+    # distances by (cloud, k). Not written to files, not compared, not carried by subset().
+    neighbours: dict = field(default_factory=dict, compare=False, repr=False)
 
     def __post_init__(self):
         self.xyz1 = np.ascontiguousarray(self.xyz1, dtype=np.float64).reshape(-1, 3)

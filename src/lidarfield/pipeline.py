@@ -2,7 +2,8 @@
 
 Each function reads its inputs from files and writes its outputs whole (atomically), in the
 layout of the design: per stage ``points.parquet``, ``removed.parquet``, ``field.parquet`` and
-``stats.json`` (one summary row), ``suggestions.parquet`` (what to try next), and per pair ``summary.parquet`` / ``summary.csv``.
+``stats.json`` (one summary row), ``suggestions.parquet`` (what to try next) with
+``neighbours.parquet`` (what the next stage's suggestions reuse), and per pair ``summary.parquet`` / ``summary.csv``.
 """
 
 from __future__ import annotations
@@ -24,6 +25,7 @@ from .pair import RegisteredPair, read_pair, write_pair
 from .sensor_fit import fit_warning, log_fit
 from .stack import Stage, apply_stack, initial_stage, next_stage
 from .stages import stage_ids
+from .analysis.neighbour_file import write_neighbours
 from .analysis.suggest import suggestions, write_suggestions
 from .analysis.tags import TAGS
 
@@ -260,6 +262,7 @@ def run_pair(
             folder / "field.parquet", folder / "stats.json",
         )  # fmt: skip
         write_suggestions(folder / "suggestions.parquet", table, stage_id, candidates[stage.level], study.grid)
+        write_neighbours(folder / "neighbours.parquet", stage.pair, stage_id)
         if study.rematch:
             from .analysis.rematch import rematch_stage
 

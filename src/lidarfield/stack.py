@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from .hypotheses import apply_step, validate_stack, validate_step
+from .hypotheses.outliers import carry_neighbours
 from .pair import RegisteredPair
 from .stages import step_name
 
@@ -27,6 +28,8 @@ class Stage:
     spec: dict | None  # the normalised stack entry {name: params}; None for stage 0
     pair: RegisteredPair  # the survivors
     removed: RegisteredPair  # the points this stage removed: xyz1 of cloud 1, xyz2 of cloud 2
+    keep1: np.ndarray  # over the previous stage's cloud 1 (stage 0: the registered pair's)
+    keep2: np.ndarray
 
     @property
     def removed1(self) -> int:
@@ -37,9 +40,11 @@ class Stage:
         return len(self.removed.xyz2)
 
     def removed_columns(self) -> dict[str, np.ndarray]:
-        """The removed-points table: points-table columns plus ``hypothesis``."""
+        """The removed-points table: points-table columns plus ``hypothesis`` and ``row`` (the
+        point's row among its cloud's points in the previous stage)."""
         columns = self.removed.to_columns()
         columns["hypothesis"] = np.full(len(columns["cloud"]), self.name, dtype=object).astype(str)
+        columns["row"] = np.concatenate([np.flatnonzero(~self.keep1), np.flatnonzero(~self.keep2)]).astype(np.int64)
         return columns
 
     def metadata(self, stage_id: str) -> dict:
@@ -49,9 +54,8 @@ class Stage:
 
 def initial_stage(pair: RegisteredPair) -> Stage:
     """Stage 0: the registered pair itself, nothing removed."""
-    nothing1 = np.zeros(len(pair.xyz1), dtype=bool)
-    nothing2 = np.zeros(len(pair.xyz2), dtype=bool)
-    return Stage(0, NO_MITIGATION, None, pair, pair.subset(nothing1, nothing2))
+    keep1, keep2 = np.ones(len(pair.xyz1), dtype=bool), np.ones(len(pair.xyz2), dtype=bool)
+    return Stage(0, NO_MITIGATION, None, pair, pair.subset(~keep1, ~keep2), keep1, keep2)
 
 
 def next_stage(
@@ -60,7 +64,7 @@ def next_stage(
     """Stage ``level``: hypothesis ``step`` applied to ``pair`` (the previous stage's survivors)."""
     spec = validate_step(step, base_dir, study_grid, level)
     keep1, keep2 = apply_step(pair, spec, base_dir, study_grid, level)
-    return Stage(level, step_name(spec), spec, pair.subset(keep1, keep2), pair.subset(~keep1, ~keep2))
+    return Stage(level, step_name(spec), spec, pair.subset(keep1, keep2), pair.subset(~keep1, ~keep2), keep1, keep2)
 
 
 def apply_stack(
@@ -80,5 +84,8 @@ def _stages(pair: RegisteredPair, steps: list[dict], base_dir, study_grid) -> It
     stage = initial_stage(pair)
     yield stage
     for level, step in enumerate(steps, start=1):
-        stage = next_stage(stage.pair, step, level, base_dir, study_grid)
+        previous, stage = stage, next_stage(stage.pair, step, level, base_dir, study_grid)
+        # what the caller derived from the previous stage's points (its suggestions' outlier
+        # scores), carried over exactly for less than a new search costs
+        carry_neighbours(previous.pair, stage.keep1, stage.keep2, stage.pair)
         yield stage

@@ -123,13 +123,16 @@ def previous_stage_dir(wildcards):
     return stage_dir(wildcards.pair, STAGES[wildcards.pair][level - 1]) if level else ""
 
 
-def previous_stage_field(wildcards):
-    level = stage_level(wildcards)
-    if level == 0:
-        return []
-    return (
-        f"{stage_dir(wildcards.pair, STAGES[wildcards.pair][level - 1])}/field.parquet"
-    )
+def previous_stage_file(name):
+    """An input function: the previous stage's file ``name``; nothing for stage 0."""
+
+    def previous(wildcards):
+        level = stage_level(wildcards)
+        if level == 0:
+            return []
+        return f"{stage_dir(wildcards.pair, STAGES[wildcards.pair][level - 1])}/{name}"
+
+    return previous
 
 
 def pair_stats(wildcards):

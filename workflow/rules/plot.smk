@@ -7,7 +7,7 @@ rule plot_stage:
         field=f"{RESULTS}/{{pair}}/stages/{{stage}}/field.parquet",
         points=f"{RESULTS}/{{pair}}/stages/{{stage}}/points.parquet",
         removed=f"{RESULTS}/{{pair}}/stages/{{stage}}/removed.parquet",
-        previous=previous_stage_field,
+        previous=previous_stage_file("field.parquet"),
         plotly=f"{RESULTS}/assets/plotly.min.js",
     output:
         report(

@@ -1,14 +1,19 @@
 # What to try next, per stage: every candidate hypothesis applied on its own to the stage's
 # survivors, and the field it would leave. A rule of its own so that it never delays the
-# stages: the next stage's mitigate job does not wait for it.
+# stages: the next stage's mitigate job does not wait for it. Each stage's suggestions pass
+# their outlier candidate's neighbour distances to the next stage's (neighbours.parquet),
+# which carries them past the points its hypothesis removed instead of searching again.
 
 
 rule suggest:
     input:
         points=f"{RESULTS}/{{pair}}/stages/{{stage}}/points.parquet",
+        removed=f"{RESULTS}/{{pair}}/stages/{{stage}}/removed.parquet",
+        previous_neighbours=previous_stage_file("neighbours.parquet"),
         plugins=candidate_plugin_sources,
     output:
-        f"{RESULTS}/{{pair}}/stages/{{stage}}/suggestions.parquet",
+        suggestions=f"{RESULTS}/{{pair}}/stages/{{stage}}/suggestions.parquet",
+        neighbours=f"{RESULTS}/{{pair}}/stages/{{stage}}/neighbours.parquet",
     log:
         f"{RESULTS}/logs/suggest/{{pair}}/{{stage}}.log",
     benchmark:
@@ -24,4 +29,5 @@ rule suggest:
         grid=GRID,
     shell:
         "lidarfield job suggest --points {input.points:q} --candidates {params.candidates:q} {params.defaults}"
-        " --grid {params.grid:q} --out {output:q} > {log:q} 2>&1"
+        " --grid {params.grid:q} --out {output.suggestions:q} --neighbours-out {output.neighbours:q}"
+        " --previous-neighbours={input.previous_neighbours:q} --removed {input.removed:q} > {log:q} 2>&1"

@@ -35,6 +35,7 @@ from ..hypotheses import BUILTINS, apply_step, validate_step
 from ..io.parquet_table import write_table
 from ..pair import RegisteredPair, read_pair
 from ..stages import canonical_json, step_name
+from .neighbour_file import carry_from_previous, write_neighbours
 from .tags import voxel_energy
 
 log = logging.getLogger(__name__)
@@ -153,11 +154,23 @@ def suggest_stage(
     out: str | Path,
     base_dir: str | Path = ".",
     defaults: bool = False,
+    neighbours_out: str | Path | None = None,
+    previous_neighbours: str | Path | None = None,
+    removed_path: str | Path | None = None,
 ) -> dict[str, np.ndarray]:
-    """``suggestions.parquet`` of a stage from its ``points.parquet``; returns the table."""
+    """``suggestions.parquet`` of a stage from its ``points.parquet``; returns the table.
+
+    ``neighbours_out``: where the candidates' neighbour distances go, for the next stage;
+    ``previous_neighbours`` (the previous stage's) with this stage's ``removed_path``: where
+    they come from, instead of a new search.
+    """
     pair, meta = read_pair(points_path)
+    if previous_neighbours:
+        carry_from_previous(pair, previous_neighbours, removed_path)
     table = suggestions(pair, field_settings_from_config(grid_section), candidates, base_dir, grid_section, defaults)
     write_suggestions(out, table, meta.get("stage"), candidates, grid_section)
+    if neighbours_out:
+        write_neighbours(neighbours_out, pair, meta.get("stage"))
     return table
 
 

@@ -62,6 +62,9 @@ def add_parser(subparsers) -> None:
     p.add_argument("--default-candidates", action="store_true", help="skip the candidates that cannot apply to the pair")
     p.add_argument("--grid", type=_json, required=True)
     p.add_argument("--out", required=True)
+    p.add_argument("--neighbours-out", default="", help="where the candidates' neighbour distances go, for the next stage")
+    p.add_argument("--previous-neighbours", default="", help="the previous stage's (none for stage 0)")
+    p.add_argument("--removed", default="", help="this stage's removed.parquet (with --previous-neighbours)")
     p.set_defaults(func=_suggest)
     p = jobs.add_parser("rematch")
     p.add_argument("--points", required=True)
@@ -161,7 +164,10 @@ def _field(args: argparse.Namespace) -> None:
 def _suggest(args: argparse.Namespace) -> None:
     from ..analysis.suggest import suggest_stage
 
-    suggest_stage(args.points, args.candidates, args.grid, args.out, defaults=args.default_candidates)
+    suggest_stage(
+        args.points, args.candidates, args.grid, args.out, defaults=args.default_candidates,
+        neighbours_out=args.neighbours_out, previous_neighbours=args.previous_neighbours, removed_path=args.removed,
+    )  # fmt: skip
 def _rematch(args: argparse.Namespace) -> None:
     from ..analysis.rematch import rematch_stage
 

@@ -338,3 +338,31 @@ def test_the_report_knows_every_figure_a_stage_can_have():
     from lidarfield.plots import STAGE_FIGURES as DRAWN
 
     assert sorted(stem for stem, _ in STAGE_FIGURES) == sorted(DRAWN)
+
+
+def test_an_embedded_copy_is_the_figure_scaled_to_the_page_in_256_colours(study):
+    """compact_png: a wide figure comes out EMBED_MAX_WIDTH wide, same aspect, a palette image
+    whose colours stay those of the figure; an RGBA file of the same pixels gives the same copy."""
+    import io
+
+    import numpy as np
+    from PIL import Image
+
+    from lidarfield.report.page import EMBED_MAX_WIDTH, compact_png
+
+    _, pairs = study
+    wide = np.asarray(Image.open(pairs["pair-00"][1] / "figures" / "before_after.png").convert("RGB"))
+    wide = np.tile(wide, (1, 3, 1))  # wider than a page at any test dpi
+    as_png = {}
+    for mode in ("RGB", "RGBA"):
+        buf = io.BytesIO()
+        Image.fromarray(wide).convert(mode).save(buf, format="PNG")
+        as_png[mode] = compact_png(buf.getvalue())
+    assert as_png["RGB"] == as_png["RGBA"]
+    with Image.open(io.BytesIO(as_png["RGB"])) as im:
+        assert im.mode == "P" and len(im.getcolors(256)) <= 256
+        assert im.width == EMBED_MAX_WIDTH and im.height == round(wide.shape[0] * EMBED_MAX_WIDTH / wide.shape[1])
+        copy = np.asarray(im.convert("RGB"), dtype=np.float64)
+    scaled = np.asarray(Image.fromarray(wide).resize(im.size, Image.Resampling.LANCZOS), dtype=np.float64)
+    assert np.abs(copy - scaled).mean() < 2.0  # a palette of the figure's colours, not a banded one
+    assert len(as_png["RGB"]) < wide.nbytes / 20

@@ -7,6 +7,7 @@ import html
 import io
 import math
 import os
+import zlib
 from pathlib import Path
 
 from PIL import Image
@@ -60,13 +61,16 @@ def page(title: str, body: list[str]) -> str:
 
 def compact_png(png: bytes, max_width: int = EMBED_MAX_WIDTH) -> bytes:
     """The PNG scaled down to ``max_width`` and reduced to a 256-colour palette: a figure
-    embedded in a page drops from a few hundred kB to well under a hundred."""
+    embedded in a page drops from a few hundred kB to well under a hundred. Deflated with
+    zlib's run-length strategy: a third of the time of its default for about 11% more bytes."""
     with Image.open(io.BytesIO(png)) as im:
-        im = im.convert("RGB")
+        if im.mode != "RGB":  # the figures are RGB already: converting them would only copy them
+            im = im.convert("RGB")
         if im.width > max_width:
             im = im.resize((max_width, round(im.height * max_width / im.width)), Image.Resampling.LANCZOS)
         out = io.BytesIO()
-        im.quantize(colors=256, method=Image.Quantize.FASTOCTREE, dither=Image.Dither.NONE).save(out, format="PNG")
+        palette = im.quantize(colors=256, method=Image.Quantize.FASTOCTREE, dither=Image.Dither.NONE)
+        palette.save(out, format="PNG", compress_type=zlib.Z_RLE)
     return out.getvalue()
 
 

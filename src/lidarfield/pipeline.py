@@ -79,7 +79,7 @@ def field_stage(
 ) -> dict:
     """The field of a stage's survivors and its summary row (``stats.json``); returns the row."""
     pair, meta = read_pair(points_path)
-    removed, _ = read_table(removed_path, required=("cloud",))
+    removed, _ = read_table(removed_path, columns=("cloud",))
     settings = field_settings_from_config(grid_section)
     columns, statistics = analyse_field(pair, settings)
     statistics = summary_json_safe(statistics)

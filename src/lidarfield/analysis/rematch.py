@@ -19,6 +19,7 @@ from ..errors import RegistrationError
 from ..io.parquet_table import read_table, write_table
 from ..pair import read_pair
 from ..poses import apply_pose, invert_pose, pose_error
+from ..registration.settings import finite_number
 
 log = logging.getLogger(__name__)
 
@@ -140,13 +141,9 @@ def method_rows(rows: list[dict]) -> list[dict]:
             values = {}
             for name in METHOD_COLUMNS[2:-1]:
                 value = row.get(f"rematch_{method}_{name.replace('_cm', '_m')}")
-                values[name] = value * 100 if name.endswith("_cm") and _number(value) else value
+                values[name] = value * 100 if name.endswith("_cm") and finite_number(value) else value
             out.append({"stage": row.get("stage"), "method": method, **values, "converged": row[f"rematch_{method}_converged_share"]})
     return out
-
-
-def _number(value) -> bool:
-    return isinstance(value, (int, float)) and np.isfinite(value)
 
 
 # --- files ----------------------------------------------------------------------------------

@@ -1,6 +1,6 @@
-"""Neighbour distances carried from a stage to its survivors (the fast path) against a new
-search of the survivors (the plain reference): equal to the bit, on synthetic clouds with
-duplicates and on real scans, and through the workflow's suggest jobs."""
+"""Neighbour distances carried past removed points (the fast path) against a new search of the
+survivors (the plain reference): equal to the bit, on synthetic clouds with duplicates and on
+real scans, and through the workflow's neighbours and suggest jobs."""
 
 from __future__ import annotations
 
@@ -9,7 +9,6 @@ import json
 import numpy as np
 import pytest
 
-from lidarfield.analysis.neighbour_file import read_neighbours
 from lidarfield.analysis.suggest import candidate_steps
 from lidarfield.hypotheses import outliers as outliers_module
 from lidarfield.hypotheses.outliers import after_removal, neighbour_distances
@@ -20,6 +19,8 @@ from lidarfield.pipeline import write_stage
 from lidarfield.stack import initial_stage, next_stage
 
 from test_outliers import _synthetic_cloud
+
+GRID = {"kind": "spherical", "azimuth_bins": 36, "elevation_bins": 5, "elevation_deg": [-15, 15], "min_points": 10}
 
 
 def assert_same(carried, searched):
@@ -76,49 +77,69 @@ def test_carried_distances_on_a_real_scan_search_only_near_what_was_removed(expd
         assert_same(carried, neighbour_distances(xyz[keep], 20, workers=1))
 
 
-def test_the_suggest_jobs_carry_the_distances_to_the_next_stage(tmp_path, expd):
-    """Stage 1 (a crop) of a real pair: its suggest job fed the stage-0 job's neighbours.parquet
-    writes the suggestions and the neighbours file that a job searching anew writes, and the
-    removed file's ``row`` column puts stage 0's points back together."""
+def test_the_suggest_jobs_carry_the_pairs_distances_to_every_stage(tmp_path, expd):
+    """A real pair through a crop and a shadow stage: the neighbours job searches the registered
+    pair once, and each stage's suggest job, fed it and the removed files of its stages, writes
+    the suggestions a job searching anew writes; the removed files' ``row`` columns put the
+    registered pair back together."""
     from lidarfield.cli import run_in_process
+    from lidarfield.pair import write_pair
 
     pair = RegisteredPair(read_scan(expd / "Cloud1_ExpD.txt").xyz, read_scan(expd / "Cloud10Aligned_ExpD.txt").xyz)
-    stage0 = initial_stage(pair)
-    stage1 = next_stage(stage0.pair, {"crop": {"max_range_m": 25.0}}, 1)
-    assert 0 < stage1.removed1 < len(pair.xyz1) / 2
-    dirs = [tmp_path / "s0", tmp_path / "s1"]
-    for stage, folder in zip((stage0, stage1), dirs):
+    write_pair(tmp_path / "registered.parquet", pair)
+    stages = [initial_stage(pair)]
+    for level, step in enumerate([{"crop": {"max_range_m": 25.0}}, {"shadow": {"origins": [1]}}], start=1):
+        stages.append(next_stage(stages[-1].pair, step, level, study_grid=GRID))
+        assert 0 < stages[-1].removed1 < len(stages[-2].pair.xyz1) / 2
+    dirs = [tmp_path / f"s{stage.level}" for stage in stages]
+    for stage, folder in zip(stages, dirs):
         folder.mkdir()
         write_stage(stage, f"0{stage.level}-x-0000000{stage.level}", folder / "points.parquet", folder / "removed.parquet")
+    argv = ["job", "neighbours", "--points", str(tmp_path / "registered.parquet"), "--k", "20", "5", "--out", str(tmp_path / "neighbours.parquet")]
+    assert run_in_process(argv) == 0
 
-    grid = {"kind": "spherical", "azimuth_bins": 36, "elevation_bins": 5, "elevation_deg": [-15, 15], "min_points": 10}
-
-    def suggest(folder, out_name, *extra):
-        candidates = candidate_steps([{"outliers": {}}, {"ego_vehicle": {}}], [])
-        argv = ["job", "suggest", "--points", str(folder / "points.parquet"), "--candidates", json.dumps(candidates),
-                "--grid", json.dumps(grid), "--out", str(folder / f"{out_name}.parquet"),
-                "--neighbours-out", str(folder / f"{out_name}-neighbours.parquet"), *extra]  # fmt: skip
+    def suggest(level, *extra):
+        candidates = candidate_steps([{"outliers": {}}, {"outliers": {"nb_neighbors": 5}}, {"ego_vehicle": {}}], [])
+        out = dirs[level] / f"suggestions{len(extra)}.parquet"
+        argv = ["job", "suggest", "--points", str(dirs[level] / "points.parquet"), "--candidates", json.dumps(candidates),
+                "--grid", json.dumps(GRID), "--out", str(out), *extra]  # fmt: skip
         assert run_in_process(argv) == 0
-        return read_table(folder / f"{out_name}.parquet")[0], read_neighbours(folder / f"{out_name}-neighbours.parquet")
+        return read_table(out)[0]
 
-    suggest(dirs[0], "suggestions")
-    carried_table, carried = suggest(
-        dirs[1], "carried", "--previous-neighbours", str(dirs[0] / "suggestions-neighbours.parquet"), "--removed", str(dirs[1] / "removed.parquet")
-    )  # fmt: skip
-    searched_table, searched = suggest(dirs[1], "searched")
-    assert set(carried) == set(searched) == {(1, 20), (2, 20)}
-    for key in searched:
-        assert_same(carried[key], searched[key])
-    for name in searched_table:
-        np.testing.assert_array_equal(carried_table[name], searched_table[name])
-    assert carried_table["hypothesis"][list(carried_table["hypothesis"]).index("outliers")] == "outliers"
+    for level in range(3):
+        removed = [str(folder / "removed.parquet") for folder in dirs[1 : level + 1]]
+        carried = suggest(level, "--neighbours", str(tmp_path / "neighbours.parquet"), "--removed", *removed)
+        searched = suggest(level)
+        assert list(carried["hypothesis"]) and set(carried["params"]) == set(searched["params"])
+        for name in searched:
+            np.testing.assert_array_equal(carried[name], searched[name])
 
-    survivors, _ = read_pair(dirs[1] / "points.parquet")
-    removed, _ = read_table(dirs[1] / "removed.parquet")
-    rows = removed["row"][removed["cloud"] == 1]
-    rebuilt = np.empty((len(survivors.xyz1) + len(rows), 3))
-    keep = np.ones(len(rebuilt), dtype=bool)
-    keep[rows] = False
-    rebuilt[keep] = survivors.xyz1
-    rebuilt[rows] = np.column_stack([removed[c][removed["cloud"] == 1] for c in "xyz"])
-    np.testing.assert_array_equal(rebuilt, read_pair(dirs[0] / "points.parquet")[0].xyz1)
+    # The carried distances themselves, at the last stage: a new search's.
+    from lidarfield.analysis.neighbour_file import carry_from_registered
+
+    last, _ = read_pair(dirs[2] / "points.parquet")
+    carry_from_registered(last, tmp_path / "neighbours.parquet", [dirs[1] / "removed.parquet", dirs[2] / "removed.parquet"])
+    assert set(last.neighbours) == {(1, 20), (2, 20), (1, 5), (2, 5)}
+    for (cloud, k), carried in last.neighbours.items():
+        assert_same(carried, neighbour_distances(last.xyz1 if cloud == 1 else last.xyz2, k))
+
+    # A removed file that does not fit the pair's distances: an error naming it.
+    from lidarfield.errors import InputError
+
+    with pytest.raises(InputError, match="neighbours.parquet"):
+        carry_from_registered(last, tmp_path / "neighbours.parquet", [dirs[2] / "removed.parquet"])
+
+
+def test_apply_stack_carries_what_the_previous_stage_searched(expd):
+    """``lidarfield run``'s path: a stage's memoised distances reach the next stage exactly."""
+    from lidarfield.hypotheses.outliers import cloud_neighbour_distances
+    from lidarfield.stack import apply_stack
+
+    pair = RegisteredPair(read_scan(expd / "Cloud1_ExpD.txt").xyz, read_scan(expd / "Cloud10Aligned_ExpD.txt").xyz)
+    stack = [{"crop": {"max_range_m": 25.0}}, {"outliers": {}}, {"shadow": {"origins": [1]}}]
+    for stage in apply_stack(pair, stack, study_grid=GRID):
+        if stage.level:
+            assert set(stage.pair.neighbours) == {(1, 20), (2, 20)}
+            for (cloud, k), carried in stage.pair.neighbours.items():
+                assert_same(carried, neighbour_distances(stage.pair.xyz1 if cloud == 1 else stage.pair.xyz2, k))
+        cloud_neighbour_distances(stage.pair, 1, 20), cloud_neighbour_distances(stage.pair, 2, 20)  # as a candidate would

@@ -113,22 +113,20 @@ def test_run_writes_every_stage_and_prints_the_table(tmp_path, paper_scans, caps
     assert list(summary["hypothesis"]) == ["none", "field_of_view", "shadow"]
     ids = list(summary["stage"])
     for stage_id in ids:
-        files = {"points.parquet", "removed.parquet", "field.parquet", "stats.json", "suggestions.parquet", "neighbours.parquet"}
+        files = {"points.parquet", "removed.parquet", "field.parquet", "stats.json", "suggestions.parquet"}
         assert {p.name for p in (out / "stages" / stage_id).iterdir()} == files
         assert stage_id in printed
-    # The outliers candidate's neighbour distances, carried from stage to stage in memory: what a
-    # new search of the last stage's points finds, to the bit.
+    # The registered pair's neighbour distances (stage 0's outliers candidate searched them), for
+    # the workflow's layout: what a new search finds, to the bit.
     from lidarfield.analysis.neighbour_file import read_neighbours
     from lidarfield.hypotheses.outliers import neighbour_distances
     from lidarfield.pair import read_pair
 
-    last_pair, _ = read_pair(out / "stages" / ids[-1] / "points.parquet")
-    carried = read_neighbours(out / "stages" / ids[-1] / "neighbours.parquet")
-    assert set(carried) == {(1, 20), (2, 20)}
-    for cloud, xyz in ((1, last_pair.xyz1), (2, last_pair.xyz2)):
-        searched = neighbour_distances(xyz, 20)
-        np.testing.assert_array_equal(carried[(cloud, 20)].mean, searched.mean)
-        np.testing.assert_array_equal(carried[(cloud, 20)].reach, searched.reach)
+    registered, _ = read_pair(out / "registered.parquet")
+    known = read_neighbours(out / "neighbours.parquet")
+    assert set(known) == {(1, 20), (2, 20)}
+    for cloud, xyz in ((1, registered.xyz1), (2, registered.xyz2)):
+        np.testing.assert_array_equal(known[(cloud, 20)].mean, neighbour_distances(xyz, 20).mean)
     assert printed.splitlines()[0].split() == ["stage", "hypothesis", "n1", "n2", "removed1", "removed2", "voxels_valid", "max_magnitude", "paper_max_metric"]
     assert summary["max_magnitude"].is_monotonic_decreasing
     # What to try next on the paper's simulated pair, before any mitigation: field_of_view or

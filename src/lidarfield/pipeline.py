@@ -2,8 +2,8 @@
 
 Each function reads its inputs from files and writes its outputs whole (atomically), in the
 layout of the design: per stage ``points.parquet``, ``removed.parquet``, ``field.parquet`` and
-``stats.json`` (one summary row), ``suggestions.parquet`` (what to try next) with
-``neighbours.parquet`` (what the next stage's suggestions reuse), and per pair ``summary.parquet`` / ``summary.csv``.
+``stats.json`` (one summary row), ``suggestions.parquet`` (what to try next), and per pair
+``neighbours.parquet`` (what every stage's suggestions carry over), ``summary.parquet`` / ``summary.csv``.
 """
 
 from __future__ import annotations
@@ -253,6 +253,7 @@ def run_pair(
     write_scan(scans[0], out_dir / "scan1.parquet")
     write_scan(scans[1], out_dir / "scan2.parquet")
     write_pair(out_dir / "registered.parquet", pair)
+    write_neighbours(out_dir / "neighbours.parquet", pair)  # what stage 0's suggestions searched
     pair_name = out_dir.resolve().name
     folders = [out_dir / "stages" / stage_id for stage_id in ids]
     for stage, stage_id, folder, table in zip(stages, ids, folders, tables):
@@ -262,7 +263,6 @@ def run_pair(
             folder / "field.parquet", folder / "stats.json",
         )  # fmt: skip
         write_suggestions(folder / "suggestions.parquet", table, stage_id, candidates[stage.level], study.grid)
-        write_neighbours(folder / "neighbours.parquet", stage.pair, stage_id)
         if study.rematch:
             from .analysis.rematch import rematch_stage
 

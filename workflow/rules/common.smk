@@ -38,6 +38,16 @@ STAGES = {pair: STUDY.stage_ids(pair) for pair in PAIRS}
 CANDIDATES = [STUDY.candidates(level) for level in range(len(STUDY.hypotheses) + 1)]
 # Default candidates (no suggest: section) that cannot apply to a pair are skipped, not errors.
 CANDIDATES_FLAG = "--default-candidates" if STUDY.suggest is None else ""
+# The neighbour counts of the outliers candidates of any stage: the pair's neighbours job
+# searches each once.
+NEIGHBOUR_COUNTS = sorted(
+    {
+        step["outliers"]["nb_neighbors"]
+        for level in CANDIDATES
+        for step in level
+        if "outliers" in step
+    }
+)
 # The pairs whose stage figures the study draws (plots.pairs); any other pair's are drawn on
 # demand, by asking for its page with them: results/{pair}/stages.html.
 PLOT_PAIRS = STUDY.plot_pairs
@@ -107,6 +117,19 @@ def plugin_source(wildcards):
 def stage_candidates(wildcards):
     """The candidate hypotheses of a stage's suggestions (canonical JSON)."""
     return canonical_json(CANDIDATES[stage_level(wildcards)])
+
+
+def pair_neighbours(wildcards):
+    """The pair's neighbour distances, when a stage has an outliers candidate."""
+    return f"{RESULTS}/{wildcards.pair}/neighbours.parquet" if NEIGHBOUR_COUNTS else []
+
+
+def removed_up_to_stage(wildcards):
+    """What stages 1..k removed, which carries the pair's neighbour distances to stage k."""
+    if not NEIGHBOUR_COUNTS:
+        return []
+    stages = STAGES[wildcards.pair][1 : stage_level(wildcards) + 1]
+    return [f"{stage_dir(wildcards.pair, stage)}/removed.parquet" for stage in stages]
 
 
 def candidate_plugin_sources(wildcards):

@@ -1,10 +1,13 @@
-"""``neighbours.parquet``: a stage's outlier-candidate neighbour distances, for the next stage.
+"""``{pair}/neighbours.parquet``: the registered pair's neighbour distances, for every stage's
+``outliers`` candidate.
 
-The suggest job of a stage searches every point's nearest neighbours for the ``outliers``
-candidate; the next stage's points are these minus the few the next hypothesis removed, so
-its suggest job carries them over (:func:`~lidarfield.hypotheses.outliers.after_removal`,
-exact) instead of searching again. Columns: ``cloud``, then ``mean_k{k}`` and ``reach_k{k}``
-for each neighbour count ``k`` the stage's candidates used (in the points file's row order).
+The ``outliers`` candidate needs every point's k nearest neighbours, the expensive part of a
+stage's suggestions. A stage's points are the registered pair's minus what the stack removed
+so far, so the pair's distances are searched once (the ``neighbours`` job) and each stage's
+suggest job carries them past the points its stages removed
+(:func:`~lidarfield.hypotheses.outliers.after_removal`, exact). Columns: ``cloud``, then
+``mean_k{k}`` and ``reach_k{k}`` for each neighbour count ``k``, in the registered pair's row
+order. One file per pair rather than per stage: the distances are as large as the points.
 """
 
 from __future__ import annotations
@@ -14,14 +17,15 @@ from pathlib import Path
 
 import numpy as np
 
-from ..hypotheses.outliers import NeighbourDistances, after_removal
+from ..errors import InputError
+from ..hypotheses.outliers import NeighbourDistances, after_removal, neighbour_distances
 from ..io.parquet_table import read_table, write_table
-from ..pair import RegisteredPair
+from ..pair import RegisteredPair, read_pair
 
 log = logging.getLogger(__name__)
 
 
-def write_neighbours(path: str | Path, pair: RegisteredPair, stage_id: str | None) -> None:
+def write_neighbours(path: str | Path, pair: RegisteredPair) -> None:
     """The neighbour distances the pair's clouds have (``pair.neighbours``), atomically."""
     sizes = {1: len(pair.xyz1), 2: len(pair.xyz2)}
     columns = {"cloud": np.repeat(np.array([1, 2], dtype=np.uint8), [sizes[1], sizes[2]])}
@@ -31,7 +35,7 @@ def write_neighbours(path: str | Path, pair: RegisteredPair, stage_id: str | Non
                 getattr(pair.neighbours[(cloud, k)], name) if (cloud, k) in pair.neighbours else np.full(sizes[cloud], np.nan)
                 for cloud in (1, 2)
             ])  # fmt: skip
-    write_table(path, columns, {"stage": stage_id})
+    write_table(path, columns, {"points": sizes})
 
 
 def read_neighbours(path: str | Path) -> dict[tuple[int, int], NeighbourDistances]:
@@ -39,36 +43,48 @@ def read_neighbours(path: str | Path) -> dict[tuple[int, int], NeighbourDistance
     columns, _ = read_table(path, required=("cloud",))
     known = {}
     for name in columns:
-        if not name.startswith("mean_k"):
-            continue
-        k = int(name.removeprefix("mean_k"))
-        for cloud in (1, 2):
-            rows = columns["cloud"] == cloud
-            mean, reach = columns[name][rows], columns[f"reach_k{k}"][rows]
-            if not np.isnan(mean).any():
-                known[(cloud, k)] = NeighbourDistances(min(k, len(mean)), mean, reach)
+        if name.startswith("mean_k"):
+            k = int(name.removeprefix("mean_k"))
+            for cloud in (1, 2):
+                rows = columns["cloud"] == cloud
+                mean, reach = columns[name][rows], columns[f"reach_k{k}"][rows]
+                if not np.isnan(mean).any():
+                    known[(cloud, k)] = NeighbourDistances(min(k, len(mean)), mean, reach)
     return known
 
 
-def carry_from_previous(pair: RegisteredPair, previous_path: str | Path, removed_path: str | Path) -> None:
-    """Give ``pair`` (a stage's survivors) the neighbour distances of the previous stage
-    (``previous_path``), carried past the points this stage removed (``removed_path``, whose
-    ``row`` column says where each was among the previous stage's points)."""
-    removed, _ = read_table(removed_path, required=("cloud", "x", "y", "z"))
-    if "row" not in removed:  # written before the column existed: search again
-        log.info("%s has no row column: the neighbour distances are searched again", removed_path)
+def neighbours_job(points_path: str | Path, ks: list[int], out: str | Path) -> None:
+    """``{pair}/neighbours.parquet`` of a registered pair, for each neighbour count in ``ks``."""
+    pair, _ = read_pair(points_path)
+    for k in ks:
+        for cloud, xyz in ((1, pair.xyz1), (2, pair.xyz2)):
+            pair.neighbours[(cloud, k)] = neighbour_distances(xyz, k)
+    write_neighbours(out, pair)
+
+
+def carry_from_registered(pair: RegisteredPair, neighbours_path: str | Path, removed_paths: list[str | Path]) -> None:
+    """Give ``pair`` (stage k's survivors) the registered pair's neighbour distances
+    (``neighbours_path``) carried past what stages 1..k removed (their ``removed.parquet``, in
+    order; each ``row`` column says where a point was among the previous stage's points)."""
+    removed = [read_table(path, required=("cloud", "x", "y", "z"))[0] for path in removed_paths]
+    if any("row" not in table for table in removed):  # written before the column existed
+        log.info("a removed.parquet without its row column: the neighbour distances are searched again")
         return
-    for (cloud, k), before in read_neighbours(previous_path).items():
-        kept = pair.xyz1 if cloud == 1 else pair.xyz2
-        mine = removed["cloud"] == cloud
-        rows = removed["row"][mine]
-        n = len(kept) + len(rows)
-        if len(before) != n or (len(rows) and rows.max() >= n):
-            log.warning("%s: %d points in cloud %d, the stage had %d: searched again", previous_path, len(before), cloud, n)
-            continue
-        keep = np.ones(n, dtype=bool)
-        keep[rows] = False
+    for (cloud, k), registered in read_neighbours(neighbours_path).items():
+        kept_xyz = pair.xyz1 if cloud == 1 else pair.xyz2
+        n = len(registered)
+        if n != len(kept_xyz) + sum(np.count_nonzero(table["cloud"] == cloud) for table in removed):
+            raise InputError(f"has {n} points in cloud {cloud}, not the stages' survivors and removed points", neighbours_path)
         xyz = np.empty((n, 3))
-        xyz[rows] = np.column_stack([removed["x"][mine], removed["y"][mine], removed["z"][mine]])
-        xyz[keep] = kept
-        pair.neighbours[(cloud, k)] = after_removal(before, xyz, keep)
+        survivors = np.arange(n)  # each survivor's row among the registered pair's
+        for table, path in zip(removed, removed_paths):
+            mine = table["cloud"] == cloud
+            rows = table["row"][mine]
+            if len(rows) and (rows.min() < 0 or rows.max() >= len(survivors)):
+                raise InputError(f"row out of range for the previous stage's {len(survivors)} points of cloud {cloud}", path)
+            xyz[survivors[rows]] = np.column_stack([table["x"][mine], table["y"][mine], table["z"][mine]])
+            survivors = np.delete(survivors, rows)
+        xyz[survivors] = kept_xyz
+        keep = np.zeros(n, dtype=bool)
+        keep[survivors] = True
+        pair.neighbours[(cloud, k)] = after_removal(registered, xyz, keep)

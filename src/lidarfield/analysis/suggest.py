@@ -35,7 +35,7 @@ from ..hypotheses import BUILTINS, apply_step, validate_step
 from ..io.parquet_table import write_table
 from ..pair import RegisteredPair, read_pair
 from ..stages import canonical_json, step_name
-from .neighbour_file import carry_from_previous, write_neighbours
+from .neighbour_file import carry_from_registered
 from .tags import voxel_energy
 
 log = logging.getLogger(__name__)
@@ -154,23 +154,19 @@ def suggest_stage(
     out: str | Path,
     base_dir: str | Path = ".",
     defaults: bool = False,
-    neighbours_out: str | Path | None = None,
-    previous_neighbours: str | Path | None = None,
-    removed_path: str | Path | None = None,
+    neighbours: str | Path | None = None,
+    removed_paths: list[str | Path] = (),
 ) -> dict[str, np.ndarray]:
     """``suggestions.parquet`` of a stage from its ``points.parquet``; returns the table.
 
-    ``neighbours_out``: where the candidates' neighbour distances go, for the next stage;
-    ``previous_neighbours`` (the previous stage's) with this stage's ``removed_path``: where
-    they come from, instead of a new search.
+    ``neighbours``: the pair's ``neighbours.parquet``, carried past what the stages removed
+    (``removed_paths``: the ``removed.parquet`` of stages 1..k) instead of a new search.
     """
     pair, meta = read_pair(points_path)
-    if previous_neighbours:
-        carry_from_previous(pair, previous_neighbours, removed_path)
+    if neighbours:
+        carry_from_registered(pair, neighbours, list(removed_paths))
     table = suggestions(pair, field_settings_from_config(grid_section), candidates, base_dir, grid_section, defaults)
     write_suggestions(out, table, meta.get("stage"), candidates, grid_section)
-    if neighbours_out:
-        write_neighbours(neighbours_out, pair, meta.get("stage"))
     return table
 
 

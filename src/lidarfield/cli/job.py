@@ -62,10 +62,15 @@ def add_parser(subparsers) -> None:
     p.add_argument("--default-candidates", action="store_true", help="skip the candidates that cannot apply to the pair")
     p.add_argument("--grid", type=_json, required=True)
     p.add_argument("--out", required=True)
-    p.add_argument("--neighbours-out", default="", help="where the candidates' neighbour distances go, for the next stage")
-    p.add_argument("--previous-neighbours", default="", help="the previous stage's (none for stage 0)")
-    p.add_argument("--removed", default="", help="this stage's removed.parquet (with --previous-neighbours)")
+    p.add_argument("--neighbours", default="", help="the pair's neighbours.parquet (none: searched here)")
+    p.add_argument("--removed", nargs="*", default=[], help="with --neighbours: the removed.parquet of stages 1..k")
     p.set_defaults(func=_suggest)
+
+    p = jobs.add_parser("neighbours")
+    p.add_argument("--points", required=True, help="the registered pair")
+    p.add_argument("--k", type=int, nargs="*", default=[], help="the outliers candidates' neighbour counts")
+    p.add_argument("--out", required=True)
+    p.set_defaults(func=_neighbours)
     p = jobs.add_parser("rematch")
     p.add_argument("--points", required=True)
     p.add_argument("--settings", type=_json, required=True, help="the validated rematch section")
@@ -166,8 +171,14 @@ def _suggest(args: argparse.Namespace) -> None:
 
     suggest_stage(
         args.points, args.candidates, args.grid, args.out, defaults=args.default_candidates,
-        neighbours_out=args.neighbours_out, previous_neighbours=args.previous_neighbours, removed_path=args.removed,
+        neighbours=args.neighbours, removed_paths=args.removed,
     )  # fmt: skip
+
+
+def _neighbours(args: argparse.Namespace) -> None:
+    from ..analysis.neighbour_file import neighbours_job
+
+    neighbours_job(args.points, args.k, args.out)
 def _rematch(args: argparse.Namespace) -> None:
     from ..analysis.rematch import rematch_stage
 

@@ -170,6 +170,16 @@ def test_editing_the_grid_replans_only_fields_plots_and_report(study_dir):
     assert jobs == {"field": 6, "suggest": 6, "plot_stage": 6, "plot_pair": 2, "summary": 1, "study_voxels": 1, "study_tables": 1, "study_figures": 1, "pair_report": 2, "report": 1}
 
 
+def test_the_outliers_candidates_neighbour_count_replans_the_pairs_one_search(study_dir):
+    """The pair's neighbour search (the neighbours rule) depends on the outliers candidates'
+    k only: a new k searches each pair again; no outliers candidate, no search."""
+    planned = planned_after(study_dir, lambda s: s.update(suggest=[{"outliers": {"nb_neighbors": 8}}]))
+    assert planned["neighbours"] == 2 and planned["suggest"] == 6
+    assert not {"mitigate", "field", "plot_stage"} & set(planned)
+    planned = planned_after(study_dir, lambda s: s.update(suggest=[{"crop": {"max_range_m": 30.0}}]))
+    assert "neighbours" not in planned and planned["suggest"] == 6
+
+
 def test_choosing_the_plotted_pairs_replans_only_their_pages(study_dir):
     assert planned_after(study_dir, lambda s: s["plots"].update(pairs=["shift"])) == {"pair_report": 1, "report": 1}
     assert planned_after(study_dir, lambda s: s["plots"].update(pairs="none")) == {"pair_report": 2, "report": 1}

@@ -14,6 +14,7 @@ import zlib
 
 import matplotlib
 import numpy as np
+from PIL import Image
 
 SIGNATURE = b"\x89PNG\r\n\x1a\n"
 COLOUR_TYPES = {3: 2, 4: 6}  # channels -> PNG colour type: truecolour, truecolour with alpha
@@ -29,7 +30,10 @@ def chunk(kind: bytes, data: bytes) -> bytes:
 
 def encode_png(rgba: np.ndarray, dpi: float) -> bytes:
     """(height, width, 4) uint8 pixels as a PNG: RGB when every pixel is opaque, else RGBA."""
-    pixels = rgba[..., :3] if np.all(rgba[..., 3] == 255) else rgba
+    image = Image.fromarray(rgba)
+    if rgba[..., 3].min() == 255:
+        image = image.convert("RGB")  # Pillow drops the alpha channel faster than a strided numpy copy
+    pixels = np.asarray(image)
     height, width, channels = pixels.shape
     rows = np.empty((height, 1 + width * channels), np.uint8)
     rows[:, 0] = NO_FILTER
@@ -40,7 +44,7 @@ def encode_png(rgba: np.ndarray, dpi: float) -> bytes:
         chunk(b"IHDR", struct.pack(">IIBBBBB", width, height, 8, COLOUR_TYPES[channels], 0, 0, 0)),
         chunk(b"pHYs", struct.pack(">IIB", per_metre, per_metre, 1)),
         chunk(b"tEXt", b"Software\0" + SOFTWARE.encode("latin-1")),
-        chunk(b"IDAT", zlib.compress(rows.tobytes(), ZLIB_LEVEL)),
+        chunk(b"IDAT", zlib.compress(rows, ZLIB_LEVEL)),
         chunk(b"IEND", b""),
     ])
 

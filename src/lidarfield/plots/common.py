@@ -330,7 +330,7 @@ def set_equal_3d(ax, limits: np.ndarray, min_z_share: float = 0.3) -> None:
     ax.yaxis.set_major_locator(MaxNLocator(nbins=6, steps=[1, 2, 2.5, 5, 10]))
     ax.zaxis.set_major_locator(MaxNLocator(nbins=4, steps=[1, 2, 2.5, 5, 10]))
     for axis in (ax.xaxis, ax.yaxis, ax.zaxis):
-        axis.set_pane_color((1.0, 1.0, 1.0, 0.0))
+        axis.pane.set_visible(False)  # white figures: no grey panes (hidden, not drawn transparent)
 
 
 def set_top_axes(ax, limits: np.ndarray) -> None:

@@ -1,4 +1,5 @@
-"""Time of the figures of one stage against the time of computing its field (same data, same run).
+"""Time of the figures of one stage, and of a page embedding them, against the time of
+computing its field (same data, same run).
 
 Run: python bench/plots.py [n_points_per_cloud]
 """
@@ -13,6 +14,7 @@ from lidarfield.field import discrepancy_field
 from lidarfield.plots import plot_stage
 from lidarfield.plots.common import load_stage
 from lidarfield.plots.synthetic import SETTINGS, write_synthetic_pair
+from lidarfield.report.page import compact_png
 
 from timing import best_time, machine  # bench/timing.py
 
@@ -25,8 +27,12 @@ def main() -> None:
         stage = load_stage(dirs[1])
         field_s, _ = best_time(lambda: discrepancy_field(stage.pair.xyz1, stage.pair.xyz2, SETTINGS))
         for label, settings in (("png only, no 3-D view", {"interactive": False}), ("png + field_3d.html (default)", {})):
-            plot_s, _ = best_time(lambda: plot_stage(dirs[1], dirs[0], Path(tmp) / "figures", settings), repeat=2)
+            plot_s, written = best_time(lambda: plot_stage(dirs[1], dirs[0], Path(tmp) / "figures", settings), repeat=2)
             print(f"{n} points per cloud, {label}: plot_stage {plot_s:.2f} s; field {field_s * 1000:.1f} ms; ratio {plot_s / field_s:.0f}x")
+        pngs = [path.read_bytes() for path in written if path.suffix == ".png"]
+        embed_s, _ = best_time(lambda: [compact_png(png) for png in pngs])
+        print(f"a page embedding its {len(pngs)} figures (compact_png): {embed_s * 1000:.0f} ms, {sum(map(len, pngs)) / 1e3:.0f} kB of PNG; "
+              f"ratio {embed_s / field_s:.1f}x the field")
 
 
 if __name__ == "__main__":

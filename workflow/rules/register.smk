@@ -10,6 +10,7 @@ rule register:
         f"{RESULTS}/logs/register/{{pair}}.log",
     benchmark:
         f"{RESULTS}/benchmarks/register/{{pair}}.tsv"
+    priority: PRIORITY["register"]
     conda:
         "../envs/lidarfield.yaml"
     threads: 1

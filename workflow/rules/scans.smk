@@ -8,6 +8,7 @@ rule simulate:
         f"{RESULTS}/logs/simulate/{{scan}}.log",
     benchmark:
         f"{RESULTS}/benchmarks/simulate/{{scan}}.tsv"
+    priority: PRIORITY["scan"]
     conda:
         "../envs/lidarfield.yaml"
     threads: 1
@@ -26,6 +27,7 @@ rule ingest:
         f"{RESULTS}/logs/ingest/{{scan}}.log",
     benchmark:
         f"{RESULTS}/benchmarks/ingest/{{scan}}.tsv"
+    priority: PRIORITY["scan"]
     conda:
         "../envs/lidarfield.yaml"
     threads: 1

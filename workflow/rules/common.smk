@@ -48,12 +48,6 @@ NEIGHBOUR_COUNTS = sorted(
         if "outliers" in step
     }
 )
-# Jobs that unlock others first (Snakemake runs the highest priority among the ready jobs;
-# otherwise its greedy scheduler prefers the largest inputs, and a pair's scan, registration
-# and stages came last, with their chain of jobs alone at the end of the run): the many
-# figure, suggestion and page jobs then keep every core busy to the end. (plotly_js, which
-# every plot job needs, runs with the scans.)
-PRIORITY = {"scan": 40, "register": 30, "mitigate": 20, "field": 10, "neighbours": 10}
 # The pairs whose stage figures the study draws (plots.pairs); any other pair's are drawn on
 # demand, by asking for its page with them: results/{pair}/stages.html.
 PLOT_PAIRS = STUDY.plot_pairs

@@ -13,7 +13,6 @@ rule field:
         f"{RESULTS}/logs/field/{{pair}}/{{stage}}.log",
     benchmark:
         f"{RESULTS}/benchmarks/field/{{pair}}/{{stage}}.tsv"
-    priority: PRIORITY["field"]
     conda:
         "../envs/lidarfield.yaml"
     threads: 1

@@ -15,7 +15,6 @@ rule mitigate:
         f"{RESULTS}/logs/mitigate/{{pair}}/{{stage}}.log",
     benchmark:
         f"{RESULTS}/benchmarks/mitigate/{{pair}}/{{stage}}.tsv"
-    priority: PRIORITY["mitigate"]
     conda:
         "../envs/lidarfield.yaml"
     threads: 1

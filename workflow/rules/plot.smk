@@ -46,7 +46,6 @@ rule plotly_js:
         f"{RESULTS}/logs/plotly_js.log",
     benchmark:
         f"{RESULTS}/benchmarks/plotly_js.tsv"
-    priority: PRIORITY["scan"]
     localrule: True
     conda:
         "../envs/lidarfield.yaml"

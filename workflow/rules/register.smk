@@ -10,7 +10,6 @@ rule register:
         f"{RESULTS}/logs/register/{{pair}}.log",
     benchmark:
         f"{RESULTS}/benchmarks/register/{{pair}}.tsv"
-    priority: PRIORITY["register"]
     conda:
         "../envs/lidarfield.yaml"
     threads: 1

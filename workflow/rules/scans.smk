@@ -8,7 +8,6 @@ rule simulate:
         f"{RESULTS}/logs/simulate/{{scan}}.log",
     benchmark:
         f"{RESULTS}/benchmarks/simulate/{{scan}}.tsv"
-    priority: PRIORITY["scan"]
     conda:
         "../envs/lidarfield.yaml"
     threads: 1
@@ -27,7 +26,6 @@ rule ingest:
         f"{RESULTS}/logs/ingest/{{scan}}.log",
     benchmark:
         f"{RESULTS}/benchmarks/ingest/{{scan}}.tsv"
-    priority: PRIORITY["scan"]
     conda:
         "../envs/lidarfield.yaml"
     threads: 1

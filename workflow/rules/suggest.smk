@@ -15,7 +15,6 @@ rule neighbours:
         f"{RESULTS}/logs/neighbours/{{pair}}.log",
     benchmark:
         f"{RESULTS}/benchmarks/neighbours/{{pair}}.tsv"
-    priority: PRIORITY["neighbours"]
     conda:
         "../envs/lidarfield.yaml"
     threads: 1

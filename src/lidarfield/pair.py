@@ -89,9 +89,15 @@ class RegisteredPair:
 
     @classmethod
     def from_columns(cls, columns: dict[str, np.ndarray], meta: dict) -> "RegisteredPair":
-        cloud = columns["cloud"]
-        in1, in2 = cloud == 1, cloud == 2
-        xyz = np.column_stack([columns["x"], columns["y"], columns["z"]]).astype(np.float64)
+        cloud = np.asarray(columns["cloud"])
+        n1 = int(np.count_nonzero(cloud == 1))
+        if (cloud[:n1] == 1).all() and (cloud[n1:] == 2).all():
+            in1, in2 = slice(0, n1), slice(n1, None)  # as written (cloud 1 first): views, no copies
+        else:
+            in1, in2 = cloud == 1, cloud == 2
+        xyz = np.empty((len(cloud), 3))
+        for axis, name in enumerate("xyz"):
+            xyz[:, axis] = columns[name]
         attrs = {k: v for k, v in columns.items() if k not in ("cloud", "x", "y", "z")}
         return cls(
             xyz[in1],

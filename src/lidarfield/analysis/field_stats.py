@@ -23,7 +23,7 @@ import math
 
 import numpy as np
 
-from ..field import discrepancy_field
+from ..field import field_from_voxel_ids
 from ..grid import FieldSettings
 from ..pair import RegisteredPair
 from ..poses import rotation_angle
@@ -53,8 +53,9 @@ STATISTIC_KEYS = (
 
 def analyse_field(pair: RegisteredPair, settings: FieldSettings) -> tuple[dict[str, np.ndarray], dict]:
     """The field of a pair (binned about sensor 1) with its tag columns, and its statistics."""
-    columns = discrepancy_field(pair.xyz1, pair.xyz2, settings)
-    columns.update(voxel_tags(columns, pair, settings))
+    ids = settings.grid.assign(pair.xyz1), settings.grid.assign(pair.xyz2)  # binned once: the tags need them too
+    columns = field_from_voxel_ids(ids[0], pair.xyz1, ids[1], pair.xyz2, settings)
+    columns.update(voxel_tags(columns, pair, settings, ids))
     return columns, field_statistics(columns, settings)
 
 

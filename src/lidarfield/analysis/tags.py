@@ -57,11 +57,15 @@ def voxel_energy(columns: dict[str, np.ndarray]) -> np.ndarray:
     return np.where(np.asarray(columns["valid"], dtype=bool), energy, 0.0)
 
 
-def voxel_tags(columns: dict[str, np.ndarray], pair: RegisteredPair, settings: FieldSettings) -> dict[str, np.ndarray]:
-    """``{tag_column(tag): bool (V,)}`` for the field ``columns`` of ``pair`` (binned about sensor 1)."""
+def voxel_tags(
+    columns: dict[str, np.ndarray], pair: RegisteredPair, settings: FieldSettings, ids: tuple[np.ndarray, np.ndarray] | None = None
+) -> dict[str, np.ndarray]:
+    """``{tag_column(tag): bool (V,)}`` for the field ``columns`` of ``pair`` (binned about
+    sensor 1); ``ids``: each cloud's voxel ids, when the caller has them."""
     valid = np.asarray(columns["valid"], dtype=bool)
     voxel = np.asarray(columns["voxel"], dtype=np.int64)
-    rows = [_rows(voxel, settings.grid.assign(xyz)) for xyz in (pair.xyz1, pair.xyz2)]
+    ids = ids or tuple(settings.grid.assign(xyz) for xyz in (pair.xyz1, pair.xyz2))
+    rows = [_rows(voxel, cloud_ids) for cloud_ids in ids]
     counts = [columns["n1"], columns["n2"]]
 
     def point_tag(flags) -> np.ndarray:

@@ -256,3 +256,18 @@ def test_the_worker_stops_when_its_workflow_is_gone(tmp_path):
     pid = int(subprocess.run([sys.executable, "-c", starter], capture_output=True, text=True, check=True).stdout)
     wait_for(lambda: not alive(pid), timeout=60)
     assert not path.exists()
+
+
+def test_a_run_that_executes_nothing_stops_the_worker_it_started(tmp_path):
+    """Snakemake starts the worker while it plans (lidarfield.worker.spawn); a dry run never
+    points a job at it, and stops it at exit: no worker process and no socket are left."""
+    from test_workflow import snakemake, tiny_study, write_study
+
+    write_study(tmp_path, tiny_study())
+    proc = snakemake(tmp_path, "--dry-run", "--cores", "1")
+    assert "Job stats" in proc.stdout
+    log = (tmp_path / "results" / "logs" / "worker.log").read_text()
+    started = [int(pid) for pid in re.findall(r"worker (\d+) (?:on|stopped)", log)]
+    assert started and "stopped" in log
+    assert not any(alive(pid) for pid in started)
+    assert not list((tmp_path / "results").glob(".worker-*.sock"))

@@ -7,9 +7,11 @@ takes the job's stdin/stdout/stderr, working directory and environment and runs 
 job ...`` in-process, so a crash or a kill stays in its job. It reports the child's exit status
 (or the signal that killed it) to the client, and kills the child if the client goes away.
 
-The workflow starts one worker per run (``start``, in ``onstart``), with its socket in the
-results folder named after the Snakemake process, and stops it (``stop``, in ``onsuccess`` /
-``onerror``). The worker also exits when the process that started it is gone, or after
+The workflow starts one worker per run while Snakemake reads the Snakefile (``spawn``: its
+imports overlap Snakemake's planning), points the jobs at it when the run starts executing
+locally (``start``, in ``onstart``), with its socket in the results folder named after the
+Snakemake process, and stops it (``stop``, in ``onsuccess`` / ``onerror``, or at exit when
+nothing ran). The worker also exits when the process that started it is gone, or after
 ``idle_timeout_s`` without a job. Its log, with each job's CPU time and peak memory (which
 Snakemake's benchmark files cannot see), is ``results/logs/worker.log``.
 
@@ -20,6 +22,7 @@ is started with one thread per numeric library (the rules declare ``threads: 1``
 from __future__ import annotations
 
 import argparse
+import atexit
 import gc
 import importlib
 import logging
@@ -229,6 +232,9 @@ def preload() -> None:
 
 def serve(socket_path: str, parent_pid: int, idle_timeout_s: float = IDLE_TIMEOUT_S) -> None:
     """Listen on ``socket_path`` at once (clients queue while the imports run), then serve."""
+    # Stopped while still importing (a dry run ends): exit through the finally below, which
+    # removes the socket. Worker.serve installs its own handler afterwards.
+    signal.signal(signal.SIGTERM, lambda *_: sys.exit(0))
     listener = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
     listener.bind(socket_path)
     try:
@@ -264,40 +270,54 @@ def remove_stale_sockets(results: Path) -> None:
             pass
 
 
-# The worker of this workflow run (the Snakemake process), between start() and stop().
+# The worker of this workflow run (the Snakemake process), from spawn() or start() to stop().
 _running: subprocess.Popen | None = None
 
 
-def start(results: str | Path, idle_timeout_s: float = IDLE_TIMEOUT_S) -> subprocess.Popen | None:
-    """Start this workflow run's worker and point its jobs at it (``LIDARFIELD_WORKER``);
-    None, and jobs run as plain processes, when ``LIDARFIELD_WORKER=off``."""
+def spawn(results: str | Path, idle_timeout_s: float = IDLE_TIMEOUT_S) -> subprocess.Popen | None:
+    """Start this workflow run's worker importing, without pointing jobs at it yet: called
+    while Snakemake reads the Snakefile, its imports overlap Snakemake's planning. ``start``
+    then uses it; a run that executes nothing (a dry run, nothing to do) stops it at exit.
+    None when ``LIDARFIELD_WORKER=off``."""
     global _running
     if ENV in os.environ and worker_socket() is None:
         return None
-    results = Path(results)
-    (results / "logs").mkdir(parents=True, exist_ok=True)
-    remove_stale_sockets(results)
+    if _running is None:
+        results = Path(results)
+        (results / "logs").mkdir(parents=True, exist_ok=True)
+        remove_stale_sockets(results)
+        path = socket_path(results, os.getpid())
+        Path(path).unlink(missing_ok=True)
+        env = {**os.environ, **{name: "1" for name in THREAD_VARS}}
+        env.pop(ENV, None)
+        with open(results / "logs" / "worker.log", "a") as log_file:
+            _running = subprocess.Popen(
+                [sys.executable, "-m", "lidarfield.worker", path, "--parent-pid", str(os.getpid()), "--idle-timeout", str(idle_timeout_s)],
+                stdin=subprocess.DEVNULL,
+                stdout=log_file,
+                stderr=subprocess.STDOUT,
+                env=env,
+                start_new_session=True,  # Ctrl-C reaches the jobs through their clients, not the worker
+            )  # fmt: skip
+        atexit.register(stop)
+    return _running
+
+
+def start(results: str | Path, idle_timeout_s: float = IDLE_TIMEOUT_S) -> subprocess.Popen | None:
+    """Point this workflow run's jobs at its worker (``LIDARFIELD_WORKER``), spawned now if
+    ``spawn`` was not called; None, and jobs run as plain processes, when
+    ``LIDARFIELD_WORKER=off`` or the worker did not come up."""
+    worker = spawn(results, idle_timeout_s)
+    if worker is None:
+        return None
     path = socket_path(results, os.getpid())
-    Path(path).unlink(missing_ok=True)
-    env = {**os.environ, **{name: "1" for name in THREAD_VARS}}
-    env.pop(ENV, None)
-    with open(results / "logs" / "worker.log", "a") as log_file:
-        worker = subprocess.Popen(
-            [sys.executable, "-m", "lidarfield.worker", path, "--parent-pid", str(os.getpid()), "--idle-timeout", str(idle_timeout_s)],
-            stdin=subprocess.DEVNULL,
-            stdout=log_file,
-            stderr=subprocess.STDOUT,
-            env=env,
-            start_new_session=True,  # Ctrl-C reaches the jobs through their clients, not the worker
-        )  # fmt: skip
     deadline = time.monotonic() + 10.0
     while not os.path.exists(path) and worker.poll() is None and time.monotonic() < deadline:
         time.sleep(0.01)
     if not os.path.exists(path):
-        worker.kill()
+        stop()
         return None  # jobs run as plain processes; the reason is in the worker's log
     os.environ[ENV] = path
-    _running = worker
     return worker
 
 

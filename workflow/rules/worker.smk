@@ -1,15 +1,23 @@
 # A local run hands each job to a pre-imported worker (lidarfield.worker), started here and
-# stopped when the run ends: jobs then skip Python's start and imports. On a cluster, or with
+# stopped when the run ends (or at exit, when the run executes nothing): jobs then skip
+# Python's start and imports. On a cluster, or with
 # LIDARFIELD_WORKER=off, every job is its own process.
 # The end of a run also cancels the scheduler's pending re-evaluation timers (see
 # lidarfield.scheduling), which would otherwise hold the exit for up to a minute.
 import lidarfield.scheduling
 import lidarfield.worker
 
+# Started importing now, while Snakemake plans: the run's first jobs need not wait for it.
+# Not in the Snakemake processes that run one job each (on a cluster node).
+if workflow.is_main_process:
+    lidarfield.worker.spawn(RESULTS)
+
 
 onstart:
     if workflow.local_exec:
         lidarfield.worker.start(RESULTS)
+    else:
+        lidarfield.worker.stop()  # jobs run on cluster nodes
 
 
 onsuccess:

@@ -271,3 +271,13 @@ def test_a_run_that_executes_nothing_stops_the_worker_it_started(tmp_path):
     assert started and "stopped" in log
     assert not any(alive(pid) for pid in started)
     assert not list((tmp_path / "results").glob(".worker-*.sock"))
+
+
+def test_no_worker_when_jobs_run_in_their_own_software_environments(tmp_path):
+    """With --sdm conda each job must run in its rule's environment, not with the worker's
+    imports: no worker is started (whether or not conda is installed to run the study)."""
+    from test_workflow import snakemake, tiny_study, write_study
+
+    write_study(tmp_path, tiny_study())
+    snakemake(tmp_path, "--dry-run", "--cores", "1", "--sdm", "conda", check=False)
+    assert not (tmp_path / "results" / "logs" / "worker.log").exists()

@@ -7,17 +7,22 @@
 import lidarfield.scheduling
 import lidarfield.worker
 
+# Not in the Snakemake processes that run one job each (on a cluster node), nor when each job
+# runs in its rule's own software environment (--sdm conda / apptainer): the worker runs the
+# jobs with its own imports, those of the environment Snakemake runs in.
+USE_WORKER = (
+    workflow.is_main_process and not workflow.deployment_settings.deployment_method
+)
 # Started importing now, while Snakemake plans: the run's first jobs need not wait for it.
-# Not in the Snakemake processes that run one job each (on a cluster node).
-if workflow.is_main_process:
+if USE_WORKER:
     lidarfield.worker.spawn(RESULTS)
 
 
 onstart:
-    if workflow.local_exec:
+    if USE_WORKER and workflow.local_exec:
         lidarfield.worker.start(RESULTS)
     else:
-        lidarfield.worker.stop()  # jobs run on cluster nodes
+        lidarfield.worker.stop()  # jobs run on cluster nodes or in their own environments
 
 
 onsuccess:

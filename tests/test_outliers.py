@@ -8,7 +8,7 @@ import pytest
 
 from lidarfield.hypotheses import apply_step
 from lidarfield.hypotheses.outliers import (
-    mean_neighbour_distances,
+    neighbour_distances,
     neighbour_threads,
     open3d_threshold,
     statistical_inliers,
@@ -79,7 +79,7 @@ def test_same_masks_as_open3d_on_duplicates_and_isolated_points(seed, nb_neighbo
 def test_mean_distance_counts_the_point_itself():
     xyz = np.array([[0.0, 0, 0], [1.0, 0, 0], [3.0, 0, 0], [7.0, 0, 0]])
     # Nearest two of point 0: itself (0) and point 1 (1): mean 0.5; of point 3: itself and point 2.
-    np.testing.assert_allclose(mean_neighbour_distances(xyz, 2), [0.5, 0.5, 1.0, 2.0])
+    np.testing.assert_allclose(neighbour_distances(xyz, 2).mean, [0.5, 0.5, 1.0, 2.0])
     scores = np.array([0.0, 2.0, 2.0, 6.0, 0.0])
     # Open3D: mean (2 + 2 + 6) / 5 = 2 over all points, std sqrt((0 + 0 + 4^2) / (5 - 1)) = 2 over
     # the positive scores; summing the zeros' squares too, or dividing by the 3 positive scores
@@ -94,7 +94,7 @@ def test_clouds_of_at_most_k_points(n):
     """Open3D averages over the whole cloud when it has no more than k points (one point: 0 / 0,
     removed); the hypothesis keeps such a cloud whole instead."""
     xyz = np.random.default_rng(n).normal(size=(n, 3))
-    scores = mean_neighbour_distances(xyz, 20)
+    scores = neighbour_distances(xyz, 20).mean
     np.testing.assert_array_equal(open3d_threshold(scores, 2.0), open3d_inliers(xyz, 20, 2.0))
     assert statistical_inliers(xyz, 20, 2.0).all()
     keep1, keep2 = apply_step(RegisteredPair(xyz, xyz[:1]), {"outliers": {}})

@@ -136,11 +136,6 @@ def _workers(workers: int | None) -> int:
     return workers or neighbour_threads()
 
 
-def mean_neighbour_distances(xyz: np.ndarray, nb_neighbors: int, workers: int = 1) -> np.ndarray:
-    """Each point's mean distance to its ``nb_neighbors`` nearest points (itself included)."""
-    return neighbour_distances(xyz, nb_neighbors, workers).mean
-
-
 def statistical_inliers(
     xyz: np.ndarray, nb_neighbors: int, std_ratio: float, workers: int | None = None, distances: NeighbourDistances | None = None
 ) -> np.ndarray:

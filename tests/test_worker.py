@@ -281,3 +281,36 @@ def test_no_worker_when_jobs_run_in_their_own_software_environments(tmp_path):
     write_study(tmp_path, tiny_study())
     snakemake(tmp_path, "--dry-run", "--cores", "1", "--sdm", "conda", check=False)
     assert not (tmp_path / "results" / "logs" / "worker.log").exists()
+
+
+def test_the_figure_warm_up_draws_every_figure_and_leaves_no_folder(tmp_path, monkeypatch):
+    import tempfile
+
+    from lidarfield.plots.warm_up import WARM_UP_FIGURES, warm_up_steps
+
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
+    assert list(warm_up_steps()) == ["synthetic pair", *WARM_UP_FIGURES, "field_3d"]
+    assert list(tmp_path.iterdir()) == []
+    steps = warm_up_steps()
+    next(steps)
+    assert len(list(tmp_path.iterdir())) == 1
+    steps.close()  # as the worker does when it stops mid-way
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_figures_drawn_after_the_warm_up_are_those_of_a_plain_process(tmp_path, worker):
+    """The warm-up leaves matplotlib's caches filled, not its settings changed: a stage's
+    figures forked from the warmed-up worker are byte for byte those of a plain process."""
+    from lidarfield.plots.synthetic import write_synthetic_pair
+
+    wait_for(lambda: "figures warmed up" in (tmp_path / "worker.log").read_text(), timeout=120)
+    stages = write_synthetic_pair(tmp_path / "pair", "pair", levels=2, n=6000)
+    figures = {}
+    for mode in ("off", worker[1]):
+        out = tmp_path / ("plain" if mode == "off" else "forked")
+        argv = ["plot-stage", "--stage-dir", str(stages[1]), f"--previous={stages[0]}", "--plots", json.dumps({"top_k": 5}),
+                "--out", str(out)]  # fmt: skip
+        assert start_job(argv, tmp_path, mode, tmp_path / f"{out.name}.log").wait(timeout=120) == 0
+        figures[mode] = {p.name: p.read_bytes() for p in sorted(out.glob("*.png"))}
+    assert len(figures["off"]) == 6
+    assert figures["off"] == figures[worker[1]]

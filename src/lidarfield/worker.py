@@ -13,7 +13,9 @@ locally (``start``, in ``onstart``), with its socket in the results folder named
 Snakemake process, and stops it (``stop``, in ``onsuccess`` / ``onerror``, or at exit when
 nothing ran). The worker also exits when the process that started it is gone, or after
 ``idle_timeout_s`` without a job. Its log, with each job's CPU time and peak memory (which
-Snakemake's benchmark files cannot see), is ``results/logs/worker.log``.
+Snakemake's benchmark files cannot see), is ``results/logs/worker.log``. Between jobs, in
+steps, it draws a synthetic pair's figures once (``plots.warm_up``), so that the plot jobs it
+forks afterwards skip matplotlib's and plotly's first-use costs.
 
 Fork safety: the worker imports libraries but runs nothing that starts a thread pool, and it
 is started with one thread per numeric library (the rules declare ``threads: 1``).
@@ -34,6 +36,7 @@ import subprocess
 import sys
 import time
 import traceback
+from collections.abc import Iterator
 from pathlib import Path
 
 from .job_client import ENV, recv_message, send_message, worker_socket
@@ -74,6 +77,33 @@ class Worker:
         self.selector = selectors.DefaultSelector()
         self.wakeup_r, self.wakeup_w = os.pipe()
         self.stopping = False
+        self.warm_up: Iterator[str] | None = None
+        self.warm_up_s = 0.0
+
+    def start_warm_up(self) -> None:
+        """Draw the figures once, a step at a time while no request waits (see
+        ``plots.warm_up``): the plot jobs forked afterwards skip matplotlib's first-use costs."""
+        try:
+            from .plots.warm_up import warm_up_steps
+        except ImportError as e:
+            log.warning("no figure warm-up: %s", e)
+            return
+        self.warm_up = warm_up_steps()
+
+    def warm_up_step(self) -> None:
+        started = time.perf_counter()
+        try:
+            next(self.warm_up)
+            self.warm_up_s += time.perf_counter() - started
+            return
+        except StopIteration:
+            log.info("figures warmed up in %.2f s", self.warm_up_s)
+        except Exception as e:  # a failed warm-up only costs the jobs their first-use time
+            log.warning("figure warm-up stopped: %s: %s", type(e).__name__, e)
+            self.warm_up.close()
+        self.warm_up = None
+        gc.collect()
+        gc.freeze()  # what the warm-up created, out of the jobs' collections too (see preload)
 
     def serve(self) -> None:
         os.set_blocking(self.wakeup_w, False)
@@ -85,7 +115,8 @@ class Worker:
         self.selector.register(self.wakeup_r, selectors.EVENT_READ, "wakeup")
         last_job = time.monotonic()
         while not self.stopping:
-            for key, _ in self.selector.select(timeout=1.0):
+            events = self.selector.select(timeout=0 if self.warm_up is not None else 1.0)
+            for key, _ in events:
                 if key.data == "accept":
                     self.accept()
                 elif key.data == "wakeup":
@@ -93,6 +124,8 @@ class Worker:
                 else:
                     self.client_gone(key.data)
             self.reap()
+            if self.warm_up is not None and not events:
+                self.warm_up_step()
             if self.jobs:
                 last_job = time.monotonic()
             if os.getppid() != self.parent_pid:
@@ -103,6 +136,8 @@ class Worker:
                 break
         for pid in self.jobs:
             os.kill(pid, signal.SIGTERM)
+        if self.warm_up is not None:
+            self.warm_up.close()  # removes its temporary folder
 
     def stop(self, signum, frame) -> None:
         self.stopping = True
@@ -242,7 +277,9 @@ def serve(socket_path: str, parent_pid: int, idle_timeout_s: float = IDLE_TIMEOU
         started = time.perf_counter()
         preload()
         log.info("worker %d on %s: imports took %.2f s", os.getpid(), socket_path, time.perf_counter() - started)
-        Worker(listener, parent_pid, idle_timeout_s).serve()
+        worker = Worker(listener, parent_pid, idle_timeout_s)
+        worker.start_warm_up()
+        worker.serve()
     finally:
         listener.close()
         Path(socket_path).unlink(missing_ok=True)

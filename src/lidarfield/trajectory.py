@@ -8,7 +8,6 @@ from __future__ import annotations
 from typing import NamedTuple
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from .poses import pose_from_xyzrpy
 
@@ -17,6 +16,9 @@ def moved_pose(pose: np.ndarray, dt_s, linear_velocity_mps, angular_velocity_rps
     """Pose(s) after ``dt_s`` seconds of constant motion: ``linear_velocity_mps`` in the world
     frame, ``angular_velocity_rps`` (rad/s) in the sensor frame. ``dt_s`` may be an array:
     the result is then (n, 4, 4)."""
+    # Imported here: planning a simulated drive needs this module's poses, not SciPy (0.4 s).
+    from scipy.spatial.transform import Rotation
+
     dt = np.atleast_1d(np.asarray(dt_s, dtype=float))
     rotation = Rotation.from_rotvec(dt[:, None] * np.asarray(angular_velocity_rps, dtype=float)).as_matrix()
     out = np.broadcast_to(np.eye(4), (len(dt), 4, 4)).copy()

@@ -303,7 +303,7 @@ def test_figures_drawn_after_the_warm_up_are_those_of_a_plain_process(tmp_path, 
     figures forked from the warmed-up worker are byte for byte those of a plain process."""
     from lidarfield.plots.synthetic import write_synthetic_pair
 
-    wait_for(lambda: "figures warmed up" in (tmp_path / "worker.log").read_text(), timeout=120)
+    wait_for(lambda: "figure warm-up done" in (tmp_path / "worker.log").read_text(), timeout=120)
     stages = write_synthetic_pair(tmp_path / "pair", "pair", levels=2, n=6000)
     figures = {}
     for mode in ("off", worker[1]):

@@ -13,9 +13,9 @@ locally (``start``, in ``onstart``), with its socket in the results folder named
 Snakemake process, and stops it (``stop``, in ``onsuccess`` / ``onerror``, or at exit when
 nothing ran). The worker also exits when the process that started it is gone, or after
 ``idle_timeout_s`` without a job. Its log, with each job's CPU time and peak memory (which
-Snakemake's benchmark files cannot see), is ``results/logs/worker.log``. Between jobs, in
-steps, it draws a synthetic pair's figures once (``plots.warm_up``), so that the plot jobs it
-forks afterwards skip matplotlib's and plotly's first-use costs.
+Snakemake's benchmark files cannot see), is ``results/logs/worker.log``. What only later jobs
+need (figures, pages) it imports between jobs, in steps, then draws a few figures once
+(``plots.warm_up``): see ``PRELOAD_BETWEEN_JOBS``.
 
 Fork safety: the worker imports libraries but runs nothing that starts a thread pool, and it
 is started with one thread per numeric library (the rules declare ``threads: 1``).
@@ -43,22 +43,29 @@ from .job_client import ENV, recv_message, send_message, worker_socket
 
 log = logging.getLogger("lidarfield.worker")
 
-# What the jobs import, loaded once in the worker before it forks anything.
+# What the jobs import, loaded once in the worker before it forks anything: what a run's first
+# jobs (scans, registration, stages) use.
 PRELOAD = (
     "lidarfield.cli.job",
     "lidarfield.jobs",
     "lidarfield.pipeline",
-    "lidarfield.plots",
     "lidarfield.registration.matching",  # Open3D
     "lidarfield.analysis.rematch",
     "lidarfield.simulate",
     "lidarfield.scene",
     "lidarfield.stack",
-    "lidarfield.report",
     "lidarfield.analysis.suggest",
+    "scipy.spatial",  # the outliers hypothesis' k-d tree (mitigate and suggest jobs)
+)
+# What only the figure, page and study jobs import, later in a run: imported between jobs once
+# the worker serves, so that the first jobs do not wait for it (0.9 s). Then the worker draws a
+# few figures once (plots.warm_up): the plot jobs forked afterwards skip matplotlib's and
+# plotly's first-use costs.
+PRELOAD_BETWEEN_JOBS = (
+    "lidarfield.plots",
+    "lidarfield.report",
     "lidarfield.analysis.study",
     "pandas",  # the summary job's
-    "scipy.spatial",  # the outliers hypothesis' k-d tree (mitigate and suggest jobs)
 )
 # Numeric libraries start as many threads as these say; jobs run with threads: 1.
 THREAD_VARS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMEXPR_NUM_THREADS")
@@ -77,33 +84,24 @@ class Worker:
         self.selector = selectors.DefaultSelector()
         self.wakeup_r, self.wakeup_w = os.pipe()
         self.stopping = False
-        self.warm_up: Iterator[str] | None = None
-        self.warm_up_s = 0.0
+        self.between_jobs: Iterator[str] | None = between_jobs()
+        self.between_jobs_s = 0.0
 
-    def start_warm_up(self) -> None:
-        """Draw the figures once, a step at a time while no request waits (see
-        ``plots.warm_up``): the plot jobs forked afterwards skip matplotlib's first-use costs."""
-        try:
-            from .plots.warm_up import warm_up_steps
-        except ImportError as e:
-            log.warning("no figure warm-up: %s", e)
-            return
-        self.warm_up = warm_up_steps()
-
-    def warm_up_step(self) -> None:
+    def step_between_jobs(self) -> None:
+        """One step of ``between_jobs``, while no request waits."""
         started = time.perf_counter()
         try:
-            next(self.warm_up)
-            self.warm_up_s += time.perf_counter() - started
+            next(self.between_jobs)
+            self.between_jobs_s += time.perf_counter() - started
             return
         except StopIteration:
-            log.info("figures warmed up in %.2f s", self.warm_up_s)
-        except Exception as e:  # a failed warm-up only costs the jobs their first-use time
+            log.info("later imports and figure warm-up done in %.2f s between jobs", self.between_jobs_s)
+        except Exception as e:  # a failed warm-up only costs the plot jobs their first-use time
             log.warning("figure warm-up stopped: %s: %s", type(e).__name__, e)
-            self.warm_up.close()
-        self.warm_up = None
+            self.between_jobs.close()
+        self.between_jobs = None
         gc.collect()
-        gc.freeze()  # what the warm-up created, out of the jobs' collections too (see preload)
+        gc.freeze()  # what these steps created, out of the jobs' collections too (see preload)
 
     def serve(self) -> None:
         os.set_blocking(self.wakeup_w, False)
@@ -115,7 +113,7 @@ class Worker:
         self.selector.register(self.wakeup_r, selectors.EVENT_READ, "wakeup")
         last_job = time.monotonic()
         while not self.stopping:
-            events = self.selector.select(timeout=0 if self.warm_up is not None else 1.0)
+            events = self.selector.select(timeout=0 if self.between_jobs is not None else 1.0)
             for key, _ in events:
                 if key.data == "accept":
                     self.accept()
@@ -124,8 +122,8 @@ class Worker:
                 else:
                     self.client_gone(key.data)
             self.reap()
-            if self.warm_up is not None and not events:
-                self.warm_up_step()
+            if self.between_jobs is not None and not events:
+                self.step_between_jobs()
             if self.jobs:
                 last_job = time.monotonic()
             if os.getppid() != self.parent_pid:
@@ -136,8 +134,8 @@ class Worker:
                 break
         for pid in self.jobs:
             os.kill(pid, signal.SIGTERM)
-        if self.warm_up is not None:
-            self.warm_up.close()  # removes its temporary folder
+        if self.between_jobs is not None:
+            self.between_jobs.close()  # removes the warm-up's temporary folder
 
     def stop(self, signum, frame) -> None:
         self.stopping = True
@@ -250,12 +248,16 @@ def run_job(argv: list[str]) -> int:
         return 1
 
 
+def import_module(module: str) -> None:
+    try:
+        importlib.import_module(module)
+    except ImportError as e:  # the jobs that need it will fail with the same error
+        log.warning("could not preload %s: %s", module, e)
+
+
 def preload() -> None:
     for module in PRELOAD:
-        try:
-            importlib.import_module(module)
-        except ImportError as e:  # the jobs that need it will fail with the same error
-            log.warning("could not preload %s: %s", module, e)
+        import_module(module)
     from .cli import build_parser
 
     build_parser()  # cached: every job parses its argv with this one
@@ -263,6 +265,17 @@ def preload() -> None:
     # copy, page by page) the whole inherited heap, 0.15 s of a plot job.
     gc.collect()
     gc.freeze()
+
+
+def between_jobs() -> Iterator[str]:
+    """The worker's work between jobs, a short step at a time: the later imports, then the
+    figure warm-up. Each step yields what it did."""
+    for module in PRELOAD_BETWEEN_JOBS:
+        import_module(module)
+        yield module
+    from .plots.warm_up import warm_up_steps
+
+    yield from warm_up_steps()
 
 
 def serve(socket_path: str, parent_pid: int, idle_timeout_s: float = IDLE_TIMEOUT_S) -> None:
@@ -277,9 +290,7 @@ def serve(socket_path: str, parent_pid: int, idle_timeout_s: float = IDLE_TIMEOU
         started = time.perf_counter()
         preload()
         log.info("worker %d on %s: imports took %.2f s", os.getpid(), socket_path, time.perf_counter() - started)
-        worker = Worker(listener, parent_pid, idle_timeout_s)
-        worker.start_warm_up()
-        worker.serve()
+        Worker(listener, parent_pid, idle_timeout_s).serve()
     finally:
         listener.close()
         Path(socket_path).unlink(missing_ok=True)

@@ -258,6 +258,24 @@ def test_the_worker_stops_when_its_workflow_is_gone(tmp_path):
     assert not path.exists()
 
 
+def test_a_worker_stopped_while_importing_exits_at_once(tmp_path):
+    """Stopped at any moment of its imports (a dry run ends), the worker exits and removes its
+    socket; stopped inside a compiled module's import, it once took the stop for that import
+    failing and went on to serve."""
+    for i, delay in enumerate([0.2 * k for k in range(1, 9)]):
+        path = tmp_path / f"w{i}.sock"
+        log = tmp_path / f"w{i}.log"
+        with open(log, "w") as out:
+            command = [sys.executable, "-m", "lidarfield.worker", str(path), "--parent-pid", str(os.getpid())]
+            proc = subprocess.Popen(command, stdout=out, stderr=subprocess.STDOUT, env={**os.environ, **SNAKEMAKE_ENV})
+            wait_for(path.exists, timeout=30)
+            time.sleep(delay)
+            proc.terminate()
+            assert proc.wait(timeout=30) == 0, log.read_text()
+        assert not path.exists()
+        assert "stopped" in log.read_text()
+
+
 def test_a_run_that_executes_nothing_stops_the_worker_it_started(tmp_path):
     """Snakemake starts the worker while it plans (lidarfield.worker.spawn); a dry run never
     points a job at it, and stops it at exit: no worker process and no socket are left."""

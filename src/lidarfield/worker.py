@@ -17,8 +17,10 @@ Snakemake's benchmark files cannot see), is ``results/logs/worker.log``. What on
 need (figures, pages) it imports between jobs, in steps, then draws a few figures once
 (``plots.warm_up``): see ``PRELOAD_BETWEEN_JOBS``.
 
-Fork safety: the worker imports libraries but runs nothing that starts a thread pool, and it
-is started with one thread per numeric library (the rules declare ``threads: 1``).
+Fork safety: the worker is started with one thread per numeric library (the rules declare
+``threads: 1``). Its figure warm-up writes and reads Parquet files, which starts Arrow's thread
+pools: Arrow starts them anew in a forked child (its fork handlers), and matplotlib and plotly
+start none.
 """
 
 from __future__ import annotations
@@ -280,9 +282,17 @@ def between_jobs() -> Iterator[str]:
 
 def serve(socket_path: str, parent_pid: int, idle_timeout_s: float = IDLE_TIMEOUT_S) -> None:
     """Listen on ``socket_path`` at once (clients queue while the imports run), then serve."""
-    # Stopped while still importing (a dry run ends): exit through the finally below, which
-    # removes the socket. Worker.serve installs its own handler afterwards.
-    signal.signal(signal.SIGTERM, lambda *_: sys.exit(0))
+
+    def stop_while_importing(signum, frame):
+        # A dry run ends while the worker imports. Exit at once: an exception raised here, in
+        # the middle of a compiled module's import (Open3D's), comes out as that import
+        # failing ("initialization failed"), and the imports would go on. Worker.serve
+        # installs its own handler afterwards.
+        Path(socket_path).unlink(missing_ok=True)
+        log.info("worker %d stopped while importing", os.getpid())
+        os._exit(0)
+
+    signal.signal(signal.SIGTERM, stop_while_importing)
     listener = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
     listener.bind(socket_path)
     try:

@@ -142,12 +142,11 @@ def alive(pid: int) -> bool:
     return Path(f"/proc/{pid}/stat").read_text().split()[2] != "Z" if Path(f"/proc/{pid}").exists() else True
 
 
-@pytest.fixture
-def worker(tmp_path):
-    """A worker serving on a socket in ``tmp_path``, with this test as its parent."""
-    path = str(tmp_path / "w.sock")
-    log = open(tmp_path / "worker.log", "w")
-    command = [sys.executable, "-m", "lidarfield.worker", path, "--parent-pid", str(os.getpid())]
+def serving_worker(folder: Path, *options: str):
+    """A worker serving on a socket in ``folder``, with this test as its parent."""
+    path = str(folder / "w.sock")
+    log = open(folder / "worker.log", "w")
+    command = [sys.executable, "-m", "lidarfield.worker", path, "--parent-pid", str(os.getpid()), *options]
     proc = subprocess.Popen(command, stdout=log, stderr=subprocess.STDOUT, env={**os.environ, **SNAKEMAKE_ENV})
     wait_for(lambda: os.path.exists(path), timeout=30)
     yield proc, path
@@ -155,6 +154,16 @@ def worker(tmp_path):
     proc.wait(timeout=30)
     log.close()
     assert not os.path.exists(path), "the worker leaves no socket behind"
+
+
+@pytest.fixture
+def worker(tmp_path):
+    yield from serving_worker(tmp_path)
+
+
+@pytest.fixture
+def warming_worker(tmp_path):
+    yield from serving_worker(tmp_path, "--warm-up")
 
 
 def test_killed_job_leaves_other_jobs_and_the_worker_sound(tmp_path, worker):
@@ -316,12 +325,13 @@ def test_the_figure_warm_up_draws_every_figure_and_leaves_no_folder(tmp_path, mo
     assert list(tmp_path.iterdir()) == []
 
 
-def test_figures_drawn_after_the_warm_up_are_those_of_a_plain_process(tmp_path, worker):
+def test_figures_drawn_after_the_warm_up_are_those_of_a_plain_process(tmp_path, warming_worker):
     """The warm-up leaves matplotlib's caches filled, not its settings changed: a stage's
     figures forked from the warmed-up worker are byte for byte those of a plain process."""
     from lidarfield.plots.synthetic import write_synthetic_pair
 
     wait_for(lambda: "figure warm-up done" in (tmp_path / "worker.log").read_text(), timeout=120)
+    worker = warming_worker
     stages = write_synthetic_pair(tmp_path / "pair", "pair", levels=2, n=6000)
     figures = {}
     for mode in ("off", worker[1]):
@@ -332,3 +342,27 @@ def test_figures_drawn_after_the_warm_up_are_those_of_a_plain_process(tmp_path, 
         figures[mode] = {p.name: p.read_bytes() for p in sorted(out.glob("*.png"))}
     assert len(figures["off"]) == 6
     assert figures["off"] == figures[worker[1]]
+
+
+def test_the_workflow_warms_the_worker_up_only_for_studies_with_many_figures(tmp_path, monkeypatch):
+    from lidarfield import worker as worker_module
+
+    commands = []
+
+    class Spawned:
+        def __init__(self, command, **kwargs):
+            commands.append(command)
+
+        def terminate(self):
+            pass
+
+        def wait(self, timeout=None):
+            return 0
+
+    monkeypatch.setattr(worker_module.subprocess, "Popen", Spawned)
+    monkeypatch.delenv("LIDARFIELD_WORKER", raising=False)
+    threshold = worker_module.WARM_UP_MIN_FIGURE_JOBS
+    for figure_jobs in (0, threshold - 1, threshold, 27):
+        worker_module.spawn(tmp_path / "results", figure_jobs=figure_jobs)
+        worker_module.stop()
+    assert ["--warm-up" in command for command in commands] == [False, False, True, True]

@@ -72,13 +72,17 @@ PRELOAD_BETWEEN_JOBS = (
 # Numeric libraries start as many threads as these say; jobs run with threads: 1.
 THREAD_VARS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMEXPR_NUM_THREADS")
 IDLE_TIMEOUT_S = 900.0
+# The figure warm-up costs about 1 s of CPU and saves a stage's figure job about 0.2 s: it is
+# done for studies with at least this many stage-figure jobs (the default study has 27; a
+# one-pair test study's run took 20% longer with it).
+WARM_UP_MIN_FIGURE_JOBS = 10
 SOCKET_GLOB = ".worker-*.sock"
 
 
 class Worker:
     """The socket loop: accept a job, fork its child, report its status; one thread only."""
 
-    def __init__(self, listener: socket.socket, parent_pid: int, idle_timeout_s: float):
+    def __init__(self, listener: socket.socket, parent_pid: int, idle_timeout_s: float, warm_up: bool = False):
         self.listener = listener
         self.parent_pid = parent_pid
         self.idle_timeout_s = idle_timeout_s
@@ -86,7 +90,8 @@ class Worker:
         self.selector = selectors.DefaultSelector()
         self.wakeup_r, self.wakeup_w = os.pipe()
         self.stopping = False
-        self.between_jobs: Iterator[str] | None = between_jobs()
+        self.warm_up = warm_up
+        self.between_jobs: Iterator[str] | None = between_jobs(warm_up)
         self.between_jobs_s = 0.0
 
     def step_between_jobs(self) -> None:
@@ -97,7 +102,8 @@ class Worker:
             self.between_jobs_s += time.perf_counter() - started
             return
         except StopIteration:
-            log.info("later imports and figure warm-up done in %.2f s between jobs", self.between_jobs_s)
+            done = "later imports and figure warm-up" if self.warm_up else "later imports"
+            log.info("%s done in %.2f s between jobs", done, self.between_jobs_s)
         except Exception as e:  # a failed warm-up only costs the plot jobs their first-use time
             log.warning("figure warm-up stopped: %s: %s", type(e).__name__, e)
             self.between_jobs.close()
@@ -269,18 +275,20 @@ def preload() -> None:
     gc.freeze()
 
 
-def between_jobs() -> Iterator[str]:
-    """The worker's work between jobs, a short step at a time: the later imports, then the
-    figure warm-up. Each step yields what it did."""
+def between_jobs(warm_up: bool) -> Iterator[str]:
+    """The worker's work between jobs, a short step at a time: the later imports, then (when
+    ``warm_up``) the figure warm-up. Each step yields what it did."""
     for module in PRELOAD_BETWEEN_JOBS:
         import_module(module)
         yield module
+    if not warm_up:
+        return
     from .plots.warm_up import warm_up_steps
 
     yield from warm_up_steps()
 
 
-def serve(socket_path: str, parent_pid: int, idle_timeout_s: float = IDLE_TIMEOUT_S) -> None:
+def serve(socket_path: str, parent_pid: int, idle_timeout_s: float = IDLE_TIMEOUT_S, warm_up: bool = False) -> None:
     """Listen on ``socket_path`` at once (clients queue while the imports run), then serve."""
 
     def stop_while_importing(signum, frame):
@@ -300,7 +308,7 @@ def serve(socket_path: str, parent_pid: int, idle_timeout_s: float = IDLE_TIMEOU
         started = time.perf_counter()
         preload()
         log.info("worker %d on %s: imports took %.2f s", os.getpid(), socket_path, time.perf_counter() - started)
-        Worker(listener, parent_pid, idle_timeout_s).serve()
+        Worker(listener, parent_pid, idle_timeout_s, warm_up).serve()
     finally:
         listener.close()
         Path(socket_path).unlink(missing_ok=True)
@@ -332,11 +340,12 @@ def remove_stale_sockets(results: Path) -> None:
 _running: subprocess.Popen | None = None
 
 
-def spawn(results: str | Path, idle_timeout_s: float = IDLE_TIMEOUT_S) -> subprocess.Popen | None:
+def spawn(results: str | Path, idle_timeout_s: float = IDLE_TIMEOUT_S, figure_jobs: int = 0) -> subprocess.Popen | None:
     """Start this workflow run's worker importing, without pointing jobs at it yet: called
     while Snakemake reads the Snakefile, its imports overlap Snakemake's planning. ``start``
     then uses it; a run that executes nothing (a dry run, nothing to do) stops it at exit.
-    None when ``LIDARFIELD_WORKER=off``."""
+    ``figure_jobs``: the study's stage-figure jobs, which decide the figure warm-up (see
+    ``WARM_UP_MIN_FIGURE_JOBS``). None when ``LIDARFIELD_WORKER=off``."""
     global _running
     if ENV in os.environ and worker_socket() is None:
         return None
@@ -350,7 +359,8 @@ def spawn(results: str | Path, idle_timeout_s: float = IDLE_TIMEOUT_S) -> subpro
         env.pop(ENV, None)
         with open(results / "logs" / "worker.log", "a") as log_file:
             _running = subprocess.Popen(
-                [sys.executable, "-m", "lidarfield.worker", path, "--parent-pid", str(os.getpid()), "--idle-timeout", str(idle_timeout_s)],
+                [sys.executable, "-m", "lidarfield.worker", path, "--parent-pid", str(os.getpid()), "--idle-timeout", str(idle_timeout_s),
+                 *(["--warm-up"] if figure_jobs >= WARM_UP_MIN_FIGURE_JOBS else [])],
                 stdin=subprocess.DEVNULL,
                 stdout=log_file,
                 stderr=subprocess.STDOUT,
@@ -398,9 +408,10 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("socket", help="the Unix socket to listen on")
     parser.add_argument("--parent-pid", type=int, default=os.getppid(), help="stop when this process is gone")
     parser.add_argument("--idle-timeout", type=float, default=IDLE_TIMEOUT_S, help="stop after this many seconds without a job")
+    parser.add_argument("--warm-up", action="store_true", help="draw a few figures between jobs first (plots.warm_up)")
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(levelname)s %(name)s: %(message)s", datefmt="%H:%M:%S")
-    serve(args.socket, args.parent_pid, args.idle_timeout)
+    serve(args.socket, args.parent_pid, args.idle_timeout, args.warm_up)
 
 
 if __name__ == "__main__":

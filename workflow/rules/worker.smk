@@ -13,9 +13,12 @@ import lidarfield.worker
 USE_WORKER = (
     workflow.is_main_process and not workflow.deployment_settings.deployment_method
 )
-# Started importing now, while Snakemake plans: the run's first jobs need not wait for it.
+# Started importing now, while Snakemake plans: the run's first jobs need not wait for it. It
+# warms up for the figures when the study draws enough of them.
 if USE_WORKER:
-    lidarfield.worker.spawn(RESULTS)
+    lidarfield.worker.spawn(
+        RESULTS, figure_jobs=sum(len(STAGES[pair]) for pair in PLOT_PAIRS)
+    )
 
 
 onstart:

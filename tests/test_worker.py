@@ -142,18 +142,24 @@ def alive(pid: int) -> bool:
     return Path(f"/proc/{pid}/stat").read_text().split()[2] != "Z" if Path(f"/proc/{pid}").exists() else True
 
 
-def serving_worker(folder: Path, *options: str):
-    """A worker serving on a socket in ``folder``, with this test as its parent."""
-    path = str(folder / "w.sock")
-    log = open(folder / "worker.log", "w")
-    command = [sys.executable, "-m", "lidarfield.worker", path, "--parent-pid", str(os.getpid()), *options]
+def start_worker(path: Path, log, *options: str) -> subprocess.Popen:
+    """A worker on the socket ``path``, logging to the open file ``log``, with this test as
+    its parent; returned once it listens."""
+    command = [sys.executable, "-m", "lidarfield.worker", str(path), "--parent-pid", str(os.getpid()), *options]
     proc = subprocess.Popen(command, stdout=log, stderr=subprocess.STDOUT, env={**os.environ, **SNAKEMAKE_ENV})
-    wait_for(lambda: os.path.exists(path), timeout=30)
-    yield proc, path
-    proc.terminate()
-    proc.wait(timeout=30)
-    log.close()
-    assert not os.path.exists(path), "the worker leaves no socket behind"
+    wait_for(path.exists, timeout=30)
+    return proc
+
+
+def serving_worker(folder: Path, *options: str):
+    """A worker serving on a socket in ``folder``, stopped after the test."""
+    path = folder / "w.sock"
+    with open(folder / "worker.log", "w") as log:
+        proc = start_worker(path, log, *options)
+        yield proc, str(path)
+        proc.terminate()
+        proc.wait(timeout=30)
+    assert not path.exists(), "the worker leaves no socket behind"
 
 
 @pytest.fixture
@@ -275,9 +281,7 @@ def test_a_worker_stopped_while_importing_exits_at_once(tmp_path):
         path = tmp_path / f"w{i}.sock"
         log = tmp_path / f"w{i}.log"
         with open(log, "w") as out:
-            command = [sys.executable, "-m", "lidarfield.worker", str(path), "--parent-pid", str(os.getpid())]
-            proc = subprocess.Popen(command, stdout=out, stderr=subprocess.STDOUT, env={**os.environ, **SNAKEMAKE_ENV})
-            wait_for(path.exists, timeout=30)
+            proc = start_worker(path, out)
             time.sleep(delay)
             proc.terminate()
             assert proc.wait(timeout=30) == 0, log.read_text()
@@ -330,18 +334,18 @@ def test_figures_drawn_after_the_warm_up_are_those_of_a_plain_process(tmp_path, 
     figures forked from the warmed-up worker are byte for byte those of a plain process."""
     from lidarfield.plots.synthetic import write_synthetic_pair
 
+    _, sock = warming_worker
     wait_for(lambda: "figure warm-up done" in (tmp_path / "worker.log").read_text(), timeout=120)
-    worker = warming_worker
     stages = write_synthetic_pair(tmp_path / "pair", "pair", levels=2, n=6000)
     figures = {}
-    for mode in ("off", worker[1]):
+    for mode in ("off", sock):
         out = tmp_path / ("plain" if mode == "off" else "forked")
         argv = ["plot-stage", "--stage-dir", str(stages[1]), f"--previous={stages[0]}", "--plots", json.dumps({"top_k": 5}),
                 "--out", str(out)]  # fmt: skip
         assert start_job(argv, tmp_path, mode, tmp_path / f"{out.name}.log").wait(timeout=120) == 0
         figures[mode] = {p.name: p.read_bytes() for p in sorted(out.glob("*.png"))}
     assert len(figures["off"]) == 6
-    assert figures["off"] == figures[worker[1]]
+    assert figures["off"] == figures[sock]
 
 
 def test_the_workflow_warms_the_worker_up_only_for_studies_with_many_figures(tmp_path, monkeypatch):

@@ -244,3 +244,15 @@ def test_fixed_layout_keeps_axes_legends_and_titles_apart(stages, tmp_path, monk
         assert_fixed_layout(fig)
     monkeypatch.undo()
     plt.close("all")
+
+
+def test_top_voxels_whose_edges_all_lie_outside_the_view_are_still_drawn(stages, tmp_path):
+    """Found on a drive: every edge of the top voxels clipped away left mplot3d an empty
+    collection, and the stage's figure job failed."""
+    from lidarfield.plots.common import load_stage, plot_settings
+    from lidarfield.plots.top_voxels import plot_top_voxels
+
+    stage = load_stage(stages[1])
+    far_away = np.array([[1000.0, 1001.0], [1000.0, 1001.0], [1000.0, 1001.0]])
+    (written,) = plot_top_voxels(stage, far_away, tmp_path, plot_settings({**FAST, "formats": ["png"], "magnification": 2.0}))
+    assert_real_image(written, EXPECTED_SIZE_IN["top_voxels"], FAST["dpi"])

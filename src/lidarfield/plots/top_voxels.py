@@ -120,7 +120,8 @@ def plot_top_voxels(stage: Stage, limits: np.ndarray, out_dir: Path, settings: P
     ax_top.add_collection(LineCollection([e[:, :2] for edges in frames for e in edges], colors=edge_colours, linewidths=1.2))
     clipped = [clip_to_box(e, limits) for edges in frames for e in edges]
     kept = [(c, col) for c, col in zip(clipped, edge_colours) if len(c) >= 2]
-    ax_3d.add_collection3d(Line3DCollection([c for c, _ in kept], colors=[col for _, col in kept], linewidths=1.0))
+    if kept:  # every edge may lie outside the view; mplot3d cannot add an empty collection
+        ax_3d.add_collection3d(Line3DCollection([c for c, _ in kept], colors=[col for _, col in kept], linewidths=1.0))
     for rank, (i, colour) in enumerate(zip(top, colours), start=1):
         tail, tip = f.tails[i], f.tails[i] + settings.magnification * f.vectors[i]
         ax_top.annotate("", xy=tip[:2], xytext=tail[:2], arrowprops=dict(arrowstyle="-|>", color="k", lw=1.2))

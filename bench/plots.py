@@ -14,7 +14,7 @@ from lidarfield.field import discrepancy_field
 from lidarfield.plots import plot_stage
 from lidarfield.plots.common import load_stage
 from lidarfield.plots.synthetic import SETTINGS, write_synthetic_pair
-from lidarfield.report.page import compact_png
+from lidarfield.plots.png import compact_png
 
 from timing import best_time, machine  # bench/timing.py
 

@@ -71,7 +71,28 @@ def test_every_stage_figure_is_a_real_image_of_its_size(plotted):
 def test_only_the_selected_figures_are_drawn(stages, tmp_path):
     written = plot_stage(stages[2], stages[1], tmp_path, {**FAST, "figures": ["field_top", "before_after"], "interactive": False})
     assert sorted(p.name for p in written) == ["before_after.png", "field_top.png"]
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["before_after.png", "field_top.png"]
+    assert sorted(p.name for p in tmp_path.iterdir() if p.is_file()) == ["before_after.png", "field_top.png"]
+    assert sorted(p.name for p in (tmp_path / "page").iterdir()) == ["before_after.png", "field_top.png"]
+
+
+def test_page_copy_is_the_figure_file_compacted(stages, tmp_path):
+    """The figure job's page copy, from the pixels it drew, is what a page would make of the
+    PNG file; a page uses it unless the file is newer."""
+    import os
+
+    from lidarfield.plots.png import compact_file, compact_png, page_copy_path
+
+    (png,) = plot_stage(stages[1], stages[0], tmp_path, {**FAST, "figures": ["field_top"], "interactive": False})
+    copy = page_copy_path(png)
+    assert copy.read_bytes() == compact_png(png.read_bytes())
+    assert compact_file(png) == copy.read_bytes()
+    copy.write_bytes(b"the copy")  # a page reads the copy, it does not compact the file again
+    assert compact_file(png) == b"the copy"
+    newer = copy.stat().st_mtime_ns + 1_000_000_000
+    os.utime(png, ns=(newer, newer))  # the file drawn again by something that left the copy
+    assert compact_file(png) == compact_png(png.read_bytes())
+    copy.unlink()
+    assert compact_file(png) == compact_png(png.read_bytes())
 
 
 def test_svg_is_written_only_when_small(plotted):

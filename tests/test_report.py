@@ -348,7 +348,7 @@ def test_an_embedded_copy_is_the_figure_scaled_to_the_page_in_256_colours(study)
     import numpy as np
     from PIL import Image
 
-    from lidarfield.report.page import EMBED_MAX_WIDTH, compact_png
+    from lidarfield.plots.png import EMBED_MAX_WIDTH, compact_png
 
     _, pairs = study
     wide = np.asarray(Image.open(pairs["pair-00"][1] / "figures" / "before_after.png").convert("RGB"))

@@ -12,7 +12,7 @@ rule plot_stage:
     output:
         report(
             directory(f"{RESULTS}/{{pair}}/stages/{{stage}}/figures"),
-            patterns=["{figure}.png"],
+            patterns=["{figure,[^/]+}.png"],  # not the page copies in page/
             category="Stage figures",
             subcategory="{pair}",
             labels={"pair": "{pair}", "stage": "{stage}", "figure": "{figure}"},
@@ -63,7 +63,7 @@ rule plot_pair:
     output:
         report(
             directory(f"{RESULTS}/{{pair}}/figures"),
-            patterns=["{figure}.png"],
+            patterns=["{figure,[^/]+}.png"],  # not the page copies in page/
             category="Pairs",
             labels={"pair": "{pair}", "figure": "{figure}"},
         ),

@@ -49,7 +49,7 @@ rule study_figures:
     output:
         report(
             directory(f"{RESULTS}/study/figures"),
-            patterns=["{figure}.png"],
+            patterns=["{figure,[^/]+}.png"],  # not the page copies in page/
             category="Study",
             labels={"figure": "{figure}"},
         ),

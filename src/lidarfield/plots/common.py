@@ -27,7 +27,9 @@ from ..io.atomic import atomic_path  # noqa: E402
 from ..io.parquet_table import read_table  # noqa: E402
 from ..pair import RegisteredPair, read_pair  # noqa: E402
 from ..stages import level_of  # noqa: E402
-from .png import figure_png  # noqa: E402
+from PIL import Image  # noqa: E402
+
+from .png import compact_image, encode_png, figure_pixels, page_copy_path  # noqa: E402
 
 FIELD_COLUMNS = ("voxel", "n1", "n2", "x1", "y1", "z1", "x2", "y2", "z2", "u", "v", "w", "magnitude", "valid")
 CLOUD_COLOURS = {1: "#d62728", 2: "#1f77b4"}  # red = cloud 1, blue = cloud 2 (removed figures)
@@ -343,12 +345,16 @@ def set_top_axes(ax, limits: np.ndarray) -> None:
 
 
 def save(fig, out_dir: Path, stem: str, settings: PlotSettings) -> list[Path]:
-    """Write ``stem.png`` (and ``stem.svg`` when asked and small enough) atomically; close."""
+    """Write ``stem.png`` (and ``stem.svg`` when asked and small enough) atomically; close.
+    Beside the PNG, its page copy (``plots.png.compact_file``) from the same pixels."""
     written = []
     try:
         for fmt in settings.formats:
             if fmt == "png":
-                data = figure_png(fig, settings.dpi)
+                pixels = figure_pixels(fig, settings.dpi)
+                data = encode_png(pixels, settings.dpi)
+                with atomic_path(page_copy_path(out_dir / f"{stem}.png")) as tmp:
+                    tmp.write_bytes(compact_image(Image.fromarray(pixels)))
             else:
                 buf = io.BytesIO()
                 fig.savefig(buf, format=fmt, dpi=settings.dpi)
@@ -367,6 +373,6 @@ def save(fig, out_dir: Path, stem: str, settings: PlotSettings) -> list[Path]:
 def png_bytes(fig, dpi: int) -> bytes:
     """The figure as PNG bytes (for embedding in a report); closes the figure."""
     try:
-        return figure_png(fig, dpi)
+        return encode_png(figure_pixels(fig, dpi), dpi)
     finally:
         plt.close(fig)

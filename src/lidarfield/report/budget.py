@@ -15,7 +15,8 @@ from functools import partial
 from pathlib import Path
 
 from ..io.atomic import write_text
-from .page import compact_png, embedded_image, esc, linked_image, missing_image, page, relative_href
+from ..plots.png import compact_file
+from .page import embedded_image, esc, linked_image, missing_image, page, relative_href
 
 log = logging.getLogger(__name__)
 
@@ -30,7 +31,7 @@ class Figure:
     caption: str
     width_px: int
     href: str | None  # its PNG file relative to the page; None when it was drawn for the page only
-    png: Callable[[], bytes]  # read (or drawn) only when its tier is tried
+    compact: Callable[[], bytes]  # its page copy, read (or drawn) only when its tier is tried
 
     def embedded(self, compact: bytes) -> str:
         return embedded_image(compact, self.caption, self.width_px)
@@ -45,7 +46,7 @@ def file_figure(tier: str, path: Path, caption: str, width_px: int, out_dir: Pat
     """A figure drawn to a PNG file, or the note that it was not drawn."""
     if not path.is_file():
         return missing_image(caption, path)
-    return Figure(tier, caption, width_px, relative_href(path, out_dir), path.read_bytes)
+    return Figure(tier, caption, width_px, relative_href(path, out_dir), partial(compact_file, path))
 
 
 class Note:
@@ -84,10 +85,10 @@ def render(parts: list, embedded: dict[Figure, bytes], note: str) -> list[str]:
 
 def _compact_tier(tier: list[Figure], room_bytes: int) -> tuple[dict[Figure, bytes], int] | None:
     """The tier's compacted PNGs and how much they grow the page; None as soon as they outgrow
-    ``room_bytes``, without compacting the rest (about 40 ms a figure)."""
+    ``room_bytes``, without reading (or drawing) the rest."""
     compacted, growth = {}, 0
     for figure in tier:
-        compacted[figure] = compact_png(figure.png())
+        compacted[figure] = figure.compact()
         growth += utf8_len(figure.embedded(compacted[figure])) - utf8_len(figure.linked())
         if growth > room_bytes:
             return None

@@ -22,7 +22,7 @@ from ..io.atomic import write_text
 from ..plots.study import StudyFigure, study_figures
 from ..analysis.study import StudyTables
 from .budget import MB, budget_mb, utf8_len
-from .page import esc, image, link, page, table
+from .page import esc, image, image_file, link, page, table
 from .pair_page import DPI, findings_parts, registration_problem
 from .rematch import study_rematch_parts
 from .suggestions import study_suggestions
@@ -63,8 +63,9 @@ def hypotheses_table(hypotheses) -> str:
 def figure_html(f: StudyFigure, figures_dir: Path | None) -> str:
     """A study figure embedded: its PNG file when the workflow drew it, else drawn now."""
     path = figures_dir / f"{f.stem}.png" if figures_dir is not None else None
-    png = path.read_bytes() if path is not None and path.is_file() else f.png()
-    return image(png, f.caption)
+    if path is not None and path.is_file():
+        return image_file(path, f.caption)
+    return image(f.png(), f.caption)
 
 
 def study_level_parts(tables: StudyTables, figures_dir: Path | None) -> list[str]:

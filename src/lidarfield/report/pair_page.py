@@ -18,6 +18,7 @@ from ..analysis.findings import findings_items, stage_findings
 from ..plots import stage_figures
 from ..plots.common import PlotSettings, plot_settings
 from ..plots.pair_stats import pair_figure_png
+from ..plots.png import compact_png
 from ..stages import level_of
 from .budget import Figure, Note, budget_mb, file_figure, write_within_budget
 from .page import esc, relative_href, table
@@ -85,6 +86,11 @@ def findings_parts(rows: list[dict]) -> list[str]:
     return ["<h2>Findings</h2>", '<ul class="findings">' + "".join(f"<li>{esc(i)}</li>" for i in items) + "</ul>"]
 
 
+def drawn_pair_figure(stem: str, rows: list[dict]) -> bytes:
+    """The page copy of a pair figure drawn for the page (the pair has no figure files)."""
+    return compact_png(pair_figure_png(stem, rows, DPI))
+
+
 def pair_figures(name: str, pair_dir: Path | None, rows: list[dict], out_dir: Path) -> list[Figure | str]:
     """The pair's stage-by-stage figures: its files, or drawn from its rows when there are none."""
     figures = []
@@ -93,7 +99,7 @@ def pair_figures(name: str, pair_dir: Path | None, rows: list[dict], out_dir: Pa
         if path is not None and path.is_file():
             figures.append(file_figure(PAIR_TIER, path, f"{name}: {caption}", 640, out_dir))
         elif rows:
-            figures.append(Figure(PAIR_TIER, f"{name}: {caption}", 640, None, partial(pair_figure_png, stem, rows, DPI)))
+            figures.append(Figure(PAIR_TIER, f"{name}: {caption}", 640, None, partial(drawn_pair_figure, stem, rows)))
     stem, caption = REMATCH_FIGURE
     if pair_dir is not None and (pair_dir / "figures" / f"{stem}.png").is_file():
         figures.append(file_figure(PAIR_TIER, pair_dir / "figures" / f"{stem}.png", f"{name}: {caption}", 640, out_dir))

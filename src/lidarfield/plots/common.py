@@ -353,8 +353,6 @@ def save(fig, out_dir: Path, stem: str, settings: PlotSettings) -> list[Path]:
             if fmt == "png":
                 pixels = figure_pixels(fig, settings.dpi)
                 data = encode_png(pixels, settings.dpi)
-                with atomic_path(page_copy_path(out_dir / f"{stem}.png")) as tmp:
-                    tmp.write_bytes(compact_image(Image.fromarray(pixels)))
             else:
                 buf = io.BytesIO()
                 fig.savefig(buf, format=fmt, dpi=settings.dpi)
@@ -365,6 +363,9 @@ def save(fig, out_dir: Path, stem: str, settings: PlotSettings) -> list[Path]:
             with atomic_path(path) as tmp:
                 tmp.write_bytes(data)
             written.append(path)
+            if fmt == "png":  # after the file: a copy older than its file is not used
+                with atomic_path(page_copy_path(path)) as tmp:
+                    tmp.write_bytes(compact_image(Image.fromarray(pixels)))
     finally:
         plt.close(fig)
     return written

@@ -106,19 +106,26 @@ def test_the_suggest_jobs_carry_the_pairs_distances_to_every_stage(tmp_path, exp
         assert run_in_process(argv) == 0
         return read_table(out)[0]
 
+    changes = [folder / "neighbour_changes.parquet" for folder in dirs]
     for level in range(3):
         removed = [str(folder / "removed.parquet") for folder in dirs[1 : level + 1]]
-        carried = suggest(level, "--neighbours", str(tmp_path / "neighbours.parquet"), "--removed", *removed)
+        carried = suggest(level, "--neighbours", str(tmp_path / "neighbours.parquet"), "--removed", *removed,
+                          "--changes", *map(str, changes[1:level]), "--changes-out", str(changes[level]))  # fmt: skip
         searched = suggest(level)
         assert list(carried["hypothesis"]) and set(carried["params"]) == set(searched["params"])
         for name in searched:
             np.testing.assert_array_equal(carried[name], searched[name])
+    # Stage 0 changes nothing; the crop and the shadow each change some rows, far fewer than all.
+    assert len(read_table(changes[0])[0]["row"]) == 0
+    for level in (1, 2):
+        rows = read_table(changes[level])[0]["row"]
+        assert 0 < len(rows) < 0.2 * (len(stages[level].pair.xyz1) + len(stages[level].pair.xyz2))
 
     # The carried distances themselves, at the last stage: a new search's.
-    from lidarfield.analysis.neighbour_file import carry_from_registered
+    from lidarfield.analysis.neighbour_file import carry_to_stage
 
     last, _ = read_pair(dirs[2] / "points.parquet")
-    carry_from_registered(last, tmp_path / "neighbours.parquet", [dirs[1] / "removed.parquet", dirs[2] / "removed.parquet"])
+    carry_to_stage(last, tmp_path / "neighbours.parquet", [dirs[1] / "removed.parquet", dirs[2] / "removed.parquet"], [changes[1]])
     assert set(last.neighbours) == {(1, 20), (2, 20), (1, 5), (2, 5)}
     for (cloud, k), carried in last.neighbours.items():
         assert_same(carried, neighbour_distances(last.xyz1 if cloud == 1 else last.xyz2, k))
@@ -127,7 +134,28 @@ def test_the_suggest_jobs_carry_the_pairs_distances_to_every_stage(tmp_path, exp
     from lidarfield.errors import InputError
 
     with pytest.raises(InputError, match="neighbours.parquet"):
-        carry_from_registered(last, tmp_path / "neighbours.parquet", [dirs[2] / "removed.parquet"])
+        carry_to_stage(last, tmp_path / "neighbours.parquet", [dirs[2] / "removed.parquet"], [])
+
+
+def test_changes_stored_whole_where_a_stage_searched_anew_carry_on_exactly(tmp_path):
+    """A stage that searched anew (or whose cloud fell below k) stores its distances whole; the
+    next stage starts from them and still equals a new search."""
+    from lidarfield.analysis.neighbour_file import apply_change, kept, read_changes, write_changes
+
+    rng = np.random.default_rng(5)
+    xyz = _synthetic_cloud(rng)
+    registered = neighbour_distances(xyz, 20, workers=1)
+    keep1 = rng.random(len(xyz)) > 0.1
+    stage1 = neighbour_distances(xyz[keep1], 20, workers=1)
+    write_changes(tmp_path / "whole.parquet", {(1, 20): (None, stage1)})
+    write_changes(tmp_path / "partial.parquet", {(1, 20): (kept(registered, keep1), after_removal(registered, xyz, keep1, workers=1))})
+    for name in ("whole", "partial"):
+        change = read_changes(tmp_path / f"{name}.parquet")[(1, 20)]
+        assert_same(apply_change(kept(registered, keep1), change, name), stage1)
+    tiny = np.zeros(len(xyz), dtype=bool)
+    tiny[:7] = True  # fewer points than k: k itself changes, so the rows are stored whole
+    write_changes(tmp_path / "tiny.parquet", {(1, 20): (kept(registered, tiny), after_removal(registered, xyz, tiny, workers=1))})
+    assert_same(apply_change(kept(registered, tiny), read_changes(tmp_path / "tiny.parquet")[(1, 20)], "tiny"), neighbour_distances(xyz[tiny], 20, workers=1))
 
 
 def test_apply_stack_carries_what_the_previous_stage_searched(expd):

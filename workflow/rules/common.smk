@@ -153,6 +153,18 @@ def removed_up_to_stage(wildcards):
 
 
 @planned
+def changes_before_stage(wildcards):
+    """What stages 1..k-1 changed in the pair's neighbour distances (their suggest jobs')."""
+    if not NEIGHBOUR_COUNTS:
+        return []
+    stages = STAGES[wildcards.pair][1 : stage_level(wildcards)]
+    return [
+        f"{stage_dir(wildcards.pair, stage)}/neighbour_changes.parquet"
+        for stage in stages
+    ]
+
+
+@planned
 def candidate_plugin_sources(wildcards):
     """A plugin candidate's file is an input of the suggestions: editing it reruns them."""
     return [

@@ -1,11 +1,13 @@
 # What to try next, per stage: every candidate hypothesis applied on its own to the stage's
 # survivors, and the field it would leave. A rule of its own so that it never delays the
-# stages: the next stage's mitigate job does not wait for it.
+# stages: the next stage's mitigate job does not wait for it. It also writes what its stage
+# changed in the carried neighbour distances (empty without an outliers candidate), which
+# the next stage's suggest job starts from.
 
 
 # The outliers candidate's nearest-neighbour search, once per pair on the registered points:
-# each stage's suggest job carries the distances past what its stages removed (exact) instead
-# of searching again.
+# each stage's suggest job carries the distances past what its own stage removed (exact),
+# from the changes the stages before it recorded, instead of searching again.
 rule neighbours:
     input:
         f"{RESULTS}/{{pair}}/registered.parquet",
@@ -31,9 +33,11 @@ rule suggest:
         points=f"{RESULTS}/{{pair}}/stages/{{stage}}/points.parquet",
         neighbours=pair_neighbours,
         removed=removed_up_to_stage,
+        changes=changes_before_stage,
         plugins=candidate_plugin_sources,
     output:
-        f"{RESULTS}/{{pair}}/stages/{{stage}}/suggestions.parquet",
+        suggestions=f"{RESULTS}/{{pair}}/stages/{{stage}}/suggestions.parquet",
+        changes=f"{RESULTS}/{{pair}}/stages/{{stage}}/neighbour_changes.parquet",
     log:
         f"{RESULTS}/logs/suggest/{{pair}}/{{stage}}.log",
     benchmark:
@@ -50,4 +54,4 @@ rule suggest:
     shell:
         "lidarfield job suggest --points {input.points:q} --candidates {params.candidates:q} {params.defaults}"
         " --grid {params.grid:q} --neighbours={input.neighbours:q} --removed {input.removed:q}"
-        " --out {output:q} > {log:q} 2>&1"
+        " --changes {input.changes:q} --out {output.suggestions:q} --changes-out {output.changes:q} > {log:q} 2>&1"

@@ -35,7 +35,7 @@ from ..hypotheses import BUILTINS, apply_step, validate_step
 from ..io.parquet_table import write_table
 from ..pair import RegisteredPair, read_pair
 from ..stages import canonical_json, step_name
-from .neighbour_file import carry_from_registered
+from .neighbour_file import carry_to_stage, write_changes
 from .tags import voxel_energy
 
 log = logging.getLogger(__name__)
@@ -156,17 +156,22 @@ def suggest_stage(
     defaults: bool = False,
     neighbours: str | Path | None = None,
     removed_paths: list[str | Path] = (),
+    change_paths: list[str | Path] = (),
+    changes_out: str | Path | None = None,
 ) -> dict[str, np.ndarray]:
     """``suggestions.parquet`` of a stage from its ``points.parquet``; returns the table.
 
-    ``neighbours``: the pair's ``neighbours.parquet``, carried past what the stages removed
-    (``removed_paths``: the ``removed.parquet`` of stages 1..k) instead of a new search.
+    ``neighbours``: the pair's ``neighbours.parquet``, carried to this stage past what stages
+    1..k removed (``removed_paths``: their ``removed.parquet``) with the changes stages
+    1..k-1 made (``change_paths``) instead of a new search; ``changes_out``: where this stage's
+    changes go (see :mod:`.neighbour_file`; no rows without ``neighbours``).
     """
     pair, meta = read_pair(points_path)
-    if neighbours:
-        carry_from_registered(pair, neighbours, list(removed_paths))
+    carried = carry_to_stage(pair, neighbours, list(removed_paths), list(change_paths)) if neighbours else {}
     table = suggestions(pair, field_settings_from_config(grid_section), candidates, base_dir, grid_section, defaults)
     write_suggestions(out, table, meta.get("stage"), candidates, grid_section)
+    if changes_out is not None:
+        write_changes(changes_out, carried)
     return table
 
 

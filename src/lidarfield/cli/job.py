@@ -64,6 +64,8 @@ def add_parser(subparsers) -> None:
     p.add_argument("--out", required=True)
     p.add_argument("--neighbours", default="", help="the pair's neighbours.parquet (none: searched here)")
     p.add_argument("--removed", nargs="*", default=[], help="with --neighbours: the removed.parquet of stages 1..k")
+    p.add_argument("--changes", nargs="*", default=[], help="with --neighbours: the neighbour_changes.parquet of stages 1..k-1")
+    p.add_argument("--changes-out", help="this stage's neighbour_changes.parquet")
     p.set_defaults(func=_suggest)
 
     p = jobs.add_parser("neighbours")
@@ -171,7 +173,7 @@ def _suggest(args: argparse.Namespace) -> None:
 
     suggest_stage(
         args.points, args.candidates, args.grid, args.out, defaults=args.default_candidates,
-        neighbours=args.neighbours, removed_paths=args.removed,
+        neighbours=args.neighbours, removed_paths=args.removed, change_paths=args.changes, changes_out=args.changes_out,
     )  # fmt: skip
 
 

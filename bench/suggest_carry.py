@@ -1,6 +1,8 @@
 """Benchmark: a stage's suggestions with the outliers candidate's neighbour distances carried
-from the registered pair's past what the stages removed (as the workflow's suggest jobs do)
-against a new search (the baseline), stage by stage through a stack, on a real scan pair.
+from the previous stage's past what this stage removed (as the workflow's suggest jobs do, from
+the changes the stages before recorded), carried from the registered pair's past everything the
+stages removed (what they did before), and searched anew (the baseline), stage by stage
+through a stack, on a real scan pair.
 
 Run: ``python bench/suggest_carry.py`` (the HDL-32E pair of ``../shared/data``, source.ply
 in target.ply's frame by ``T_target_source.txt``).
@@ -35,27 +37,40 @@ def main() -> None:
     print(f"HDL-32E pair: {len(pair.xyz1)} + {len(pair.xyz2)} points")
     registered = {(cloud, 20): neighbour_distances(xyz, 20, workers=1) for cloud, xyz in ((1, pair.xyz1), (2, pair.xyz2))}
     survivors = {1: np.arange(len(pair.xyz1)), 2: np.arange(len(pair.xyz2))}  # rows of the registered pair
+    previous_pair, previous = pair, registered  # the stage before's points and distances
     applied = []
     for stage in apply_stack(pair, STACK, study_grid=GRID):
         applied += [stage.spec] if stage.spec else []
         candidates = candidate_steps(None, applied, ".", GRID)
         survivors = {1: survivors[1][stage.keep1], 2: survivors[2][stage.keep2]}
+        keeps = {1: stage.keep1, 2: stage.keep2}
 
-        def suggest(carry: bool) -> dict:
+        def from_registered(cloud, k, distances):
+            keep = np.zeros(len(distances), dtype=bool)
+            keep[survivors[cloud]] = True
+            return after_removal(distances, pair.xyz1 if cloud == 1 else pair.xyz2, keep, workers=1)
+
+        def from_previous(cloud, k, distances):
+            return after_removal(previous[(cloud, k)], previous_pair.xyz1 if cloud == 1 else previous_pair.xyz2, keeps[cloud], workers=1)
+
+        def suggest(carry) -> dict:
             stage.pair.neighbours.clear()
-            if carry:
+            if carry is not None:
                 for (cloud, k), distances in registered.items():
-                    keep = np.zeros(len(distances), dtype=bool)
-                    keep[survivors[cloud]] = True
-                    stage.pair.neighbours[(cloud, k)] = after_removal(distances, pair.xyz1 if cloud == 1 else pair.xyz2, keep, workers=1)
+                    stage.pair.neighbours[(cloud, k)] = carry(cloud, k, distances)
             return suggestions(stage.pair, settings, candidates, study_grid=GRID, defaults=True)
 
-        searched_s, searched = best_time(lambda: suggest(False))
-        carried_s, carried = best_time(lambda: suggest(True))
+        searched_s, searched = best_time(lambda: suggest(None))
+        registered_s, carried = best_time(lambda: suggest(from_registered))
+        assert all(np.array_equal(carried[c], searched[c]) for c in carried), "carried suggestions differ"
+        previous_s, carried = best_time(lambda: suggest(from_previous))
         assert all(np.array_equal(carried[c], searched[c]) for c in carried), "carried suggestions differ"
         print(f"stage {stage.level} ({stage.name}, {len(pair.xyz1) - len(survivors[1])} + {len(pair.xyz2) - len(survivors[2])} "
-              f"removed so far): suggestions {searched_s * 1000:.0f} ms searching anew, {carried_s * 1000:.0f} ms carried "
-              f"({carried_s / searched_s:.2f}x)")  # fmt: skip
+              f"removed so far): suggestions {searched_s * 1000:.0f} ms searching anew, {registered_s * 1000:.0f} ms carried "
+              f"from the registered pair ({registered_s / searched_s:.2f}x), {previous_s * 1000:.0f} ms from the stage before "
+              f"({previous_s / searched_s:.2f}x)")  # fmt: skip
+        previous_pair, previous = stage.pair, {key: from_previous(*key, None) for key in registered}
+
 
 if __name__ == "__main__":
     main()

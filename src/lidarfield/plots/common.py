@@ -20,6 +20,7 @@ import numpy as np  # noqa: E402
 from matplotlib.cm import ScalarMappable  # noqa: E402
 from matplotlib.colors import Normalize  # noqa: E402
 from matplotlib.ticker import MaxNLocator  # noqa: E402
+from PIL import Image  # noqa: E402
 
 from ..config import figure_settings  # noqa: E402
 from ..errors import ConfigError, InputError  # noqa: E402
@@ -27,9 +28,7 @@ from ..io.atomic import atomic_path  # noqa: E402
 from ..io.parquet_table import read_table  # noqa: E402
 from ..pair import RegisteredPair, read_pair  # noqa: E402
 from ..stages import level_of  # noqa: E402
-from PIL import Image  # noqa: E402
-
-from .png import compact_image, encode_png, figure_pixels, page_copy_path  # noqa: E402
+from .png import compact_image, encode_png, figure_pixels, figure_png, page_copy_path  # noqa: E402
 
 FIELD_COLUMNS = ("voxel", "n1", "n2", "x1", "y1", "z1", "x2", "y2", "z2", "u", "v", "w", "magnitude", "valid")
 CLOUD_COLOURS = {1: "#d62728", 2: "#1f77b4"}  # red = cloud 1, blue = cloud 2 (removed figures)
@@ -374,6 +373,6 @@ def save(fig, out_dir: Path, stem: str, settings: PlotSettings) -> list[Path]:
 def png_bytes(fig, dpi: int) -> bytes:
     """The figure as PNG bytes (for embedding in a report); closes the figure."""
     try:
-        return encode_png(figure_pixels(fig, dpi), dpi)
+        return figure_png(fig, dpi)
     finally:
         plt.close(fig)

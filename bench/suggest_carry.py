@@ -69,7 +69,8 @@ def main() -> None:
               f"removed so far): suggestions {searched_s * 1000:.0f} ms searching anew, {registered_s * 1000:.0f} ms carried "
               f"from the registered pair ({registered_s / searched_s:.2f}x), {previous_s * 1000:.0f} ms from the stage before "
               f"({previous_s / searched_s:.2f}x)")  # fmt: skip
-        previous_pair, previous = stage.pair, {key: from_previous(*key, None) for key in registered}
+        # the last timed run carried from the stage before: its distances start the next stage
+        previous_pair, previous = stage.pair, {key: stage.pair.neighbours[key] for key in registered}
 
 
 if __name__ == "__main__":

@@ -13,7 +13,7 @@ import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 from PIL import Image  # noqa: E402
 
-from lidarfield.plots.png import encode_png, figure_png  # noqa: E402
+from lidarfield.plots.png import encode_png, figure_png, pixel_image  # noqa: E402
 
 
 def busy_figure(transparent: bool):
@@ -57,8 +57,8 @@ def test_an_opaque_image_round_trips_as_rgb_and_a_translucent_one_keeps_its_alph
     rng = np.random.default_rng(1)
     rgba = rng.integers(0, 256, size=(7, 5, 4), dtype=np.uint8)
     rgba[..., 3] = 255
-    with Image.open(io.BytesIO(encode_png(rgba, 120))) as im:
+    with Image.open(io.BytesIO(encode_png(pixel_image(rgba), 120))) as im:
         assert im.mode == "RGB" and np.array_equal(np.asarray(im), rgba[..., :3])
     rgba[3, 2, 3] = 17
-    with Image.open(io.BytesIO(encode_png(rgba, 120))) as im:
+    with Image.open(io.BytesIO(encode_png(pixel_image(rgba), 120))) as im:
         assert im.mode == "RGBA" and np.array_equal(np.asarray(im), rgba)

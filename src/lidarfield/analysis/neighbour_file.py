@@ -71,9 +71,6 @@ def neighbours_job(points_path: str | Path, ks: list[int], out: str | Path) -> N
     write_neighbours(out, pair)
 
 
-CHANGES_FILE = "neighbour_changes.parquet"
-
-
 def carry_to_stage(
     pair: RegisteredPair, neighbours_path: str | Path, removed_paths: list[str | Path], change_paths: list[str | Path]
 ) -> dict[tuple[int, int], tuple[NeighbourDistances, NeighbourDistances]]:

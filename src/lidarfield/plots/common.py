@@ -20,7 +20,6 @@ import numpy as np  # noqa: E402
 from matplotlib.cm import ScalarMappable  # noqa: E402
 from matplotlib.colors import Normalize  # noqa: E402
 from matplotlib.ticker import MaxNLocator  # noqa: E402
-from PIL import Image  # noqa: E402
 
 from ..config import figure_settings  # noqa: E402
 from ..errors import ConfigError, InputError  # noqa: E402
@@ -28,7 +27,7 @@ from ..io.atomic import atomic_path  # noqa: E402
 from ..io.parquet_table import read_table  # noqa: E402
 from ..pair import RegisteredPair, read_pair  # noqa: E402
 from ..stages import level_of  # noqa: E402
-from .png import compact_image, encode_png, figure_pixels, figure_png, page_copy_path  # noqa: E402
+from .png import compact_image, encode_png, figure_image, figure_png, page_copy_path  # noqa: E402
 
 FIELD_COLUMNS = ("voxel", "n1", "n2", "x1", "y1", "z1", "x2", "y2", "z2", "u", "v", "w", "magnitude", "valid")
 CLOUD_COLOURS = {1: "#d62728", 2: "#1f77b4"}  # red = cloud 1, blue = cloud 2 (removed figures)
@@ -345,13 +344,13 @@ def set_top_axes(ax, limits: np.ndarray) -> None:
 
 def save(fig, out_dir: Path, stem: str, settings: PlotSettings) -> list[Path]:
     """Write ``stem.png`` (and ``stem.svg`` when asked and small enough) atomically; close.
-    Beside the PNG, its page copy (``plots.png.compact_file``) from the same pixels."""
+    Beside the PNG, its page copy (``plots.png.compact_file``) from the same image."""
     written = []
     try:
         for fmt in settings.formats:
             if fmt == "png":
-                pixels = figure_pixels(fig, settings.dpi)
-                data = encode_png(pixels, settings.dpi)
+                image = figure_image(fig, settings.dpi)
+                data = encode_png(image, settings.dpi)
             else:
                 buf = io.BytesIO()
                 fig.savefig(buf, format=fmt, dpi=settings.dpi)
@@ -364,7 +363,7 @@ def save(fig, out_dir: Path, stem: str, settings: PlotSettings) -> list[Path]:
             written.append(path)
             if fmt == "png":  # after the file: a copy older than its file is not used
                 with atomic_path(page_copy_path(path)) as tmp:
-                    tmp.write_bytes(compact_image(Image.fromarray(pixels)))
+                    tmp.write_bytes(compact_image(image))
     finally:
         plt.close(fig)
     return written

@@ -37,11 +37,16 @@ def chunk(kind: bytes, data: bytes) -> bytes:
     return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data))
 
 
-def encode_png(rgba: np.ndarray, dpi: float) -> bytes:
-    """(height, width, 4) uint8 pixels as a PNG: RGB when every pixel is opaque, else RGBA."""
+def pixel_image(rgba: np.ndarray) -> Image.Image:
+    """(height, width, 4) uint8 pixels as an image: RGB when every pixel is opaque, else RGBA."""
     image = Image.fromarray(rgba)
     if rgba[..., 3].min() == 255:
         image = image.convert("RGB")  # Pillow drops the alpha channel faster than a strided numpy copy
+    return image
+
+
+def encode_png(image: Image.Image, dpi: float) -> bytes:
+    """An RGB or RGBA image (``pixel_image``) as a PNG."""
     pixels = np.asarray(image)
     height, width, channels = pixels.shape
     rows = np.empty((height, 1 + width * channels), np.uint8)
@@ -58,16 +63,16 @@ def encode_png(rgba: np.ndarray, dpi: float) -> bytes:
     ])
 
 
-def figure_pixels(fig, dpi: float) -> np.ndarray:
-    """The figure drawn at ``dpi``: (height, width, 4) uint8 pixels."""
+def figure_image(fig, dpi: float) -> Image.Image:
+    """The figure drawn at ``dpi`` (``pixel_image``)."""
     fig.set_dpi(dpi)
     fig.canvas.draw()
-    return np.asarray(fig.canvas.buffer_rgba())
+    return pixel_image(np.asarray(fig.canvas.buffer_rgba()))
 
 
 def figure_png(fig, dpi: float) -> bytes:
     """The figure drawn at ``dpi``: the pixels ``savefig(format="png")`` would write."""
-    return encode_png(figure_pixels(fig, dpi), dpi)
+    return encode_png(figure_image(fig, dpi), dpi)
 
 
 def compact_image(image: Image.Image, max_width: int = EMBED_MAX_WIDTH) -> bytes:

@@ -20,8 +20,8 @@ from pathlib import Path
 import numpy as np
 
 from lidarfield.io import read_scan
-from lidarfield.io.bag_writer import CloudMessage, write_bag
-from lidarfield.io.rosbag import _open_reader, open_bag
+from lidarfield.io.rosbag.writer import CloudMessage, write_bag
+from lidarfield.io.rosbag.bag import _open_reader, open_bag
 
 from timing import best_time, machine  # bench/timing.py
 

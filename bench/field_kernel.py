@@ -12,9 +12,9 @@ import argparse
 
 import numpy as np
 
-from lidarfield.field import discrepancy_field, field_from_voxel_ids
-from lidarfield.field_reference import discrepancy_field_reference, field_from_voxel_ids_reference
-from lidarfield.grid import CartesianGrid, FieldSettings, SphericalGrid
+from lidarfield.field.kernel import discrepancy_field, field_from_voxel_ids
+from lidarfield.field.reference import discrepancy_field_reference, field_from_voxel_ids_reference
+from lidarfield.field.grid import CartesianGrid, FieldSettings, SphericalGrid
 
 from timing import best_time, machine  # bench/timing.py
 

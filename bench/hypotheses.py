@@ -22,7 +22,7 @@ from lidarfield.hypotheses.geometry import in_sensor_frame, ranges
 from lidarfield.hypotheses.shadow import first_cluster_keep, first_cluster_keep_loop, shadow
 from lidarfield.pair import RegisteredPair
 from lidarfield.poses import pose_from_xyzrpy
-from lidarfield.sensors import PRESETS
+from lidarfield.sensors.models import PRESETS
 
 from timing import best_time, machine  # bench/timing.py
 

@@ -26,7 +26,7 @@ from pathlib import Path
 from timing import machine  # bench/timing.py
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "src"))
-from lidarfield import worker  # noqa: E402
+from lidarfield.runner import server as worker  # noqa: E402
 
 HEAVY = ("numpy", "pyarrow", "pandas", "matplotlib", "open3d", "scipy", "trimesh", "plotly", "yaml", "jsonschema", "lidarfield")
 

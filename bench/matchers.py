@@ -31,7 +31,8 @@ SMALL_GICP_TYPES = {"icp": "ICP", "icp_point_to_plane": "PLANE_ICP", "gicp": "GI
 def pairs():
     """(name, xyz1, xyz2 in its own frame, reference T_1_2) of each shared real pair."""
     from lidarfield.io import read_scan
-    from lidarfield.poses import read_kitti_poses, read_pose, relative_pose
+    from lidarfield.poses import relative_pose
+    from lidarfield.io.pose_files import read_kitti_poses, read_pose
 
     hdl = DATA / "hdl32-pair"
     yield "hdl32-pair", read_scan(hdl / "target.ply").xyz, read_scan(hdl / "source.ply").xyz, read_pose(hdl / "T_target_source.txt")

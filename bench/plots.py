@@ -10,10 +10,11 @@ import sys
 import tempfile
 from pathlib import Path
 
-from lidarfield.field import discrepancy_field
+from lidarfield.field.kernel import discrepancy_field
 from lidarfield.plots import plot_stage
-from lidarfield.plots.common import load_stage
-from lidarfield.plots.synthetic import SETTINGS, write_synthetic_pair
+from lidarfield.plots.stage_data import load_stage
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))  # the tests' synthetic study
+from synthetic_study import SETTINGS, write_synthetic_pair  # noqa: E402
 from lidarfield.plots.png import compact_png
 
 from timing import best_time, machine  # bench/timing.py

@@ -15,9 +15,15 @@ import argparse
 
 import numpy as np
 
-from lidarfield.scene import load_scene
-from lidarfield.sensors import PRESETS
-from lidarfield.simulate import azimuth_steps, beam_directions, first_hits, first_hits_reference, simulate_scan
+from lidarfield.simulation.scene import load_scene
+from lidarfield.sensors.models import PRESETS
+from lidarfield.simulation.raycast import (
+    azimuth_steps,
+    beam_directions,
+    first_hits,
+    first_hits_reference,
+    simulate_scan,
+)
 from lidarfield.poses import pose_from_xyzrpy as pose_from_values
 
 from timing import best_time, machine  # bench/timing.py

@@ -20,7 +20,7 @@ DATA = Path(os.environ.get("LIDARFIELD_DATA", ROOT.parent / "shared" / "data")) 
 
 def main() -> int:
     from lidarfield.io import read_scan
-    from lidarfield.poses import read_kitti_poses
+    from lidarfield.io.pose_files import read_kitti_poses
     from lidarfield.registration import register_pair
 
     parser = argparse.ArgumentParser(description=__doc__)

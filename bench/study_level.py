@@ -16,9 +16,10 @@ from pathlib import Path
 import pandas as pd
 
 from lidarfield.plots.study import plot_study
-from lidarfield.plots.synthetic import write_field_study
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))  # the tests' synthetic study
+from synthetic_study import write_field_study  # noqa: E402
 from lidarfield.report import write_overview
-from lidarfield.analysis.study import read_study_tables, write_study_tables, write_study_voxels
+from lidarfield.study.tables import read_study_tables, write_study_tables, write_study_voxels
 
 from timing import machine  # bench/timing.py
 

@@ -20,12 +20,12 @@ import time
 
 import numpy as np
 
-from lidarfield.field_reference import discrepancy_field_reference
-from lidarfield.grid import field_settings_from_config
+from lidarfield.field.reference import discrepancy_field_reference
+from lidarfield.field.grid import field_settings_from_config
 from lidarfield.hypotheses import apply_step
 from lidarfield.pair import RegisteredPair
 from lidarfield.poses import pose_from_xyzrpy
-from lidarfield.sensors import PRESETS
+from lidarfield.sensors.models import PRESETS
 from lidarfield.analysis.suggest import candidate_steps, compare_fields, suggestions
 
 from hypotheses import street_scan  # bench/hypotheses.py

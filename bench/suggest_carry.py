@@ -15,11 +15,11 @@ from pathlib import Path
 import numpy as np
 
 from lidarfield.analysis.suggest import candidate_steps, suggestions
-from lidarfield.grid import field_settings_from_config
+from lidarfield.field.grid import field_settings_from_config
 from lidarfield.hypotheses.outliers import after_removal, neighbour_distances
 from lidarfield.io import read_scan
 from lidarfield.pair import RegisteredPair
-from lidarfield.stack import apply_stack
+from lidarfield.study.stack import apply_stack
 
 from timing import best_time, machine  # bench/timing.py
 

@@ -15,11 +15,11 @@ import pytest
 import yaml
 
 from lidarfield.cli import main
-from lidarfield.config import load_config, validate_config
+from lidarfield.study.config import load_config, validate_config
 from lidarfield.io import read_scan
-from lidarfield.io.bag_writer import CloudMessage, write_bag
-from lidarfield.jobs import scan_job
-from lidarfield.poses import read_kitti_poses
+from lidarfield.io.rosbag.writer import CloudMessage, write_bag
+from lidarfield.study.jobs import scan_job
+from lidarfield.io.pose_files import read_kitti_poses
 
 pytest.importorskip("rosbags")
 
@@ -145,7 +145,7 @@ def test_bad_bag_input_is_one_line_exit_2_and_no_output(tmp_path, recording, cap
 
 def test_sequences_from_a_bag_topic_and_a_capture(tmp_path, expd, shared_data):
     from lidarfield.errors import InputError
-    from lidarfield.io.bag_writer import CloudMessage
+    from lidarfield.io.rosbag.writer import CloudMessage
     from lidarfield.scan import Scan
 
     scan = Scan(read_scan(expd / "Cloud1_ExpD.txt").xyz[:500])

@@ -11,7 +11,7 @@ import pytest
 from PIL import Image
 
 from lidarfield.plots import plot_stage, write_plotly_js
-from lidarfield.plots.synthetic import write_synthetic_study
+from synthetic_study import write_synthetic_study
 from lidarfield.report import discover, write_report
 
 pytestmark = pytest.mark.slow

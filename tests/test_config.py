@@ -5,9 +5,10 @@ from __future__ import annotations
 import pytest
 import yaml
 
-from lidarfield.config import SCHEMA_PATH, load_config, schema, validate_config
+from lidarfield.defaults import SCHEMA_PATH, schema
+from lidarfield.study.config import load_config, validate_config
 from lidarfield.errors import InputError, LidarfieldError
-from lidarfield.scene import builtin_scenes
+from lidarfield.simulation.scene import builtin_scenes
 
 from conftest import ROOT
 
@@ -23,8 +24,9 @@ def test_defaults_follow_the_kind_of_pair(expd):
     # Each pair gets its own kind's default, not the other branch's (the schema's oneOf).
     assert study.pairs["real"].register == "identity"
     assert study.pairs["sim"].register == "truth"
-    assert study.grid["azimuth_bins"] == 36 and study.grid["min_points"] == 30
-    assert study.hypotheses == [] and study.plots["magnification"] == "auto"
+    assert study.grid.grid.azimuth_bins == 36 and study.grid.min_points == 30
+    assert study.grid_section["azimuth_bins"] == 36 and study.grid_section["cell_m"] == 2.0
+    assert study.hypotheses == [] and study.plots.magnification == "auto"
 
 
 def test_a_mat_sequence_becomes_consecutive_pairs(expd, tmp_path):

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from lidarfield.cli import main
-from lidarfield.field import read_field
+from lidarfield.field.file import read_field
 from lidarfield.io import read_scan, write_scan
 
 

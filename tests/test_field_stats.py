@@ -7,9 +7,9 @@ import math
 
 import numpy as np
 
-from lidarfield.field import discrepancy_field
+from lidarfield.field.kernel import discrepancy_field
 from lidarfield.analysis.field_stats import field_statistics, summary_json_safe, weighted_rigid_transform
-from lidarfield.grid import FieldSettings, SphericalGrid
+from lidarfield.field.grid import FieldSettings, SphericalGrid
 
 from test_field import GRID, voxel_centre_clouds
 

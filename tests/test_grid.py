@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from lidarfield.errors import ConfigError
-from lidarfield.grid import (
+from lidarfield.field.grid import (
     CartesianGrid,
     FieldSettings,
     SphericalGrid,

@@ -17,9 +17,9 @@ from lidarfield.hypotheses import (
 from lidarfield.pair import RegisteredPair
 from lidarfield.poses import pose_from_xyzrpy
 from lidarfield.registration import register_pair
-from lidarfield.scene import load_scene
-from lidarfield.sensors import PRESETS
-from lidarfield.simulate import simulate_scan
+from lidarfield.simulation.scene import load_scene
+from lidarfield.sensors.models import PRESETS
+from lidarfield.simulation.raycast import simulate_scan
 
 STUDY_GRID = {
     "kind": "spherical", "azimuth_bins": 36, "azimuth_offset_deg": 0.0, "elevation_deg": [-25.0, 12.5],

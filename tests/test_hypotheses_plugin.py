@@ -11,7 +11,7 @@ import pytest
 from lidarfield.errors import HypothesisError
 from lidarfield.hypotheses import apply_step, validate_step
 from lidarfield.pair import RegisteredPair
-from lidarfield.stages import stage_ids
+from lidarfield.study.stage_ids import stage_ids
 
 ROOT = Path(__file__).resolve().parents[1]
 

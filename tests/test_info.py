@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from lidarfield.cli import main
-from lidarfield.io.bag_writer import CloudMessage, write_bag
+from lidarfield.io.rosbag.writer import CloudMessage, write_bag
 from lidarfield.scan import Scan
 
 

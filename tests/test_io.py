@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 from lidarfield.io import FORMATS, read_scan, scan_count, scan_format, split_reference, write_scan
-from lidarfield.io.pcd import lzf_decompress, write_pcd
+from lidarfield.io.formats.pcd import lzf_decompress, write_pcd
 from lidarfield.scan import Scan
-from lidarfield.sensors import PRESETS
+from lidarfield.sensors.models import PRESETS
 
 
 @pytest.fixture

@@ -9,8 +9,8 @@ import pytest
 
 from lidarfield.errors import InputError
 from lidarfield.io import read_scan, scan_count
-from lidarfield.io.bag_writer import CloudMessage, write_bag
-from lidarfield.io.pointcloud2 import PointField, decode_cloud
+from lidarfield.io.rosbag.writer import CloudMessage, write_bag
+from lidarfield.io.rosbag.pointcloud2 import PointField, decode_cloud
 from lidarfield.poses import pose_from_xyzrpy
 from lidarfield.scan import Scan
 

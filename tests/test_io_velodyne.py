@@ -11,7 +11,7 @@ import pytest
 from lidarfield.cli import main
 from lidarfield.errors import InputError
 from lidarfield.io import read_scan, scan_count
-from lidarfield.io.velodyne import capture_summary
+from lidarfield.io.formats.velodyne import capture_summary
 
 pytest.importorskip("velodyne_decoder")
 
@@ -72,7 +72,7 @@ def vlp16_reference(payload: bytes) -> np.ndarray:
 def test_vlp16_points_match_the_manual_formulas(captures):
     """velodyne-decoder's points of the first packets, against a plain decoder of the packet
     format: each reference point has a decoded point of the same ring within 2 cm."""
-    from lidarfield.io.velodyne import PACKET_SIZE, udp_payloads
+    from lidarfield.io.formats.velodyne import PACKET_SIZE, udp_payloads
 
     path = captures / VLP16
     scan = read_scan(f"{path}#0")

@@ -15,8 +15,8 @@ from lidarfield.hypotheses.outliers import after_removal, neighbour_distances
 from lidarfield.io import read_scan
 from lidarfield.io.parquet_table import read_table
 from lidarfield.pair import RegisteredPair, read_pair
-from lidarfield.pipeline import write_stage
-from lidarfield.stack import initial_stage, next_stage
+from lidarfield.study.jobs import write_stage
+from lidarfield.study.stack import initial_stage, next_stage
 
 from test_outliers import _synthetic_cloud
 
@@ -161,7 +161,7 @@ def test_changes_stored_whole_where_a_stage_searched_anew_carry_on_exactly(tmp_p
 def test_apply_stack_carries_what_the_previous_stage_searched(expd):
     """``lidarfield run``'s path: a stage's memoised distances reach the next stage exactly."""
     from lidarfield.hypotheses.outliers import cloud_neighbour_distances
-    from lidarfield.stack import apply_stack
+    from lidarfield.study.stack import apply_stack
 
     pair = RegisteredPair(read_scan(expd / "Cloud1_ExpD.txt").xyz, read_scan(expd / "Cloud10Aligned_ExpD.txt").xyz)
     stack = [{"crop": {"max_range_m": 25.0}}, {"outliers": {}}, {"shadow": {"origins": [1]}}]

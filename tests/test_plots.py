@@ -7,19 +7,12 @@ import pytest
 from PIL import Image
 
 from lidarfield.errors import ConfigError, InputError
-from lidarfield.grid import CartesianGrid, SphericalGrid
+from lidarfield.field.grid import CartesianGrid, SphericalGrid
 from lidarfield.plots import plot_pair, plot_settings, plot_stage
-from lidarfield.plots.common import (
-    FADED_ALPHA,
-    SVG_MAX_BYTES,
-    magnitude_norm,
-    nice_length,
-    read_vector_field,
-    resolve_magnification,
-    subsample,
-    view_limits,
-)
-from lidarfield.plots.synthetic import write_synthetic_pair
+from lidarfield.plots.output import SVG_MAX_BYTES
+from lidarfield.plots.stage_data import read_vector_field, subsample
+from lidarfield.plots.style import FADED_ALPHA, magnitude_norm, nice_length, resolve_magnification, vector_colours, view_limits
+from synthetic_study import write_synthetic_pair
 from lidarfield.plots.top_voxels import box_wireframe, spherical_voxel_wireframe, voxel_wireframe
 
 from layout import assert_fixed_layout
@@ -154,7 +147,7 @@ def test_vectors_within_their_noise_are_drawn_faint(stages):
     field = read_vector_field(stages[0] / "field.parquet")
     z = np.abs(field.columns["z"])
     assert field.z_min == 3.0 and 0 < np.count_nonzero(z < 3) < len(z)  # both kinds in this field
-    alpha = field.colours(magnitude_norm(field))[:, 3]
+    alpha = vector_colours(field, magnitude_norm(field))[:, 3]
     np.testing.assert_array_equal(alpha, np.where(z >= 3, 1.0, FADED_ALPHA))
 
 
@@ -239,7 +232,7 @@ def test_auto_magnification(max_m, span_m, expected):
 
 def test_a_3d_view_can_share_one_plotly_js(tmp_path):
     from lidarfield.plots import plot_stage, write_plotly_js
-    from lidarfield.plots.synthetic import write_synthetic_study
+    from synthetic_study import write_synthetic_study
 
     dirs = write_synthetic_study(tmp_path, n_pairs=1, levels=1, n=3000)["pair-00"]
     shared = write_plotly_js(tmp_path / "assets" / "plotly.min.js")
@@ -271,7 +264,8 @@ def test_fixed_layout_keeps_axes_legends_and_titles_apart(stages, tmp_path, monk
 def test_top_voxels_whose_edges_all_lie_outside_the_view_are_still_drawn(stages, tmp_path):
     """Found on a drive: every edge of the top voxels clipped away left mplot3d an empty
     collection, and the stage's figure job failed."""
-    from lidarfield.plots.common import load_stage, plot_settings
+    from lidarfield.plots.settings import plot_settings
+    from lidarfield.plots.stage_data import load_stage
     from lidarfield.plots.top_voxels import plot_top_voxels
 
     stage = load_stage(stages[1])

@@ -7,19 +7,8 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from lidarfield.errors import InputError
-from lidarfield.poses import (
-    apply_pose,
-    invert_pose,
-    parse_pose_arg,
-    pose_error,
-    pose_from_xyzrpy,
-    read_kitti_poses,
-    read_pose,
-    relative_pose,
-    rotation_angle,
-    write_kitti_poses,
-    xyzrpy_from_pose,
-)
+from lidarfield.poses import apply_pose, invert_pose, parse_pose_arg, pose_error, pose_from_xyzrpy, relative_pose, rotation_angle, xyzrpy_from_pose
+from lidarfield.io.pose_files import read_kitti_poses, read_pose, write_kitti_poses
 
 OUSTER_POSES = "ouster-os1-128/OS-1-128_v2.3.0_1024x10_lb_n3_poses_kitti.txt"
 

@@ -6,8 +6,14 @@ import numpy as np
 import pytest
 
 from lidarfield.io import read_scan
-from lidarfield.poses import apply_pose, pose_error, read_kitti_poses, read_pose, relative_pose
-from lidarfield.registration import read_xyz_rows, register_pair, translation_from_aligned_copy, translation_offsets
+from lidarfield.poses import apply_pose, pose_error, relative_pose
+from lidarfield.io.pose_files import read_kitti_poses, read_pose
+from lidarfield.registration import (
+    read_xyz_rows,
+    register_pair,
+    translation_from_aligned_copy,
+    translation_offsets,
+)
 
 ROOT = __import__("pathlib").Path(__file__).resolve().parents[1]
 COMMITTED_T_1_10 = ROOT / "config" / "expd-T_1_10.txt"

@@ -9,7 +9,8 @@ import pytest
 from lidarfield.cli import main
 from lidarfield.errors import ConfigError, InputError, RegistrationError
 from lidarfield.pair import read_pair
-from lidarfield.poses import pose_error, pose_from_xyzrpy, read_pose
+from lidarfield.poses import pose_error, pose_from_xyzrpy
+from lidarfield.io.pose_files import read_pose
 from lidarfield.registration import (
     METHODS,
     parse_settings,

@@ -8,17 +8,17 @@ import pytest
 import yaml
 
 from lidarfield.cli import main
-from lidarfield.config import validate_config
+from lidarfield.study.config import validate_config
 from lidarfield.errors import ConfigError
 from lidarfield.io import write_scan
 from lidarfield.pair import RegisteredPair
-from lidarfield.pipeline import read_stats
+from lidarfield.study.summary import read_stats
 from lidarfield.poses import apply_pose, invert_pose, pose_error, pose_from_xyzrpy, relative_pose
 from lidarfield.analysis.rematch import perturbed, read_rematch, rematch, start_offsets, summary_columns
-from lidarfield.scene import load_scene
-from lidarfield.sensors import sensor_model
-from lidarfield.simulate import simulate_scan
-from lidarfield.stack import apply_stack
+from lidarfield.simulation.scene import load_scene
+from lidarfield.sensors.models import sensor_model
+from lidarfield.simulation.raycast import simulate_scan
+from lidarfield.study.stack import apply_stack
 
 # 32 channels over the paper sensor's span, 0.4 deg steps: 29k rays a scan, fast to match.
 SENSOR = {"name": "test-32", "elevation_deg": np.linspace(-22, 9.6, 32).tolist(), "azimuth_resolution_deg": 0.4}

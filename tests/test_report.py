@@ -12,7 +12,7 @@ import pytest
 from lidarfield.cli import main
 from lidarfield.errors import InputError
 from lidarfield.plots import plot_pair, plot_stage
-from lidarfield.plots.synthetic import write_summary, write_synthetic_study
+from synthetic_study import write_summary, write_synthetic_study
 from lidarfield.report import compare_studies, discover, write_pair_page, write_report
 from lidarfield.report.pair_page import STAGE_FIGURES
 

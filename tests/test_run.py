@@ -12,16 +12,18 @@ import pytest
 import yaml
 
 from lidarfield.cli import main
-from lidarfield.config import load_config
+from lidarfield.study.config import load_config
 from lidarfield.errors import InputError
 from lidarfield.io import read_scan, write_scan
 from lidarfield.io.parquet_table import read_table
 from lidarfield.pair import RegisteredPair, read_pair, write_pair
-from lidarfield.pipeline import field_stage, mitigate_stage, run_pair, write_summary
+from lidarfield.study.jobs import field_stage, mitigate_stage
+from lidarfield.study.run import run_pair
+from lidarfield.study.summary import write_summary
 from lidarfield.poses import pose_from_xyzrpy
-from lidarfield.scene import load_scene
-from lidarfield.sensors import PRESETS
-from lidarfield.simulate import simulate_scan
+from lidarfield.simulation.scene import load_scene
+from lidarfield.sensors.models import PRESETS
+from lidarfield.simulation.raycast import simulate_scan
 
 ROOT = Path(__file__).resolve().parents[1]
 GRID = {"kind": "spherical", "azimuth_bins": 36, "elevation_deg": [-22.5, 15.0], "elevation_bins": 5, "min_points": 30}

@@ -8,9 +8,9 @@ import trimesh
 import yaml
 
 from lidarfield.errors import ConfigError, InputError
-from lidarfield.scene import builtin_scenes, load_scene, scene_from_dict
+from lidarfield.simulation.scene import builtin_scenes, load_scene, scene_from_dict
 from lidarfield.poses import pose_from_xyzrpy as pose_from_values
-from lidarfield.trajectory import arc_trajectory, moved_pose, paper_turn_trajectory
+from lidarfield.simulation.trajectory import arc_trajectory, moved_pose, paper_turn_trajectory
 
 
 def _write_yaml(path, spec):

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import threading
 
-from lidarfield.scheduling import cancel_pending_rounds
+from lidarfield.runner.scheduling import cancel_pending_rounds
 
 
 def test_pending_timers_are_cancelled_and_end_without_firing():

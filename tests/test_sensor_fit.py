@@ -12,13 +12,13 @@ import pytest
 import yaml
 
 from lidarfield.io import read_scan, write_scan
-from lidarfield.pipeline import run_pair
+from lidarfield.study.run import run_pair
 from lidarfield.poses import pose_from_xyzrpy
 from lidarfield.scan import Scan
-from lidarfield.scene import load_scene
-from lidarfield.sensor_fit import ELEVATION_TOLERANCE_DEG, fit_warning, sensor_fit
-from lidarfield.sensors import PRESETS, SensorModel
-from lidarfield.simulate import simulate_scan
+from lidarfield.simulation.scene import load_scene
+from lidarfield.sensors.fit import ELEVATION_TOLERANCE_DEG, fit_warning, sensor_fit
+from lidarfield.sensors.models import PRESETS, SensorModel
+from lidarfield.simulation.raycast import simulate_scan
 
 VLP16 = PRESETS["vlp16"]  # -15..15 deg, 0.5..100 m
 

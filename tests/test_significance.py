@@ -12,13 +12,13 @@ import math
 import numpy as np
 import pytest
 
-from lidarfield.field import discrepancy_field
+from lidarfield.field.kernel import discrepancy_field
 from lidarfield.analysis.field_stats import field_statistics
-from lidarfield.grid import CartesianGrid, FieldSettings, SphericalGrid
+from lidarfield.field.grid import CartesianGrid, FieldSettings, SphericalGrid
 from lidarfield.pair import RegisteredPair
 from lidarfield.analysis.randomness import LEVEL, neighbour_pairs, randomness_tests, unit_vectors
-from lidarfield.sensors import PRESETS
-from lidarfield.analysis.significance import SPREAD_FLOOR_M
+from lidarfield.sensors.models import PRESETS
+from lidarfield.field.significance import SPREAD_FLOOR_M
 from lidarfield.analysis.tags import tag_column, voxel_tags
 
 SETTINGS = FieldSettings(SphericalGrid())  # 36 x 10 deg, 5 x 8 deg from -20 to +20

@@ -9,9 +9,9 @@ import trimesh
 
 from lidarfield.errors import ConfigError
 from lidarfield.io import write_scan
-from lidarfield.scene import load_scene, scene_from_dict
-from lidarfield.sensors import PRESETS, SensorModel
-from lidarfield.simulate import azimuth_steps, first_hits, first_hits_reference, simulate_scan
+from lidarfield.simulation.scene import load_scene, scene_from_dict
+from lidarfield.sensors.models import PRESETS, SensorModel
+from lidarfield.simulation.raycast import azimuth_steps, first_hits, first_hits_reference, simulate_scan
 from lidarfield.poses import pose_from_xyzrpy as pose_from_values
 
 SENSOR = PRESETS["paper-sim-80"]

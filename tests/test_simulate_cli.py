@@ -8,7 +8,7 @@ import yaml
 
 from lidarfield.cli import main
 from lidarfield.io import read_scan
-from lidarfield.sensors import PRESETS
+from lidarfield.sensors.models import PRESETS
 from lidarfield.poses import pose_from_xyzrpy as pose_from_values
 
 BASE = ["simulate", "--scene", "paper-intersection", "--sensor", "vlp16"]

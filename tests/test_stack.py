@@ -7,16 +7,16 @@ import numpy as np
 import pytest
 
 from lidarfield.errors import HypothesisError
-from lidarfield.field import discrepancy_field
+from lidarfield.field.kernel import discrepancy_field
 from lidarfield.analysis.field_stats import field_statistics
-from lidarfield.grid import field_settings_from_config
+from lidarfield.field.grid import field_settings_from_config
 from lidarfield.pair import RegisteredPair
 from lidarfield.poses import pose_from_xyzrpy
 from lidarfield.registration import register_pair
-from lidarfield.scene import load_scene
-from lidarfield.sensors import PRESETS
-from lidarfield.simulate import simulate_scan
-from lidarfield.stack import apply_stack
+from lidarfield.simulation.scene import load_scene
+from lidarfield.sensors.models import PRESETS
+from lidarfield.simulation.raycast import simulate_scan
+from lidarfield.study.stack import apply_stack
 
 
 def _rows(xyz: np.ndarray) -> set[tuple[float, ...]]:

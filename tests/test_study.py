@@ -13,12 +13,12 @@ import pandas as pd
 import pytest
 
 from lidarfield.cli import main
-from lidarfield.config import AUTO_PLOT_PAIRS, plot_pairs
+from lidarfield.study.config import AUTO_PLOT_PAIRS, plot_pairs
 from lidarfield.errors import ConfigError, InputError
 from lidarfield.plots import plot_pair
 from lidarfield.plots.study import _polar_cells, plot_study
-from lidarfield.plots.synthetic import write_field_study
-from lidarfield.analysis.study import group_medians, read_study_tables, write_study_tables, write_study_voxels
+from synthetic_study import write_field_study
+from lidarfield.study.tables import group_medians, read_study_tables, write_study_tables, write_study_voxels
 
 from layout import assert_fixed_layout
 

@@ -8,9 +8,9 @@ import math
 import numpy as np
 import pytest
 
-from lidarfield.config import load_config
+from lidarfield.study.config import load_config
 from lidarfield.errors import HypothesisError
-from lidarfield.grid import FieldSettings, SphericalGrid
+from lidarfield.field.grid import FieldSettings, SphericalGrid
 from lidarfield.pair import RegisteredPair
 from lidarfield.analysis.suggest import SUGGESTION_COLUMNS, candidate_steps, suggestions
 
@@ -130,7 +130,7 @@ def test_the_suggest_job_skips_default_candidates_that_cannot_apply(tmp_path, ca
 def test_a_candidate_that_removes_nothing_gets_the_row_of_a_recomputed_field():
     """The job reuses the field before for such a candidate: the row must be what recomputing
     the field from the same points gives, to the bit."""
-    from lidarfield.field import field_from_voxel_ids
+    from lidarfield.field.kernel import field_from_voxel_ids
     from lidarfield.analysis.suggest import compare_fields
 
     vehicle, _ = with_vehicle()

@@ -16,9 +16,9 @@ from pathlib import Path
 import pyarrow.parquet as pq
 import pytest
 
-from lidarfield.config import validate_config
-from lidarfield.stages import canonical_json
-from lidarfield.worker import THREAD_VARS
+from lidarfield.study.config import validate_config
+from lidarfield.hypotheses.steps import canonical_json
+from lidarfield.runner.launch import THREAD_VARS
 
 pytestmark = pytest.mark.slow
 
@@ -145,7 +145,7 @@ def alive(pid: int) -> bool:
 def start_worker(path: Path, log, *options: str) -> subprocess.Popen:
     """A worker on the socket ``path``, logging to the open file ``log``, with this test as
     its parent; returned once it listens."""
-    command = [sys.executable, "-m", "lidarfield.worker", str(path), "--parent-pid", str(os.getpid()), *options]
+    command = [sys.executable, "-m", "lidarfield.runner.server", str(path), "--parent-pid", str(os.getpid()), *options]
     proc = subprocess.Popen(command, stdout=log, stderr=subprocess.STDOUT, env={**os.environ, **SNAKEMAKE_ENV})
     wait_for(path.exists, timeout=30)
     return proc
@@ -265,7 +265,7 @@ def test_the_worker_stops_when_its_workflow_is_gone(tmp_path):
     # A parent that starts the worker and exits at once, as a killed Snakemake would.
     starter = (
         "import os, subprocess, sys; "
-        f"p = subprocess.Popen([sys.executable, '-m', 'lidarfield.worker', {str(path)!r}, '--parent-pid', str(os.getpid())]); "
+        f"p = subprocess.Popen([sys.executable, '-m', 'lidarfield.runner.server', {str(path)!r}, '--parent-pid', str(os.getpid())]); "
         "print(p.pid)"
     )
     pid = int(subprocess.run([sys.executable, "-c", starter], capture_output=True, text=True, check=True).stdout)
@@ -290,7 +290,7 @@ def test_a_worker_stopped_while_importing_exits_at_once(tmp_path):
 
 
 def test_a_run_that_executes_nothing_stops_the_worker_it_started(tmp_path):
-    """Snakemake starts the worker while it plans (lidarfield.worker.spawn); a dry run never
+    """Snakemake starts the worker while it plans (lidarfield.runner.launch.spawn); a dry run never
     points a job at it, and stops it at exit: no worker process and no socket are left."""
     from test_workflow import snakemake, tiny_study, write_study
 
@@ -317,10 +317,10 @@ def test_no_worker_when_jobs_run_in_their_own_software_environments(tmp_path):
 def test_the_figure_warm_up_draws_every_figure_and_leaves_no_folder(tmp_path, monkeypatch):
     import tempfile
 
-    from lidarfield.plots.warm_up import WARM_UP_FIGURES, warm_up_steps
+    from lidarfield.runner.warm_up import WARM_UP_FIGURES, warm_up_steps
 
     monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
-    assert list(warm_up_steps()) == ["synthetic pair", *WARM_UP_FIGURES, "field_3d"]
+    assert list(warm_up_steps()) == ["simulated pair", *WARM_UP_FIGURES, "field_3d"]
     assert list(tmp_path.iterdir()) == []
     steps = warm_up_steps()
     next(steps)
@@ -332,7 +332,7 @@ def test_the_figure_warm_up_draws_every_figure_and_leaves_no_folder(tmp_path, mo
 def test_figures_drawn_after_the_warm_up_are_those_of_a_plain_process(tmp_path, warming_worker):
     """The warm-up leaves matplotlib's caches filled, not its settings changed: a stage's
     figures forked from the warmed-up worker are byte for byte those of a plain process."""
-    from lidarfield.plots.synthetic import write_synthetic_pair
+    from synthetic_study import write_synthetic_pair
 
     _, sock = warming_worker
     wait_for(lambda: "figure warm-up done" in (tmp_path / "worker.log").read_text(), timeout=120)
@@ -349,7 +349,7 @@ def test_figures_drawn_after_the_warm_up_are_those_of_a_plain_process(tmp_path, 
 
 
 def test_the_workflow_warms_the_worker_up_only_for_studies_with_many_figures(tmp_path, monkeypatch):
-    from lidarfield import worker as worker_module
+    from lidarfield.runner import launch
 
     commands = []
 
@@ -363,10 +363,10 @@ def test_the_workflow_warms_the_worker_up_only_for_studies_with_many_figures(tmp
         def wait(self, timeout=None):
             return 0
 
-    monkeypatch.setattr(worker_module.subprocess, "Popen", Spawned)
+    monkeypatch.setattr(launch.subprocess, "Popen", Spawned)
     monkeypatch.delenv("LIDARFIELD_WORKER", raising=False)
-    threshold = worker_module.WARM_UP_MIN_FIGURE_JOBS
+    threshold = launch.WARM_UP_MIN_FIGURE_JOBS
     for figure_jobs in (0, threshold - 1, threshold, 27):
-        worker_module.spawn(tmp_path / "results", figure_jobs=figure_jobs)
-        worker_module.stop()
+        launch.spawn(tmp_path / "results", figure_jobs=figure_jobs)
+        launch.stop()
     assert ["--warm-up" in command for command in commands] == [False, False, True, True]

@@ -13,7 +13,7 @@ import numpy as np
 
 from .errors import InputError
 from .io.parquet_table import read_table, write_table
-from .sensors import SensorModel
+from .sensors.models import SensorModel
 
 
 @dataclass

@@ -1,4 +1,5 @@
-"""Rigid poses as 4x4 homogeneous matrices: files, KITTI pose lines, x-y-z-roll-pitch-yaw.
+"""Rigid poses as 4x4 homogeneous matrices: x-y-z-roll-pitch-yaw, command-line strings, algebra
+(pose files: :mod:`lidarfield.io.pose_files`).
 
 Conventions: ``T_a_b`` maps points from frame b to frame a (``x_a = T_a_b @ x_b``), so a
 world-from-sensor pose is ``T_w_s``. Angles are radians with R = Rz(yaw) Ry(pitch) Rx(roll).
@@ -7,85 +8,17 @@ world-from-sensor pose is ``T_w_s``. Angles are radians with R = Rz(yaw) Ry(pitc
 from __future__ import annotations
 
 import re
-from pathlib import Path
 
 import numpy as np
 
 from .errors import InputError
-from .io.atomic import write_text
 
 # A rotation block farther than this from orthonormal is not a rigid pose (KITTI files
 # print 9 to 19 significant digits, so real poses are orthonormal to ~1e-6).
 _ORTHONORMAL_TOLERANCE = 1e-3
-_SEPARATORS = re.compile(r"[\s,;]+")
+NUMBER_SEPARATORS = re.compile(r"[\s,;]+")
 
 
-# --- files -----------------------------------------------------------------------------------
-def read_pose(path: str | Path, line: int = 0) -> np.ndarray:
-    """A 4x4 pose from a text file: a 4x4 matrix (4 rows of 4, or one row of 16), a 3x4 matrix
-    (3 rows of 4), or KITTI pose lines of 12 numbers, of which ``line`` (0-based) is taken."""
-    path = Path(path)
-    rows = _numeric_rows(path)
-    widths = {len(r) for r in rows}
-    if widths == {12}:
-        if not 0 <= line < len(rows):
-            raise InputError(f"pose line {line} requested but the file holds {len(rows)} KITTI pose line(s)", path)
-        return _rigid(_from_numbers(rows[line]), path)
-    if line != 0:
-        raise InputError(f"pose line {line} requested but the file holds one matrix, not KITTI pose lines", path)
-    if widths == {4} and len(rows) in (3, 4) or widths == {16} and len(rows) == 1:
-        return _rigid(_from_numbers(np.concatenate(rows)), path)
-    shape = " + ".join(str(len(r)) for r in rows) if len(rows) <= 6 else f"{len(rows)} rows of {sorted(widths)}"
-    raise InputError(
-        f"not a pose: found {len(rows)} row(s) of numbers ({shape}); expected a 4x4 or 3x4 matrix or "
-        "KITTI lines of 12 numbers",
-        path,
-    )
-
-
-def read_kitti_poses(path: str | Path, expected: int | None = None) -> np.ndarray:
-    """All poses of a KITTI pose file, (M, 4, 4); one 12-number line per scan.
-
-    With ``expected`` (the number of scans), a file with fewer lines is an error.
-    """
-    path = Path(path)
-    rows = _numeric_rows(path)
-    bad = [k for k, r in enumerate(rows) if len(r) != 12]
-    if bad:
-        raise InputError(f"KITTI pose line {bad[0] + 1} has {len(rows[bad[0]])} numbers, expected 12", path)
-    if expected is not None and len(rows) < expected:
-        raise InputError(f"holds {len(rows)} pose line(s) for {expected} scans: every scan needs one", path)
-    return np.stack([_rigid(_from_numbers(r), path) for r in rows])
-
-
-def write_kitti_poses(path: str | Path, poses: np.ndarray) -> None:
-    """One KITTI line (top 3x4, row-major) per pose, written whole."""
-    lines = [" ".join(f"{v:.17g}" for v in np.asarray(T)[:3].ravel()) for T in poses]
-    write_text(path, "\n".join(lines) + "\n")
-
-
-def _numeric_rows(path: Path) -> list[np.ndarray]:
-    if not path.is_file():
-        raise InputError("pose file not found", path)
-    rows = []
-    try:
-        text = path.read_text()
-    except UnicodeDecodeError:
-        raise InputError("not a text pose file", path) from None
-    for number, line in enumerate(text.splitlines(), start=1):
-        line = line.split("#", 1)[0].strip()
-        if not line:
-            continue
-        try:
-            rows.append(np.array([float(v) for v in _SEPARATORS.split(line) if v], dtype=np.float64))
-        except ValueError:
-            raise InputError(f"line {number} is not numeric: {line[:60]!r}", path) from None
-    if not rows:
-        raise InputError("empty pose file", path)
-    return rows
-
-
-# --- conversions -------------------------------------------------------------------------------
 def pose_from_xyzrpy(values) -> np.ndarray:
     """4x4 pose from (x, y, z, roll, pitch, yaw): metres and radians, R = Rz(yaw) Ry(pitch) Rx(roll)."""
     x, y, z, roll, pitch, yaw = np.asarray(values, dtype=np.float64).reshape(6)
@@ -114,7 +47,7 @@ def parse_pose_arg(text: str) -> np.ndarray:
     """A pose from a command-line string of numbers separated by commas or spaces:
     6 = x,y,z,roll,pitch,yaw (m, rad); 12 = KITTI 3x4 row-major; 16 = 4x4 row-major."""
     try:
-        numbers = np.array([float(v) for v in _SEPARATORS.split(str(text).strip()) if v], dtype=np.float64)
+        numbers = np.array([float(v) for v in NUMBER_SEPARATORS.split(str(text).strip()) if v], dtype=np.float64)
     except ValueError:
         raise InputError(f"pose {text!r} is not a list of numbers") from None
     if len(numbers) == 6:
@@ -123,19 +56,21 @@ def parse_pose_arg(text: str) -> np.ndarray:
         _finite(T, f"pose {text!r}")
         return T
     if len(numbers) in (12, 16):
-        return _rigid(_from_numbers(numbers), f"pose {text!r}")
+        return rigid_pose(pose_from_numbers(numbers), f"pose {text!r}")
     raise InputError(
         f"pose {text!r} has {len(numbers)} numbers; expected 6 (x,y,z,roll,pitch,yaw), 12 (3x4) or 16 (4x4)"
     )
 
 
-def _from_numbers(numbers: np.ndarray) -> np.ndarray:
+def pose_from_numbers(numbers: np.ndarray) -> np.ndarray:
+    """A 4x4 pose from 12 (3x4) or 16 (4x4) row-major numbers."""
     T = np.eye(4)
     T[: len(numbers) // 4] = numbers.reshape(-1, 4)
     return T
 
 
-def _rigid(T: np.ndarray, where) -> np.ndarray:
+def rigid_pose(T: np.ndarray, where) -> np.ndarray:
+    """``T`` if it is a finite rigid pose; else an InputError naming ``where`` and the problem."""
     _finite(T, where)
     R = T[:3, :3]
     if not np.allclose(T[3], [0, 0, 0, 1], atol=1e-9):
@@ -213,3 +148,21 @@ def interpolate_pose(stamps_s: np.ndarray, poses: np.ndarray, at_s: float) -> np
     T[:3, :3] = rotation.as_matrix()
     T[:3, 3] = (1 - fraction) * poses[k][:3, 3] + fraction * poses[k + 1][:3, 3]
     return T
+
+
+def weighted_rigid_transform(source: np.ndarray, target: np.ndarray, weight: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """R (3x3) and t (3,) minimising sum w |R source + t - target|^2 (weighted Kabsch).
+
+    NaN-filled when fewer than 3 points carry weight (the rotation is then undetermined).
+    """
+    if np.count_nonzero(weight > 0) < 3:
+        return np.full((3, 3), np.nan), np.full(3, np.nan)
+    w = weight / weight.sum()
+    centroid_source = w @ source
+    centroid_target = w @ target
+    covariance = (source - centroid_source).T @ ((target - centroid_target) * w[:, None])
+    u, _, vt = np.linalg.svd(covariance)
+    # Reflection guard: force det(R) = +1.
+    d = np.sign(np.linalg.det(vt.T @ u.T)) or 1.0
+    rotation = vt.T @ np.diag([1.0, 1.0, d]) @ u.T
+    return rotation, centroid_target - rotation @ centroid_source

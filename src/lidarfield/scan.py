@@ -6,7 +6,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .sensors import SensorModel
+from .sensors.models import SensorModel
 
 # Attributes the contracts know; readers may add others (kept as they are).
 KNOWN_ATTRIBUTES = ("intensity", "ring", "time")

@@ -6,8 +6,10 @@ from pathlib import Path
 from snakemake.common import overwrite_function_params
 from snakemake.utils import min_version
 
-import lidarfield.config
-from lidarfield.stages import canonical_json
+import lidarfield.study.config
+from lidarfield.hypotheses.steps import canonical_json
+from lidarfield.layout import RESULTS_FOLDERS
+from lidarfield.plots.settings import figure_settings
 
 min_version("9.0")
 
@@ -24,7 +26,7 @@ if not config:
 # working directory. An invalid config is one line and exit status 2, as in the CLI (raised,
 # Snakemake would add the stack frames of this file and of the package).
 try:
-    STUDY = lidarfield.config.validate_config(
+    STUDY = lidarfield.study.config.validate_config(
         config,
         base_dir=Path.cwd(),
         source=", ".join(map(str, workflow.configfiles)) or "config",
@@ -59,7 +61,7 @@ PLOT_PAIRS = STUDY.plot_pairs
 # writes a constraint into every path pattern, and matching a list of 1,000 names made
 # planning a 1,000-pair study take minutes.
 wildcard_constraints:
-    pair=rf"(?!(?:{'|'.join(lidarfield.config.RESULTS_FOLDERS)})/)[A-Za-z0-9][A-Za-z0-9_.-]*",
+    pair=rf"(?!(?:{'|'.join(RESULTS_FOLDERS)})/)[A-Za-z0-9][A-Za-z0-9_.-]*",
     stage=r"\d\d-[A-Za-z0-9_]+-[0-9a-f]{8}",
     scan=r"[A-Za-z0-9][A-Za-z0-9_.-]*",
     page="report|stages",
@@ -278,6 +280,6 @@ def rematch_files(wildcards=None):
     return all_stage_files("rematch.parquet")
 
 
-GRID = canonical_json(STUDY.grid)
+GRID = canonical_json(STUDY.grid_section)
 REMATCH = canonical_json(STUDY.rematch)
-PLOTS = canonical_json(lidarfield.config.figure_settings(STUDY.plots))
+PLOTS = canonical_json(figure_settings(STUDY.config["plots"]))

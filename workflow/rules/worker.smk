@@ -1,11 +1,10 @@
-# A local run hands each job to a pre-imported worker (lidarfield.worker), started here and
+# A local run hands each job to a pre-imported worker (lidarfield.runner.server), started here and
 # stopped when the run ends (or at exit, when the run executes nothing): jobs then skip
 # Python's start and imports. On a cluster, or with
 # LIDARFIELD_WORKER=off, every job is its own process.
 # The end of a run also cancels the scheduler's pending re-evaluation timers (see
-# lidarfield.scheduling), which would otherwise hold the exit for up to a minute.
-import lidarfield.scheduling
-import lidarfield.worker
+# lidarfield.runner.scheduling), which would otherwise hold the exit for up to a minute.
+from lidarfield.runner import launch, scheduling
 
 # Not in the Snakemake processes that run one job each (on a cluster node), nor when each job
 # runs in its rule's own software environment (--sdm conda / apptainer): the worker runs the
@@ -16,23 +15,23 @@ USE_WORKER = (
 # Started importing now, while Snakemake plans: the run's first jobs need not wait for it. It
 # warms up for the figures when the study draws enough of them.
 if USE_WORKER:
-    lidarfield.worker.spawn(
+    launch.spawn(
         RESULTS, figure_jobs=sum(len(STAGES[pair]) for pair in PLOT_PAIRS)
     )
 
 
 onstart:
     if USE_WORKER and workflow.local_exec:
-        lidarfield.worker.start(RESULTS)
+        launch.start(RESULTS)
     else:
-        lidarfield.worker.stop()  # jobs run on cluster nodes or in their own environments
+        launch.stop()  # jobs run on cluster nodes or in their own environments
 
 
 onsuccess:
-    lidarfield.worker.stop()
-    lidarfield.scheduling.cancel_pending_rounds()
+    launch.stop()
+    scheduling.cancel_pending_rounds()
 
 
 onerror:
-    lidarfield.worker.stop()
-    lidarfield.scheduling.cancel_pending_rounds()
+    launch.stop()
+    scheduling.cancel_pending_rounds()

@@ -23,10 +23,10 @@ import math
 
 import numpy as np
 
-from ..field import field_from_voxel_ids
-from ..grid import FieldSettings
+from ..field.kernel import field_from_voxel_ids
+from ..field.grid import FieldSettings
 from ..pair import RegisteredPair
-from ..poses import rotation_angle
+from ..poses import rotation_angle, weighted_rigid_transform
 from .randomness import neighbour_pairs, randomness_tests, unit_vectors
 from .tags import energy_shares, voxel_energy, voxel_tags
 
@@ -99,24 +99,6 @@ def field_statistics(columns: dict[str, np.ndarray], settings: FieldSettings | N
     stats["field_energy"] = float(voxel_energy(columns).sum())
     stats.update(energy_shares(columns))
     return stats
-
-
-def weighted_rigid_transform(source: np.ndarray, target: np.ndarray, weight: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """R (3x3) and t (3,) minimising sum w |R source + t - target|^2 (weighted Kabsch).
-
-    NaN-filled when fewer than 3 points carry weight (the rotation is then undetermined).
-    """
-    if np.count_nonzero(weight > 0) < 3:
-        return np.full((3, 3), np.nan), np.full(3, np.nan)
-    w = weight / weight.sum()
-    centroid_source = w @ source
-    centroid_target = w @ target
-    covariance = (source - centroid_source).T @ ((target - centroid_target) * w[:, None])
-    u, _, vt = np.linalg.svd(covariance)
-    # Reflection guard: force det(R) = +1.
-    d = np.sign(np.linalg.det(vt.T @ u.T)) or 1.0
-    rotation = vt.T @ np.diag([1.0, 1.0, d]) @ u.T
-    return rotation, centroid_target - rotation @ centroid_source
 
 
 def rigid_energy_share(

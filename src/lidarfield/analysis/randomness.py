@@ -31,7 +31,7 @@ import math
 
 import numpy as np
 
-from ..grid import CARTESIAN_BITS
+from ..field.grid import CARTESIAN_BITS
 
 LEVEL = 0.05
 PERMUTATIONS = 999

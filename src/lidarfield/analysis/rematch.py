@@ -19,7 +19,7 @@ from ..errors import RegistrationError
 from ..io.parquet_table import read_table, write_table
 from ..pair import read_pair
 from ..poses import apply_pose, invert_pose, pose_error
-from ..registration.settings import finite_number
+from ..checks import is_number
 
 log = logging.getLogger(__name__)
 
@@ -141,7 +141,7 @@ def method_rows(rows: list[dict]) -> list[dict]:
             values = {}
             for name in METHOD_COLUMNS[2:-1]:
                 value = row.get(f"rematch_{method}_{name.replace('_cm', '_m')}")
-                values[name] = value * 100 if name.endswith("_cm") and finite_number(value) else value
+                values[name] = value * 100 if name.endswith("_cm") and is_number(value, finite=True) else value
             out.append({"stage": row.get("stage"), "method": method, **values, "converged": row[f"rematch_{method}_converged_share"]})
     return out
 

@@ -29,12 +29,12 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import HypothesisError, NotApplicableError
-from ..field import field_from_voxel_ids
-from ..grid import FieldSettings, field_settings_from_config
+from ..field.kernel import field_from_voxel_ids
+from ..field.grid import FieldSettings, field_settings_from_config
 from ..hypotheses import BUILTINS, apply_step, validate_step
 from ..io.parquet_table import write_table
 from ..pair import RegisteredPair, read_pair
-from ..stages import canonical_json, step_name
+from ..hypotheses.steps import canonical_json, step_name
 from .neighbour_file import carry_to_stage, write_changes
 from .tags import voxel_energy
 

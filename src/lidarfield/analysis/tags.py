@@ -16,7 +16,7 @@ carry several tags; an invalid voxel carries none. The point-based tags hold whe
 From the vector and counts:
 
 - ``radial``: the vector within ``RADIAL_DEG`` of the line of sight from sensor 1 (either way).
-- ``rigid``: the field's rigid part (``field_stats.weighted_rigid_transform``) leaves a residual
+- ``rigid``: the field's rigid part (``poses.weighted_rigid_transform``) leaves a residual
   no longer than ``RIGID_RESIDUAL_SHARE`` of the vector (it explains >= 75% of its energy).
 - ``count_imbalance``: one cloud has at least ``IMBALANCE_RATIO`` times the other's points.
 
@@ -32,8 +32,9 @@ import math
 import numpy as np
 
 from ..errors import HypothesisError
-from ..grid import FieldSettings, SphericalGrid
+from ..field.grid import FieldSettings, SphericalGrid
 from ..pair import RegisteredPair
+from ..poses import weighted_rigid_transform
 
 TAGS = ("fov_edge", "near_sensor", "depth_edge", "radial", "rigid", "count_imbalance")
 POINT_SHARE = 0.1
@@ -145,8 +146,6 @@ def _radial(columns: dict[str, np.ndarray]) -> np.ndarray:
 
 
 def _rigid(columns: dict[str, np.ndarray], valid: np.ndarray) -> np.ndarray:
-    from .field_stats import weighted_rigid_transform
-
     mean1 = np.column_stack([columns[c] for c in ("x1", "y1", "z1")])
     mean2 = np.column_stack([columns[c] for c in ("x2", "y2", "z2")])
     weight = np.minimum(columns["n1"], columns["n2"]).astype(np.float64)

@@ -56,13 +56,14 @@ def add_parser(subparsers) -> None:
 
 
 def run(args) -> int:
-    from ..field import field_meta, write_field
+    from ..field.file import field_meta, write_field
     from ..analysis.field_stats import analyse_field, summary_json_safe
-    from ..grid import field_settings_from_config
+    from ..field.grid import field_settings_from_config
     from ..io import read_scan
     from ..io.atomic import write_text
     from ..pair import RegisteredPair
-    from ..poses import apply_pose, parse_pose_arg, read_pose
+    from ..poses import apply_pose, parse_pose_arg
+    from ..io.pose_files import read_pose
 
     # Everything that can fail on the user's input happens before the first file is written.
     settings = field_settings_from_config(_grid_config(args))

@@ -17,7 +17,7 @@ def add_parser(subparsers) -> None:
 
 
 def _info(args: argparse.Namespace) -> int:
-    from ..describe import describe_file
+    from ..io.describe import describe_file
 
     print(describe_file(args.file))
     return 0

@@ -145,25 +145,25 @@ def add_parser(subparsers) -> None:
 
 
 def _scan(args: argparse.Namespace) -> None:
-    from ..jobs import scan_job
+    from ..study.jobs import scan_job
 
     scan_job(args.kind, args.spec, args.out)
 
 
 def _register(args: argparse.Namespace) -> None:
-    from ..jobs import register_job
+    from ..study.jobs import register_job
 
     register_job(args.scan1, args.scan2, args.settings, args.out)
 
 
 def _mitigate(args: argparse.Namespace) -> None:
-    from ..pipeline import mitigate_stage
+    from ..study.jobs import mitigate_stage
 
     mitigate_stage(args.points_in, args.step, args.stage, args.level, args.points_out, args.removed_out)
 
 
 def _field(args: argparse.Namespace) -> None:
-    from ..pipeline import field_stage
+    from ..study.jobs import field_stage
 
     field_stage(args.points, args.removed, args.grid, args.pair, args.field_out, args.stats_out)
 
@@ -200,7 +200,7 @@ def _plotly_js(args: argparse.Namespace) -> None:
 
 
 def _plot_pair(args: argparse.Namespace) -> None:
-    from ..pipeline import read_stats
+    from ..study.summary import read_stats
     from ..plots import plot_pair
 
     plot_pair(read_stats(args.stats), args.out)
@@ -211,33 +211,33 @@ def _plot_pair(args: argparse.Namespace) -> None:
 
 
 def _summary(args: argparse.Namespace) -> None:
-    from ..pipeline import write_summary
+    from ..study.summary import write_summary
 
     write_summary(args.stats, args.parquet, args.csv, args.rematch)
 
 
 def _study_voxels(args: argparse.Namespace) -> None:
-    from ..analysis.study import write_study_voxels
+    from ..study.tables import write_study_voxels
 
     write_study_voxels(args.fields, args.out)
 
 
 def _study_tables(args: argparse.Namespace) -> None:
-    from ..analysis.study import write_study_tables
+    from ..study.tables import write_study_tables
 
     write_study_tables(args.summary, args.hypotheses_out, args.pairs_out)
 
 
 def _study_figures(args: argparse.Namespace) -> None:
     from ..plots.study import plot_study
-    from ..analysis.study import read_study_tables
+    from ..study.tables import read_study_tables
 
     t = read_study_tables(args.summary, args.study_dir)
     plot_study(t.summary, t.voxels, t.hypotheses, t.pairs, t.grid, args.out)
 
 
 def _pair_report(args: argparse.Namespace) -> None:
-    from ..pipeline import read_stats
+    from ..study.summary import read_stats
     from ..report import write_pair_page
 
     write_pair_page(args.pair, args.stage_dirs, read_stats(args.stats, args.rematch), args.out, args.plots, args.figures,
@@ -248,7 +248,7 @@ def _report(args: argparse.Namespace) -> None:
     from pathlib import Path
 
     from ..report import write_overview
-    from ..analysis.study import read_study_tables
+    from ..study.tables import read_study_tables
 
     tables = read_study_tables(args.summary, args.study_dir)
     # .../{pair}/stages/{stage}/suggestions.parquet

@@ -19,7 +19,7 @@ def add_parser(subparsers) -> None:
 
 
 def run(args) -> int:
-    from ..config import load_config
+    from ..study.config import load_config
     from ..plots import plot_stage
 
     settings = load_config(args.config, require_pairs=False).plots if args.config else {}

@@ -90,7 +90,7 @@ def _guess_arg(text: str):
 
 
 def _pose_spec(spec: str) -> np.ndarray:
-    from ..poses import read_pose
+    from ..io.pose_files import read_pose
 
     path, _, line = spec.partition("#")
     if line and not line.isdigit():
@@ -114,7 +114,12 @@ def _print_registration(pair) -> None:
 
 
 def _from_aligned(original: Path, aligned: Path, out: Path) -> int:
-    from ..registration import read_xyz_rows, translation_from_aligned_copy, translation_offsets, write_transform
+    from ..registration import (
+        read_xyz_rows,
+        translation_from_aligned_copy,
+        translation_offsets,
+        write_transform,
+    )
 
     rows_original, rows_aligned = read_xyz_rows(original), read_xyz_rows(aligned)
     T = translation_from_aligned_copy(rows_original, rows_aligned)

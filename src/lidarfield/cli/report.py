@@ -32,7 +32,7 @@ def add_parser(subparsers) -> None:
 
 
 def run(args) -> int:
-    from ..config import load_config
+    from ..study.config import load_config
     from ..report import discover, write_report
 
     study = load_config(args.config, require_pairs=False).config if args.config else {}

@@ -35,7 +35,7 @@ def add_parser(subparsers) -> None:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from ..pipeline import run_pair
+    from ..study.run import run_pair
     from ..analysis.rematch import METHOD_COLUMNS, method_rows
 
     poses = None if args.poses is None else {"topic": args.poses, **({"frame": args.pose_frame} if args.pose_frame else {})}

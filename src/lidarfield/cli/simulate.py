@@ -35,9 +35,9 @@ def add_parser(subparsers) -> None:
 
 def run(args) -> int:
     from ..io import write_scan
-    from ..scene import load_scene
-    from ..sensors import sensor_model
-    from ..simulate import simulate_scan
+    from ..simulation.scene import load_scene
+    from ..sensors.models import sensor_model
+    from ..simulation.raycast import simulate_scan
     from ..poses import pose_from_xyzrpy
 
     pose = pose_from_xyzrpy(_numbers(args.pose, 6, "--pose"))

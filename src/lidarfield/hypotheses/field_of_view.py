@@ -17,7 +17,7 @@ import numpy as np
 
 from ..errors import NotApplicableError
 from ..pair import RegisteredPair
-from ..sensors import SensorModel
+from ..sensors.models import SensorModel
 from .geometry import in_sensor_frame, sensor_pose
 from .params import doc
 

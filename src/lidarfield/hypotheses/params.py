@@ -13,6 +13,7 @@ import types
 import typing
 from typing import Any
 
+from ..checks import is_integer, is_number
 from ..errors import HypothesisError
 
 
@@ -93,10 +94,6 @@ def _plural(hint: Any) -> str:
     return {float: "numbers", int: "integers", str: "strings", bool: "true/false values"}.get(hint, type_label(hint))
 
 
-def _is_number(value: Any) -> bool:
-    return isinstance(value, (int, float)) and not isinstance(value, bool)
-
-
 def _coerce(value: Any, hint: Any, what: str) -> Any:
     """``value`` converted to ``hint`` (int -> float, list -> tuple), or a HypothesisError."""
     if _is_optional(hint):
@@ -114,9 +111,9 @@ def _coerce(value: Any, hint: Any, what: str) -> Any:
             return tuple(_coerce(v, args[0], what) for v in value)
         if len(value) == len(args):
             return tuple(_coerce(v, a, what) for v, a in zip(value, args))
-    elif hint is float and _is_number(value):
+    elif hint is float and is_number(value):
         return float(value)
-    elif hint is int and isinstance(value, int) and not isinstance(value, bool):
+    elif hint is int and is_integer(value):
         return value
     elif hint in (bool, str, dict) and isinstance(value, hint):
         return value

@@ -21,7 +21,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from ..errors import ConfigError
-from ..grid import SphericalGrid, grid_from_config
+from ..field.grid import SphericalGrid, grid_from_config
 from ..pair import RegisteredPair
 from .geometry import in_sensor_frame, ranges
 from .params import doc

@@ -18,8 +18,8 @@ from typing import NamedTuple
 
 from ..errors import InputError
 from ..scan import Scan
-from ..sensors import SensorModel, sensor_model
-from .rosbag import is_bag_folder
+from ..sensors.models import SensorModel, sensor_model
+from .rosbag.bag import is_bag_folder
 
 
 @dataclass(frozen=True)
@@ -48,19 +48,19 @@ class ScanFormat:
 FORMATS: dict[str, ScanFormat] = {
     f.name: f
     for f in (
-        ScanFormat("pcd", (".pcd",), "pcd"),
-        ScanFormat("ply", (".ply",), "ply"),
-        ScanFormat("bin", (".bin",), "kitti_bin"),
-        ScanFormat("txt", (".txt", ".xyz", ".asc"), "text"),
-        ScanFormat("csv", (".csv",), "text"),
-        ScanFormat("npy", (".npy",), "npy"),
-        ScanFormat("parquet", (".parquet", ".pq"), "scan_parquet"),
-        ScanFormat("las", (".las", ".laz"), "las"),
-        ScanFormat("mat", (".mat",), "mat", writable=False, container=True),
-        ScanFormat("pcap", (".pcap",), "pcap", writable=False, container=True, sensor_decodes=True),
-        ScanFormat("ouster", (".osf",), "ouster", writable=False, container=True),
-        ScanFormat("velodyne", (), "velodyne", writable=False, container=True, sensor_decodes=True),
-        ScanFormat("rosbag", (".bag", ".mcap", ".db3"), "rosbag", writable=False, container=True, topics=True),
+        ScanFormat("pcd", (".pcd",), "formats.pcd"),
+        ScanFormat("ply", (".ply",), "formats.ply"),
+        ScanFormat("bin", (".bin",), "formats.kitti_bin"),
+        ScanFormat("txt", (".txt", ".xyz", ".asc"), "formats.text"),
+        ScanFormat("csv", (".csv",), "formats.text"),
+        ScanFormat("npy", (".npy",), "formats.npy"),
+        ScanFormat("parquet", (".parquet", ".pq"), "formats.scan_parquet"),
+        ScanFormat("las", (".las", ".laz"), "formats.las"),
+        ScanFormat("mat", (".mat",), "formats.mat", writable=False, container=True),
+        ScanFormat("pcap", (".pcap",), "formats.pcap", writable=False, container=True, sensor_decodes=True),
+        ScanFormat("ouster", (".osf",), "formats.ouster", writable=False, container=True),
+        ScanFormat("velodyne", (), "formats.velodyne", writable=False, container=True, sensor_decodes=True),
+        ScanFormat("rosbag", (".bag", ".mcap", ".db3"), "rosbag.reader", writable=False, container=True, topics=True),
     )
 }
 

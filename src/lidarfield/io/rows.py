@@ -8,7 +8,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..scan import Scan
-from ..sensors import SensorModel
+from ..sensors.models import SensorModel
 
 
 def scan_from_rows(

@@ -1,86 +1,29 @@
 """Figures of a stage and of a pair (matplotlib, Agg) and the interactive 3-D view (plotly).
 
-``plot_stage`` writes, into ``out_dir``, the figures selected in the settings (default: all):
-``field_top``, ``field_perspective``, ``removed_top`` and ``removed_perspective`` (not for
-stage 0, which removes nothing), ``top_voxels``, ``before_after`` (when the previous stage is
-given), as PNG (+ SVG when asked and small), and ``field_3d.html``. ``plot_pair`` writes
-``stages.png`` and ``rigid_randomness.png`` from a pair's summary rows.
+``plot_stage`` writes the figures of one stage folder (:mod:`.stage`), ``plot_pair`` those of
+a pair's summary rows (:mod:`.pair_stats`). Names are imported on first use, so that the
+settings (:mod:`.settings`, read when a config is validated) come without matplotlib.
 """
 
 from __future__ import annotations
 
-import logging
-import time
-from dataclasses import replace
-from pathlib import Path
+import importlib
 
-import numpy as np
+# public name -> module that defines it
+_EXPORTS = {
+    "STAGE_FIGURES": "settings",
+    "PlotSettings": "settings",
+    "plot_settings": "settings",
+    "plot_stage": "stage",
+    "stage_figures": "stage",
+    "plot_pair": "pair_stats",
+    "write_plotly_js": "interactive",
+}
 
-from .before_after import plot_before_after
-from .common import STAGE_FIGURES, PlotSettings, background, load_stage, magnitude_norm, plot_settings, removed_xyz, resolve_magnification, view_limits
-from .field_views import magnified_tips, plot_field_perspective, plot_field_top
-from .interactive import plot_interactive, write_plotly_js
-from .pair_stats import plot_pair
-from .removed import plot_removed
-from .top_voxels import plot_top_voxels
-
-__all__ = ["STAGE_FIGURES", "PlotSettings", "plot_pair", "plot_settings", "plot_stage", "stage_figures"]
-
-log = logging.getLogger(__name__)
+__all__ = sorted(_EXPORTS)
 
 
-def stage_figures(settings: PlotSettings, level: int, has_previous: bool) -> list[str]:
-    """The figures drawn for a stage: the selected ones that show something at this level."""
-    return [
-        name for name in settings.figures
-        if not (name.startswith("removed_") and level == 0) and not (name == "before_after" and not has_previous)
-    ]
-
-
-def plot_stage(
-    stage_dir: str | Path,
-    prev_stage_dir: str | Path | None,
-    out_dir: str | Path,
-    settings: dict | None = None,
-    plotly_js: str | Path | None = None,
-) -> list[Path]:
-    """Write every figure of one stage; returns the paths written.
-
-    ``settings`` is the config's ``plots`` section. Axis limits come from the previous stage
-    when given (its points are a superset of this stage's), so that both halves of
-    ``before_after`` and the figures of consecutive stages share their axes. ``plotly_js``:
-    a shared plotly.js file for the 3-D view (embedded when None). Magnification "auto" fits
-    the stage's figures to its own largest vector and ``before_after`` to the larger of both.
-    """
-    start = time.perf_counter()
-    s = plot_settings(settings)
-    out_dir = Path(out_dir)
-    stage = load_stage(stage_dir)
-    prev = load_stage(prev_stage_dir) if prev_stage_dir is not None else None
-
-    reference = prev if prev is not None else stage
-    scene = np.vstack([background(reference.pair, s.background_points), removed_xyz(stage.removed, 1), removed_xyz(stage.removed, 2)])
-    shown = [st for st in (stage, prev) if st is not None]
-    anchors = np.vstack([st.field.tails for st in shown] + [stage.pair.origin2[None, :], np.zeros((1, 3))])
-    span = float(np.max(np.diff(view_limits(scene, anchors)[:2], axis=1)))
-    # the stage's own figures fit its own vectors; before/after shares one factor for both
-    own = replace(s, magnification=resolve_magnification(s.magnification, stage.field.max_magnitude, span))
-    both = replace(s, magnification=resolve_magnification(s.magnification, max(st.field.max_magnitude for st in shown), span))
-    tips = [magnified_tips(stage, own.magnification)] + [magnified_tips(st, both.magnification) for st in shown]
-    limits = view_limits(scene, np.vstack([anchors, *tips]))
-
-    bg = background(stage.pair, s.background_points)
-    norm = magnitude_norm(stage.field)
-    draw = {
-        "field_top": lambda: plot_field_top(stage, bg, norm, limits, out_dir, own),
-        "field_perspective": lambda: plot_field_perspective(stage, bg, norm, limits, out_dir, own),
-        "removed_top": lambda: plot_removed(stage, "top", limits, out_dir, own),
-        "removed_perspective": lambda: plot_removed(stage, "perspective", limits, out_dir, own),
-        "top_voxels": lambda: plot_top_voxels(stage, limits, out_dir, own),
-        "before_after": lambda: plot_before_after(prev, stage, limits, out_dir, both),
-    }
-    written = [path for name in stage_figures(s, stage.level, prev is not None) for path in draw[name]()]
-    if s.interactive:
-        written += plot_interactive(stage, out_dir, own, None if plotly_js is None else Path(plotly_js))
-    log.info("plotted %s: %d files in %.2f s", stage.path, len(written), time.perf_counter() - start)
-    return written
+def __getattr__(name: str):
+    if name not in _EXPORTS:
+        raise AttributeError(f"module 'lidarfield.plots' has no attribute {name!r}")
+    return getattr(importlib.import_module(f".{_EXPORTS[name]}", __name__), name)

@@ -6,11 +6,14 @@ from pathlib import Path
 
 import numpy as np
 
-from .common import PlotSettings, Stage, background, figure, magnitude_norm, save
+from .output import save
+from .settings import PlotSettings
+from .stage_data import StageData, background
+from .style import figure, magnitude_norm
 from .field_views import colour_bar, draw_field_top
 
 
-def plot_before_after(before: Stage, after: Stage, limits: np.ndarray, out_dir: Path, settings: PlotSettings) -> list[Path]:
+def plot_before_after(before: StageData, after: StageData, limits: np.ndarray, out_dir: Path, settings: PlotSettings) -> list[Path]:
     norm = magnitude_norm(before.field, after.field)
     fig = figure(16.0, 7.5, settings.dpi)
     axes = fig.subplots(1, 2, sharex=True, sharey=True)

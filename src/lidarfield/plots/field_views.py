@@ -8,31 +8,19 @@ import numpy as np
 from matplotlib.cm import ScalarMappable
 from matplotlib.colors import Normalize
 
-from .common import (
-    BACKGROUND_COLOUR,
-    MAGNITUDE_CMAP,
-    POINTS_3D,
-    PlotSettings,
-    Stage,
-    figure,
-    format_length,
-    legend,
-    mark_sensors,
-    nice_length,
-    save,
-    sensor_origins,
-    set_equal_3d,
-    set_top_axes,
-)
+from .output import save
+from .settings import PlotSettings
+from .stage_data import StageData, sensor_origins
+from .style import BACKGROUND_COLOUR, MAGNITUDE_CMAP, POINTS_3D, figure, vector_colours, format_length, legend, mark_sensors, nice_length, set_equal_3d, set_top_axes
 
 PERSPECTIVE_VIEW = dict(elev=35.0, azim=-60.0)
 
 
-def magnified_tips(stage: Stage, magnification: float) -> np.ndarray:
+def magnified_tips(stage: StageData, magnification: float) -> np.ndarray:
     return stage.field.tails + magnification * stage.field.vectors
 
 
-def draw_field_top(ax, stage: Stage, bg: np.ndarray, norm: Normalize, limits: np.ndarray, settings: PlotSettings):
+def draw_field_top(ax, stage: StageData, bg: np.ndarray, norm: Normalize, limits: np.ndarray, settings: PlotSettings):
     """Arrows (magnified) over the faint points, sensors marked, the scale arrow in a corner."""
     f = stage.field
     ax.scatter(bg[:, 0], bg[:, 1], s=0.8, c=BACKGROUND_COLOUR, alpha=0.45, lw=0, rasterized=True, label="points (both clouds)")
@@ -40,7 +28,7 @@ def draw_field_top(ax, stage: Stage, bg: np.ndarray, norm: Normalize, limits: np
     m = settings.magnification
     q = ax.quiver(
         f.tails[order, 0], f.tails[order, 1], m * f.vectors[order, 0], m * f.vectors[order, 1],
-        color=f.colours(norm)[order], angles="xy", scale_units="xy", scale=1.0,
+        color=vector_colours(f, norm)[order], angles="xy", scale_units="xy", scale=1.0,
         width=0.004, headwidth=3.5, headlength=4.5, minlength=0.5, zorder=3,
     )
     if not f.significant.all():
@@ -57,11 +45,11 @@ def draw_field_top(ax, stage: Stage, bg: np.ndarray, norm: Normalize, limits: np
     return q
 
 
-def draw_field_3d(ax, stage: Stage, bg: np.ndarray, norm: Normalize, limits: np.ndarray, settings: PlotSettings) -> None:
+def draw_field_3d(ax, stage: StageData, bg: np.ndarray, norm: Normalize, limits: np.ndarray, settings: PlotSettings) -> None:
     f = stage.field
     ax.scatter(bg[:, 0], bg[:, 1], bg[:, 2], s=0.3, c=BACKGROUND_COLOUR, alpha=0.25, lw=0, rasterized=True, **POINTS_3D)
     if len(f.magnitude):
-        colours = f.colours(norm)
+        colours = vector_colours(f, norm)
         m = settings.magnification
         # A 3-D quiver draws the shafts, then two head lines per arrow: colours in that order.
         ax.quiver(
@@ -75,7 +63,7 @@ def draw_field_3d(ax, stage: Stage, bg: np.ndarray, norm: Normalize, limits: np.
     ax.view_init(**PERSPECTIVE_VIEW)
 
 
-def stage_title(stage: Stage, what: str) -> str:
+def stage_title(stage: StageData, what: str) -> str:
     pair_name = stage.path.parent.parent.name
     f = stage.field
     return (
@@ -91,7 +79,7 @@ def colour_bar(fig, ax, norm: Normalize) -> None:
                  label="vector magnitude |mean2 − mean1| (m)")
 
 
-def plot_field_top(stage: Stage, bg: np.ndarray, norm: Normalize, limits: np.ndarray, out_dir: Path, settings: PlotSettings) -> list[Path]:
+def plot_field_top(stage: StageData, bg: np.ndarray, norm: Normalize, limits: np.ndarray, out_dir: Path, settings: PlotSettings) -> list[Path]:
     fig = figure(9.0, 7.5, settings.dpi)
     ax = fig.add_subplot()
     draw_field_top(ax, stage, bg, norm, limits, settings)
@@ -100,7 +88,7 @@ def plot_field_top(stage: Stage, bg: np.ndarray, norm: Normalize, limits: np.nda
     return save(fig, out_dir, "field_top", settings)
 
 
-def plot_field_perspective(stage: Stage, bg: np.ndarray, norm: Normalize, limits: np.ndarray, out_dir: Path, settings: PlotSettings) -> list[Path]:
+def plot_field_perspective(stage: StageData, bg: np.ndarray, norm: Normalize, limits: np.ndarray, out_dir: Path, settings: PlotSettings) -> list[Path]:
     fig = figure(9.0, 7.5, settings.dpi)
     ax = fig.add_subplot(projection="3d")
     draw_field_3d(ax, stage, bg, norm, limits, settings)

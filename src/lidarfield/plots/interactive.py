@@ -14,7 +14,8 @@ import numpy as np
 import plotly.graph_objects as go
 
 from ..io.atomic import write_text
-from .common import PlotSettings, Stage, subsample
+from .settings import PlotSettings
+from .stage_data import StageData, subsample
 
 CLOUD_RGB = {1: "rgba(214,39,40,0.45)", 2: "rgba(31,119,180,0.45)"}
 
@@ -34,7 +35,7 @@ def _z_texts(f) -> list[str]:
     return [f", z {z:.1f}" + ("" if sig else ", within noise") for z, sig in zip(f.columns["z"], f.significant)]
 
 
-def field_figure(stage: Stage, settings: PlotSettings) -> go.Figure:
+def field_figure(stage: StageData, settings: PlotSettings) -> go.Figure:
     f = stage.field
     m = settings.magnification
     fig = go.Figure()
@@ -74,7 +75,7 @@ def field_figure(stage: Stage, settings: PlotSettings) -> go.Figure:
     return fig
 
 
-def plot_interactive(stage: Stage, out_dir: Path, settings: PlotSettings, plotly_js: Path | None = None) -> list[Path]:
+def plot_interactive(stage: StageData, out_dir: Path, settings: PlotSettings, plotly_js: Path | None = None) -> list[Path]:
     """Write ``field_3d.html``: plotly.js embedded, or loaded from ``plotly_js`` by relative path."""
     path = out_dir / "field_3d.html"
     script = True if plotly_js is None else Path(os.path.relpath(plotly_js, out_dir)).as_posix()

@@ -7,7 +7,9 @@ from pathlib import Path
 import numpy as np
 
 from ..analysis.tags import TAGS
-from .common import Margins, PlotSettings, figure, legend_at_right, plot_settings, png_bytes, save
+from .output import png_bytes, save
+from .settings import PlotSettings, plot_settings
+from .style import Margins, figure, legend_at_right
 
 MAGNITUDE_SERIES = (
     ("max_magnitude", "max", "o-"),

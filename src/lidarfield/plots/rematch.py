@@ -8,7 +8,9 @@ from pathlib import Path
 import numpy as np
 
 from ..analysis.rematch import ERRORS, read_rematch
-from .common import Margins, figure, plot_settings, png_bytes, save
+from .output import save
+from .settings import plot_settings
+from .style import Margins, figure
 from .pair_stats import column
 
 # A trial where no estimate was made has a NaN error: drawn at the top of the axes, as an x.
@@ -173,7 +175,3 @@ def study_rematch_figure(rows: list[dict], methods: list[str], dpi: int):
     axes[1].set_xticks(levels, [f"{level:02d}\n{names[level]}" for level in levels], fontsize=8)
     axes[1].set_xlabel("hypothesis (stage k against stage k-1)")
     return fig
-
-
-def study_rematch_png(rows: list[dict], methods: list[str], dpi: int = 120) -> bytes:
-    return png_bytes(study_rematch_figure(rows, methods, dpi), dpi)

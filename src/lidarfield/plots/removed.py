@@ -6,26 +6,14 @@ from pathlib import Path
 
 import numpy as np
 
-from .common import (
-    CLOUD_COLOURS,
-    KEPT_COLOUR,
-    POINTS_3D,
-    PlotSettings,
-    Stage,
-    figure,
-    legend,
-    mark_sensors,
-    removed_xyz,
-    save,
-    sensor_origins,
-    set_equal_3d,
-    set_top_axes,
-    subsample,
-)
+from .output import save
+from .settings import PlotSettings
+from .stage_data import StageData, removed_xyz, sensor_origins, subsample
+from .style import CLOUD_COLOURS, KEPT_COLOUR, POINTS_3D, figure, legend, mark_sensors, set_equal_3d, set_top_axes
 from .field_views import PERSPECTIVE_VIEW
 
 
-def removed_title(stage: Stage, view: str) -> str:
+def removed_title(stage: StageData, view: str) -> str:
     pair_name = stage.path.parent.parent.name
     n1 = int(np.count_nonzero(stage.removed["cloud"] == 1))
     n2 = int(np.count_nonzero(stage.removed["cloud"] == 2))
@@ -35,7 +23,7 @@ def removed_title(stage: Stage, view: str) -> str:
     )
 
 
-def _layers(stage: Stage, n: int) -> tuple[np.ndarray, dict[int, np.ndarray]]:
+def _layers(stage: StageData, n: int) -> tuple[np.ndarray, dict[int, np.ndarray]]:
     """Kept points (subsampled) and the removed points of each cloud (all, up to ``n`` each)."""
     kept = subsample(np.vstack([stage.pair.xyz1, stage.pair.xyz2]), n)
     removed = {c: subsample(removed_xyz(stage.removed, c), n) for c in (1, 2)}
@@ -47,7 +35,7 @@ def _label(cloud: int, full: int, drawn: int) -> str:
     return f"removed from cloud {cloud} ({full}{shown})"
 
 
-def plot_removed(stage: Stage, view: str, limits: np.ndarray, out_dir: Path, settings: PlotSettings) -> list[Path]:
+def plot_removed(stage: StageData, view: str, limits: np.ndarray, out_dir: Path, settings: PlotSettings) -> list[Path]:
     """``removed_top`` (view "top") or ``removed_perspective`` (view "perspective")."""
     kept, removed = _layers(stage, settings.background_points)
     counts = {c: int(np.count_nonzero(stage.removed["cloud"] == c)) for c in (1, 2)}

@@ -21,7 +21,9 @@ from pathlib import Path
 import numpy as np
 from matplotlib.colors import Normalize
 
-from .common import MAGNITUDE_CMAP, Margins, PlotSettings, figure, png_bytes, save
+from .output import png_bytes, save
+from .settings import PlotSettings
+from .style import MAGNITUDE_CMAP, Margins, figure
 
 log = logging.getLogger(__name__)
 

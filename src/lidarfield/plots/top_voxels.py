@@ -15,8 +15,11 @@ from matplotlib.lines import Line2D
 from mpl_toolkits.mplot3d.art3d import Line3DCollection
 
 from ..errors import InputError
-from ..grid import CartesianGrid, Grid, SphericalGrid, grid_from_config
-from .common import CLOUD_COLOURS, POINTS_3D, Margins, PlotSettings, Stage, figure, legend_at_right, mark_sensors, save, sensor_origins, set_equal_3d, set_top_axes, subsample
+from ..field.grid import CartesianGrid, Grid, SphericalGrid, grid_from_config
+from .output import save
+from .settings import PlotSettings
+from .stage_data import StageData, sensor_origins, subsample
+from .style import CLOUD_COLOURS, Margins, POINTS_3D, figure, legend_at_right, mark_sensors, set_equal_3d, set_top_axes
 from .field_views import PERSPECTIVE_VIEW
 
 ARC_SAMPLES = 16
@@ -89,14 +92,14 @@ def clip_to_box(polyline: np.ndarray, limits: np.ndarray) -> np.ndarray:
     return polyline[inside]
 
 
-def stage_grid(stage: Stage) -> Grid:
+def stage_grid(stage: StageData) -> Grid:
     grid_config = stage.field.meta.get("grid")
     if not isinstance(grid_config, dict):
         raise InputError("field metadata has no 'grid' settings: cannot draw its voxels", stage.path / "field.parquet")
     return grid_from_config(grid_config)
 
 
-def plot_top_voxels(stage: Stage, limits: np.ndarray, out_dir: Path, settings: PlotSettings) -> list[Path]:
+def plot_top_voxels(stage: StageData, limits: np.ndarray, out_dir: Path, settings: PlotSettings) -> list[Path]:
     f = stage.field
     grid = stage_grid(stage)
     k = min(settings.top_k, len(f.magnitude))

@@ -8,9 +8,10 @@ import numpy as np
 
 from ..errors import RegistrationError
 from ..pair import RegisteredPair
-from ..poses import apply_pose, pose_error, read_pose, relative_pose
+from ..poses import apply_pose, pose_error, relative_pose
+from ..io.pose_files import read_pose
 from ..scan import Scan
-from ..sensor_fit import sensor_fit
+from ..sensors.fit import sensor_fit
 from .settings import MATCHING_METHODS, RegistrationSettings, parse_settings
 
 # Fewer points than this after downsampling cannot constrain six degrees of freedom robustly.

@@ -12,8 +12,10 @@ from pathlib import Path
 
 import numpy as np
 
+from ..checks import is_number
 from ..errors import ConfigError, InputError
-from ..poses import parse_pose_arg, read_pose
+from ..poses import parse_pose_arg
+from ..io.pose_files import read_pose
 
 FIXED_METHODS = ("identity", "truth", "transform")
 MATCHING_METHODS = ("icp", "icp_point_to_plane", "gicp", "ndt")
@@ -96,7 +98,7 @@ def _guess(value, base: Path) -> np.ndarray | str:
 def _check_params(params: dict) -> None:
     positive = ("voxel_m", "max_correspondence_m", "normal_radius_m", "fitness_distance_m")
     for key in positive:
-        if not finite_number(params[key]) or params[key] < 0 or (params[key] == 0 and key != "voxel_m"):
+        if not is_number(params[key], finite=True) or params[key] < 0 or (params[key] == 0 and key != "voxel_m"):
             raise ConfigError(f"register.{key}: expected a positive number (voxel_m may be 0: no downsampling), got {params[key]!r}")
     for key in ("max_iterations", "normal_max_nn"):
         if not isinstance(params[key], int) or params[key] < 1:
@@ -104,17 +106,12 @@ def _check_params(params: dict) -> None:
     if not isinstance(params["ndt_min_points_per_voxel"], int) or params["ndt_min_points_per_voxel"] < 4:
         raise ConfigError("register.ndt_min_points_per_voxel: expected an integer >= 4 (Open3D's minimum)")
     resolution = params["ndt_resolution_m"]
-    resolution = [resolution] if finite_number(resolution) else resolution
-    if not isinstance(resolution, list) or not resolution or not all(finite_number(r) and r > 0 for r in resolution):
+    resolution = [resolution] if is_number(resolution, finite=True) else resolution
+    if not isinstance(resolution, list) or not resolution or not all(is_number(r, finite=True) and r > 0 for r in resolution):
         raise ConfigError(f"register.ndt_resolution_m: expected a positive number or a list of them, got {resolution!r}")
     params["ndt_resolution_m"] = [float(r) for r in resolution]
     for key in ("min_range_m", "relative_fitness", "relative_rmse", "gicp_epsilon", "ndt_outlier_threshold"):
-        if not finite_number(params[key]) or params[key] < 0:
+        if not is_number(params[key], finite=True) or params[key] < 0:
             raise ConfigError(f"register.{key}: expected a non-negative number, got {params[key]!r}")
-    if not finite_number(params["min_fitness"]) or not 0 <= params["min_fitness"] <= 1:
+    if not is_number(params["min_fitness"], finite=True) or not 0 <= params["min_fitness"] <= 1:
         raise ConfigError(f"register.min_fitness: expected a number in [0, 1], got {params['min_fitness']!r}")
-
-
-def finite_number(value) -> bool:
-    """A real number (not a bool), finite."""
-    return isinstance(value, (int, float)) and not isinstance(value, bool) and np.isfinite(value)

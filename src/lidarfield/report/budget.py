@@ -14,6 +14,7 @@ from dataclasses import dataclass
 from functools import partial
 from pathlib import Path
 
+from ..defaults import default
 from ..io.atomic import write_text
 from ..plots.png import compact_file
 from .page import embedded_image, esc, linked_image, missing_image, page, relative_href
@@ -59,9 +60,7 @@ def utf8_len(text: str) -> int:
 
 def default_max_mb() -> float:
     """The config schema's default of ``report.max_mb`` (the schema is the one place it is set)."""
-    from ..config import schema
-
-    return schema()["definitions"]["report"]["properties"]["max_mb"]["default"]
+    return default("report", "max_mb")
 
 
 def budget_mb(study: dict | None, max_mb: float | None) -> float:

@@ -11,29 +11,11 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-import pandas as pd
-
 from ..errors import InputError
-from ..pipeline import read_stats
-from ..stages import level_of
+from ..study.summary import read_stats, read_summary_frame
+from ..layout import level_of
 
 LIST_COLUMNS = ("rigid_translation_m",)
-
-
-def read_summary_frame(path: Path) -> pd.DataFrame:
-    """A summary table (``.parquet`` or ``.csv``) with at least its 'pair' and 'stage' columns."""
-    if not path.is_file():
-        raise InputError("file not found", path)
-    reader = pd.read_csv if path.suffix == ".csv" else pd.read_parquet
-    try:
-        df = reader(path)
-    except Exception as e:  # pyarrow and pandas raise many types for a bad file
-        raise InputError(f"not a readable summary table ({e})", path) from None
-    if not {"pair", "stage"} <= set(df.columns):
-        raise InputError(f"summary table without 'pair' and 'stage' columns (has {list(df.columns)})", path)
-    if "level" not in df.columns:
-        df["level"] = [level_of(str(s)) or 0 for s in df["stage"]]
-    return df
 
 
 def read_summary(folder: Path) -> list[dict] | None:

@@ -15,7 +15,7 @@ from __future__ import annotations
 import logging
 from pathlib import Path
 
-from ..analysis.study import compute_study_tables
+from ..study.tables import compute_study_tables
 from .overview import PAIR_PAGE, write_overview
 from .pair_page import write_pair_page
 

@@ -20,7 +20,7 @@ import yaml
 from .. import __version__
 from ..io.atomic import write_text
 from ..plots.study import StudyFigure, study_figures
-from ..analysis.study import StudyTables
+from ..study.tables import StudyTables
 from .budget import MB, budget_mb, utf8_len
 from .page import esc, image, image_file, link, page, table
 from .pair_page import DPI, findings_parts, registration_problem

@@ -16,10 +16,10 @@ from pathlib import Path
 from .. import __version__
 from ..analysis.findings import findings_items, stage_findings
 from ..plots import stage_figures
-from ..plots.common import PlotSettings, plot_settings
+from ..plots.settings import PlotSettings, plot_settings
 from ..plots.pair_stats import pair_figure_png
 from ..plots.png import compact_png
-from ..stages import level_of
+from ..layout import level_of
 from .budget import Figure, Note, budget_mb, file_figure, write_within_budget
 from .page import esc, relative_href, table
 from .rematch import pair_rematch_table

@@ -4,7 +4,7 @@ field but make matching worse shown as such."""
 
 from __future__ import annotations
 
-from ..plots.common import png_bytes
+from ..plots.output import png_bytes
 from ..plots.rematch import ABSOLUTE_CHANGE_M, RELATIVE_CHANGE, hypothesis_effects, study_rematch_figure
 from ..analysis.rematch import METHOD_COLUMNS, method_rows
 from .page import image, table

@@ -1,0 +1,118 @@
+"""A plain reference for the field kernel: the grid's bins written out in degrees, and a pandas
+groupby over them.
+
+Slow and obvious on purpose, and independent of ``grid.assign``'s arithmetic and of the
+kernel's sums of products: covariances come from pandas' own ``cov`` and ``se`` from a plain
+loop over voxels with 3x3 matrices. The tests check ``field.discrepancy_field`` (binning,
+aggregation, se and z) against it and the benchmark times the kernel against it.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+from .grid import CARTESIAN_BITS, CARTESIAN_OFFSET, CartesianGrid, FieldSettings, SphericalGrid
+from .significance import SPREAD_FLOOR_M, SPREAD_MIN_POINTS
+
+
+def discrepancy_field_reference(
+    xyz1: np.ndarray, xyz2: np.ndarray, settings: FieldSettings, origin=(0.0, 0.0, 0.0)
+) -> dict[str, np.ndarray]:
+    """Same contract as ``field.discrepancy_field``, computed with a pandas groupby."""
+    grid = settings.grid
+    return field_from_voxel_ids_reference(
+        plain_voxel_ids(grid, xyz1, origin), xyz1, plain_voxel_ids(grid, xyz2, origin), xyz2, settings
+    )
+
+
+def plain_voxel_ids(grid: SphericalGrid | CartesianGrid, xyz: np.ndarray, origin=(0.0, 0.0, 0.0)) -> np.ndarray:
+    """The voxel id of each point (-1 outside the grid), by the grid's definition in degrees."""
+    d = np.asarray(xyz, dtype=np.float64) - np.asarray(origin, dtype=np.float64)
+    if isinstance(grid, CartesianGrid):
+        cell = np.floor((d - np.asarray(grid.origin)) / grid.cell_m)
+        inside = np.all((cell >= -CARTESIAN_OFFSET) & (cell < CARTESIAN_OFFSET), axis=1)
+        index = np.where(inside[:, None], cell, 0).astype(np.int64) + CARTESIAN_OFFSET
+        ids = index[:, 0] | (index[:, 1] << CARTESIAN_BITS) | (index[:, 2] << (2 * CARTESIAN_BITS))
+        return np.where(inside, ids, -1)
+    azimuth = np.degrees(np.arctan2(d[:, 1], d[:, 0]))
+    elevation = np.degrees(np.arctan2(d[:, 2], np.hypot(d[:, 0], d[:, 1])))
+    lo, hi = grid.elevation_deg
+    inside = (elevation >= lo) & (elevation <= hi)  # False for NaN points
+    az = np.floor(((azimuth - grid.azimuth_offset_deg) % 360.0) / (360.0 / grid.azimuth_bins))
+    az = np.where(inside, az, 0).astype(np.int64) % grid.azimuth_bins
+    el = np.minimum(np.floor((elevation - lo) / ((hi - lo) / grid.elevation_bins)), grid.elevation_bins - 1)
+    ids = az + grid.azimuth_bins * np.where(inside, el, 0).astype(np.int64)
+    if grid.range_edges_m is not None:
+        edges = np.asarray(grid.range_edges_m, dtype=np.float64)
+        r = np.linalg.norm(d, axis=1)
+        inside &= (r >= edges[0]) & (r <= edges[-1])
+        shell = np.minimum(np.searchsorted(edges, r, side="right") - 1, len(edges) - 2)
+        ids = ids + grid.azimuth_bins * grid.elevation_bins * np.where(inside, shell, 0)
+    return np.where(inside, ids, -1)
+
+
+def field_from_voxel_ids_reference(
+    ids1: np.ndarray, xyz1: np.ndarray, ids2: np.ndarray, xyz2: np.ndarray, settings: FieldSettings
+) -> dict[str, np.ndarray]:
+    """Same contract as ``field.field_from_voxel_ids``, computed with a pandas groupby."""
+    grid = settings.grid
+    per_cloud, covariances = [], []
+    for k, xyz, ids in ((1, xyz1, ids1), (2, xyz2, ids2)):
+        frame = pd.DataFrame(np.asarray(xyz, dtype=np.float64), columns=["x", "y", "z"])
+        frame["voxel"] = ids
+        frame = frame[frame["voxel"] >= 0]
+        grouped = frame.groupby("voxel").agg(
+            **{f"n{k}": ("x", "size"), f"x{k}": ("x", "mean"), f"y{k}": ("y", "mean"), f"z{k}": ("z", "mean")}
+        )
+        per_cloud.append(grouped)
+        covariances.append(_covariances(frame))
+    table = per_cloud[0].join(per_cloud[1], how="outer").sort_index()
+    table[["n1", "n2"]] = table[["n1", "n2"]].fillna(0).astype(np.int64)
+
+    valid = (table["n1"] >= settings.min_points) & (table["n2"] >= settings.min_points)
+    for out, a, b in (("u", "x2", "x1"), ("v", "y2", "y1"), ("w", "z2", "z1")):
+        table[out] = table[a] - table[b]
+        if settings.max_component_m is not None:
+            valid &= table[out].abs() <= settings.max_component_m
+    for out in ("u", "v", "w"):
+        table.loc[~valid, out] = np.nan
+    table["magnitude"] = np.sqrt(table["u"] ** 2 + table["v"] ** 2 + table["w"] ** 2)
+    table["valid"] = valid
+    table["se"] = [_standard_error(row, *covariances) if row.valid else np.nan for row in table.itertuples()]
+    table["z"] = table["magnitude"] / table["se"]
+
+    voxel = table.index.to_numpy(dtype=np.int64)
+    columns = {"voxel": voxel, **grid.bins(voxel)}
+    for name in ("n1", "n2", "x1", "y1", "z1", "x2", "y2", "z2", "u", "v", "w", "magnitude", "se", "z", "valid"):
+        columns[name] = table[name].to_numpy()
+    return columns
+
+
+def _covariances(frame: pd.DataFrame) -> dict[int, np.ndarray]:
+    """voxel -> 3x3 sample covariance (ddof 1; NaN for one point), two-pass: products of
+    coordinates about their group's mean, summed per group."""
+    centred = frame[["x", "y", "z"]] - frame.groupby("voxel")[["x", "y", "z"]].transform("mean")
+    products = pd.DataFrame({"voxel": frame["voxel"]})
+    for a in "xyz":
+        for b in "xyz":
+            products[a + b] = centred[a] * centred[b]
+    grouped = products.groupby("voxel")
+    covariance = grouped.sum().div(grouped.size() - 1, axis=0).replace([np.inf, -np.inf], np.nan)
+    return dict(zip(covariance.index, covariance.to_numpy().reshape(-1, 3, 3)))
+
+
+def _standard_error(row, covariance1: dict, covariance2: dict) -> float:
+    """se of one voxel's vector along its direction: sqrt(d^T (S1/n1 + S2/n2) d) / |d|, with a
+    cloud of fewer than SPREAD_MIN_POINTS points borrowing the other's S, plus the floor."""
+    d = np.array([row.u, row.v, row.w])
+    own = [row.n1 >= SPREAD_MIN_POINTS, row.n2 >= SPREAD_MIN_POINTS]
+    if not np.all(np.isfinite(d)) or not any(own):
+        return np.nan
+    spreads = [c[row.Index] if ok else None for c, ok in zip((covariance1, covariance2), own)]
+    spread1 = spreads[0] if own[0] else spreads[1]
+    spread2 = spreads[1] if own[1] else spreads[0]
+    combined = spread1 / row.n1 + spread2 / row.n2
+    length = np.linalg.norm(d)
+    along = d @ combined @ d / length**2 if length > 0 else np.trace(combined) / 3
+    return float(np.sqrt(max(along, 0.0) + SPREAD_FLOOR_M**2 * (1 / row.n1 + 1 / row.n2)))

@@ -1,0 +1,121 @@
+"""The workflow's jobs, file in, file out: a scan (simulated or recorded), the registered
+pair, a stage's points (mitigate) and its field with its summary row.
+
+Each job reads what the config resolved for it (a scan spec, the pair's ``register``
+setting, one stack entry, the grid) and writes its outputs whole and atomically, so a failed
+job leaves nothing behind. ``lidarfield run`` calls the same functions for one pair.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+from pathlib import Path
+
+import numpy as np
+
+from ..analysis.field_stats import analyse_field, summary_json_safe
+from ..field.file import field_meta, write_field
+from ..field.grid import field_settings_from_config
+from ..io import read_scan, write_scan
+from ..io.atomic import write_text
+from ..io.parquet_table import read_table, write_table
+from ..pair import read_pair, write_pair
+from ..scan import Scan
+from ..sensors.fit import log_fit
+from ..sensors.models import sensor_model
+from .stack import Stage, initial_stage, next_stage
+from .summary import summary_row
+
+log = logging.getLogger(__name__)
+
+
+def simulated_scan(spec: dict) -> Scan:
+    """Ray-cast one scan as a :class:`ScanSpec` of kind ``simulated`` describes it."""
+    from ..simulation.scene import load_scene
+    from ..simulation.raycast import simulate_scan
+
+    return simulate_scan(
+        load_scene(spec["scene"]),
+        sensor_model(spec["sensor"]),
+        np.asarray(spec["pose"], dtype=float),
+        time_s=spec["time_s"],
+        seed=spec["seed"],
+        range_noise_m=spec["range_noise_m"],
+        dropout=spec["dropout"],
+        max_range_m=spec["max_range_m"],
+        rolling_shutter=spec["rolling_shutter"],
+        linear_velocity_mps=spec["velocity_mps"],
+        angular_velocity_rps=spec["angular_velocity_rps"],
+    )
+
+
+def recorded_scan(spec: dict) -> Scan:
+    """Read one recorded scan as a :class:`ScanSpec` of kind ``recorded`` describes it."""
+    scan = read_scan(spec["path"], format=spec["format"], sensor=spec["sensor"], poses=spec.get("poses"))
+    if spec["pose"] is not None:
+        scan.pose = np.asarray(spec["pose"], dtype=float)
+    return scan
+
+
+def scan_job(kind: str, spec: dict, out: str | Path) -> None:
+    scan = simulated_scan(spec) if kind == "simulated" else recorded_scan(spec)
+    log.info("%s scan: %d points (%d invalid rows dropped) -> %s", kind, len(scan), scan.dropped_invalid, out)
+    log_fit(scan.xyz, scan.sensor, spec.get("path") or str(out))
+    write_scan(scan, out)
+
+
+def register_job(scan1: str | Path, scan2: str | Path, settings, out: str | Path) -> None:
+    from ..registration import register_pair
+
+    pair = register_pair(read_scan(scan1), read_scan(scan2), settings)
+    reg = pair.registration
+    log.info("registration %s: %s", reg.get("method"), {k: v for k, v in reg.items() if k != "method"})
+    if reg.get("warning"):
+        log.warning("registration of %s to %s: %s", scan2, scan1, reg["warning"])
+    write_pair(out, pair)
+
+
+def write_stage(stage: Stage, stage_id: str, points_out: str | Path, removed_out: str | Path) -> None:
+    """The stage's survivors and removed points, each file with the stage's metadata."""
+    meta = stage.metadata(stage_id)
+    write_pair(points_out, stage.pair, meta)
+    write_table(removed_out, stage.removed_columns(), {**stage.removed.metadata(), **meta})
+
+
+def mitigate_stage(
+    points_in: str | Path,
+    step: dict | None,
+    stage_id: str,
+    level: int,
+    points_out: str | Path,
+    removed_out: str | Path,
+    base_dir: str | Path = ".",
+    study_grid: dict | None = None,
+) -> None:
+    """Stage ``level``: apply ``step`` to the points of ``points_in`` (the previous stage's, or
+    the registered pair for stage 0, where ``step`` is None and nothing is removed)."""
+    pair, _ = read_pair(points_in)
+    stage = initial_stage(pair) if step is None else next_stage(pair, step, level, base_dir, study_grid)
+    log.info("stage %s: removed %d + %d points", stage_id, stage.removed1, stage.removed2)
+    write_stage(stage, stage_id, points_out, removed_out)
+
+
+def field_stage(
+    points_path: str | Path,
+    removed_path: str | Path,
+    grid_section: dict,
+    pair_name: str,
+    field_out: str | Path,
+    stats_out: str | Path,
+) -> dict:
+    """The field of a stage's survivors and its summary row (``stats.json``); returns the row."""
+    pair, meta = read_pair(points_path)
+    removed, _ = read_table(removed_path, columns=("cloud",))
+    settings = field_settings_from_config(grid_section)
+    columns, statistics = analyse_field(pair, settings)
+    statistics = summary_json_safe(statistics)
+    write_field(field_out, columns, field_meta(settings, statistics, stage=meta.get("stage")))
+    row = summary_row(pair_name, pair, meta, removed["cloud"], statistics)
+    write_text(stats_out, json.dumps(row, indent=1) + "\n")
+    return row

@@ -1,0 +1,211 @@
+"""A study's pairs and scans, resolved from its ``pairs`` and ``sequences`` sections.
+
+Every scan of the study becomes a :class:`ScanSpec` (the JSON spec its simulate or ingest job
+reads, hashed into the stage ids) and every pair a :class:`PairSpec`; sequences expand into
+consecutive pairs. Files, sensors and registration settings are checked here, so a bad one
+fails before any job runs.
+"""
+
+from __future__ import annotations
+
+import glob
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import ConfigError, LidarfieldError
+from ..poses import pose_from_xyzrpy
+
+
+@dataclass(frozen=True)
+class ScanSpec:
+    """One scan of the study: simulated from a scene, or read from a file."""
+
+    id: str  # unique in the study; the scan's file is results/scans/{kind}/{id}.parquet
+    kind: str  # "simulated" | "recorded"
+    spec: dict  # JSON-able settings of the simulate or ingest job
+
+
+@dataclass(frozen=True)
+class PairSpec:
+    name: str
+    scan1: ScanSpec
+    scan2: ScanSpec
+    register: str | dict
+
+    def inputs(self) -> dict:
+        """What ``hash_0`` of the pair's stage ids covers."""
+        return {"scan1": self.scan1.spec, "scan2": self.scan2.spec, "register": self.register}
+
+
+def study_pairs(config: dict, base_dir: Path) -> dict[str, PairSpec]:
+    """The pairs of a validated config: its ``pairs``, then the pairs of its ``sequences``."""
+    pairs: dict[str, PairSpec] = {}
+    for name, entry in config["pairs"].items():
+        pairs[name] = _pair(name, entry, base_dir)
+    for name, entry in config["sequences"].items():
+        for pair in _sequence_pairs(name, entry, base_dir):
+            if pair.name in pairs:
+                raise ConfigError(f"sequences.{name}: pair name {pair.name!r} is also a pair of 'pairs'")
+            pairs[pair.name] = pair
+    return pairs
+
+
+def _existing_file(path: str, key: str, base_dir: Path) -> str:
+    """A scan reference ``file``, ``file#k`` or ``bag#/topic#k`` whose file (or bag folder) exists."""
+    from ..io.rosbag.bag import is_bag_folder
+
+    file = base_dir / path.split("#", 1)[0]
+    if not (file.is_file() or is_bag_folder(file)):
+        raise ConfigError(f"{key}: file not found: {file}")
+    return path
+
+
+def _sensor(setting, key: str, base_dir: Path):
+    """A scan's sensor setting (preset, YAML file, model, or none), checked now so that a bad
+    one fails before any job."""
+    from ..sensors.models import sensor_model
+
+    if isinstance(setting, str) and setting.endswith((".yaml", ".yml")):
+        _existing_file(setting, f"{key}.sensor", base_dir)
+        setting = str(base_dir / setting)
+    try:
+        sensor_model(setting)
+    except LidarfieldError as e:
+        raise ConfigError(f"{key}.sensor: {e}") from None
+
+
+def _register(setting, key: str, base_dir: Path):
+    """A pair's ``register`` setting, checked now so that a bad one fails before any job."""
+    from ..registration.settings import parse_settings
+
+    if isinstance(setting, dict) and "transform" in setting:
+        _existing_file(setting["transform"], f"{key}.register.transform", base_dir)
+    try:
+        parse_settings(setting, base_dir)
+    except LidarfieldError as e:
+        raise ConfigError(f"{key}.{e}") from None
+    return setting
+
+
+def _rounded(values) -> list:
+    # Specs are hashed into stage ids: rounding keeps trigonometric last-bit noise out of them.
+    return np.asarray(values, dtype=float).round(12).tolist()
+
+
+def _simulated_scan(scan_id: str, sim: dict, pose, time_s: float, velocity, angular_velocity) -> ScanSpec:
+    spec = {
+        "scene": sim["scene"],
+        "sensor": sim["sensor"],
+        "pose": _rounded(pose),
+        "time_s": float(time_s),
+        "velocity_mps": _rounded(velocity),
+        "angular_velocity_rps": _rounded(angular_velocity),
+        **sim["options"],
+    }
+    return ScanSpec(scan_id, "simulated", spec)
+
+
+def recorded_scan_spec(path: str, format: str | None = None, sensor=None, pose=None, poses: dict | None = None) -> dict:
+    """The spec of a recorded scan, as the ingest job reads it and stage ids hash it: the one
+    place it is built, for a study's pairs and for ``lidarfield run`` (equal inputs, equal ids).
+    ``poses`` ({topic, frame}) takes the scan's pose from a topic of its bag when it is read."""
+    spec = {"path": path, "format": format, "sensor": sensor, "pose": pose}
+    if isinstance(poses, dict):
+        spec["poses"] = poses
+    return spec
+
+
+def _recorded_scan(scan_id: str, entry: dict, path: str, pose=None) -> ScanSpec:
+    spec = recorded_scan_spec(path, entry.get("format"), entry.get("sensor"), pose, entry.get("poses"))
+    return ScanSpec(scan_id, "recorded", spec)
+
+
+def _pair(name: str, entry: dict, base_dir: Path) -> PairSpec:
+    key = f"pairs.{name}"
+    if "simulate" in entry:
+        sim = _checked_simulation(entry["simulate"], f"{key}.simulate", base_dir)
+        still = [[0.0, 0.0, 0.0]] * 2
+        scans = [
+            _simulated_scan(
+                f"{name}-{i + 1}",
+                sim,
+                pose_from_xyzrpy(sim[f"pose{i + 1}"]),
+                sim["time_s"][i],
+                sim.get("velocity_mps", still)[i],
+                sim.get("angular_velocity_rps", still)[i],
+            )
+            for i in (0, 1)
+        ]
+    else:
+        _sensor(entry.get("sensor"), key, base_dir)
+        scans = [
+            _recorded_scan(f"{name}-{i}", entry, _existing_file(entry[f"scan{i}"], f"{key}.scan{i}", base_dir))
+            for i in (1, 2)
+        ]
+    return PairSpec(name, scans[0], scans[1], _register(entry["register"], key, base_dir))
+
+
+def _checked_simulation(sim: dict, key: str, base_dir: Path) -> dict:
+    """A ``simulate`` section whose sensor and scene file (a built-in scene is the schema's
+    business) are checked."""
+    _sensor(sim["sensor"], key, base_dir)
+    if sim["scene"].endswith((".yaml", ".yml")):
+        _existing_file(sim["scene"], f"{key}.scene", base_dir)
+    return sim
+
+
+def _sequence_pairs(name: str, entry: dict, base_dir: Path) -> list[PairSpec]:
+    key = f"sequences.{name}"
+    scans = (
+        _simulated_sequence(name, entry, base_dir) if "simulate" in entry else _recorded_sequence(name, entry, base_dir)
+    )
+    register = _register(entry["register"], key, base_dir)
+    stride = entry["stride"]
+    return [
+        PairSpec(f"{name}-{i:03d}", scans[j], scans[j + stride], register)
+        for i, j in enumerate(range(0, len(scans) - stride, stride))
+    ]
+
+
+def _simulated_sequence(name: str, entry: dict, base_dir: Path) -> list[ScanSpec]:
+    from ..simulation.trajectory import arc_trajectory
+
+    sim = _checked_simulation(entry["simulate"], f"sequences.{name}.simulate", base_dir)
+    rate_hz = sim["trajectory"]["rate_hz"]
+    # The schema's trajectory keys are arc_trajectory's parameters.
+    return [
+        _simulated_scan(f"{name}-s{k:03d}", sim, pose, k / rate_hz, velocity, angular_velocity)
+        for k, (pose, velocity, angular_velocity) in enumerate(arc_trajectory(**sim["trajectory"]))
+    ]
+
+
+def _recorded_sequence(name: str, entry: dict, base_dir: Path) -> list[ScanSpec]:
+    from ..io import scan_count
+    from ..io.pose_files import read_kitti_poses
+
+    key = f"sequences.{name}.scans"
+    _sensor(entry.get("sensor"), f"sequences.{name}", base_dir)
+    scans = entry["scans"]
+    if isinstance(scans, list):
+        files = [_existing_file(s, key, base_dir) for s in scans]
+    elif any(ch in scans for ch in "*?["):
+        files = sorted(str(Path(p).relative_to(base_dir)) for p in glob.glob(str(base_dir / scans)))
+        if not files:
+            raise ConfigError(f"{key}: no file matches {scans!r} (relative to {base_dir})")
+    else:
+        _existing_file(scans, key, base_dir)
+        container = scans if entry.get("topic") is None else f"{scans}#{entry['topic']}"
+        files = [f"{container}#{k}" for k in range(scan_count(base_dir / container, sensor=entry.get("sensor")))]
+    last = len(files) - 1 if entry["last"] is None else entry["last"]
+    if not entry["first"] <= last < len(files):
+        raise ConfigError(f"sequences.{name}: first/last ({entry['first']}, {last}) outside the {len(files)} scans")
+    poses = None
+    if isinstance(entry.get("poses"), str):
+        _existing_file(entry["poses"], f"sequences.{name}.poses", base_dir)
+        poses = read_kitti_poses(base_dir / entry["poses"], expected=len(files))
+    return [
+        _recorded_scan(f"{name}-s{k:03d}", entry, files[k], None if poses is None else poses[k].tolist())
+        for k in range(entry["first"], last + 1)
+    ]

@@ -1,0 +1,124 @@
+"""One pair through the whole stack of a study config, without Snakemake (``lidarfield run``):
+the same jobs as the workflow's, in one process, into one folder."""
+
+from __future__ import annotations
+
+import json
+import logging
+from pathlib import Path
+
+from ..analysis.neighbour_file import write_neighbours
+from ..analysis.suggest import suggestions, write_suggestions
+from ..errors import ConfigError, InputError
+from ..io import read_scan, write_scan
+from ..io.atomic import write_text
+from ..pair import write_pair
+from ..sensors.fit import log_fit
+from .jobs import field_stage, write_stage
+from .pairs import recorded_scan_spec
+from .stack import apply_stack
+from .stage_ids import stage_ids
+from .summary import read_stats, write_summary
+
+log = logging.getLogger(__name__)
+
+# Marks a folder written by ``lidarfield run``: only such a folder (or an empty one) is reused.
+RUN_MARKER = ".lidarfield-run.json"
+
+
+def registration_settings(register: str | None = None, transform: str | Path | None = None) -> str | dict:
+    """The register setting of ``--register METHOD`` / ``--transform FILE`` (identity if neither)."""
+    if register is not None and transform is not None:
+        raise ConfigError("give either a registration method or a transform file, not both")
+    if transform is not None:
+        return {"transform": str(transform)}
+    if register in (None, "identity", "truth"):
+        return register or "identity"
+    return {"method": register}
+
+
+def check_out_dir(out_dir: str | Path) -> Path:
+    """``out_dir`` if it is new, empty, or written by an earlier ``lidarfield run``."""
+    out_dir = Path(out_dir)
+    if out_dir.exists() and not out_dir.is_dir():
+        raise InputError("the output folder is a file", out_dir)
+    if out_dir.is_dir() and any(out_dir.iterdir()) and not (out_dir / RUN_MARKER).is_file():
+        raise InputError(
+            f"the output folder is not empty and was not written by lidarfield run (no {RUN_MARKER}); "
+            "choose a new or empty folder",
+            out_dir,
+        )
+    return out_dir
+
+
+def run_pair(
+    scan1: str | Path,
+    scan2: str | Path,
+    config_path: str | Path,
+    out_dir: str | Path,
+    register: str | None = None,
+    transform: str | Path | None = None,
+    sensor: str | None = None,
+    poses: dict | None = None,
+) -> list[dict]:
+    """One pair through the whole stack of a study config, without Snakemake.
+
+    ``poses`` ({"topic", "frame"}) takes both scans' poses from a topic of their ROS bag.
+
+    Everything that can fail on the user's input (config, scans, registration, every
+    hypothesis) runs before the first file is written, so a failure leaves no stage output.
+    Returns the summary rows of all stages (also in ``out_dir/summary.parquet`` and ``.csv``).
+    """
+    from .config import load_config
+
+    out_dir = check_out_dir(out_dir)
+    study = load_config(config_path, require_pairs=False)
+    settings = registration_settings(register, transform)
+    scans = [read_scan(path, sensor=sensor, poses=poses) for path in (scan1, scan2)]
+    for path, scan in zip((scan1, scan2), scans):
+        log.info("read %s: %d points (%d invalid rows dropped)", path, len(scan), scan.dropped_invalid)
+        log_fit(scan.xyz, scan.sensor, str(path))
+    from ..registration import register_pair  # imports Open3D: only where a pair is registered
+
+    pair = register_pair(scans[0], scans[1], settings)
+    reg = pair.registration
+    log.info("registered by %s: fitness %.3f, converged %s", reg.get("method"), reg.get("fitness", float("nan")), reg.get("converged"))
+    candidates = [study.candidates(level) for level in range(len(study.hypotheses) + 1)]
+    stages, tables = [], []
+    for stage in apply_stack(pair, study.hypotheses, study.base_dir, study.grid_section):
+        log.info("stage %d (%s): removed %d + %d points", stage.level, stage.name, stage.removed1, stage.removed2)
+        stages.append(stage)
+        # Candidates run before any file is written too (a plugin candidate can fail).
+        tables.append(suggestions(stage.pair, study.grid, candidates[stage.level], study.base_dir, study.grid_section, study.suggest is None))
+
+    # The same inputs as a config pair {scan1, scan2, sensor, register}: equal stage ids.
+    scan_specs = [recorded_scan_spec(str(path), sensor=sensor, poses=poses) for path in (scan1, scan2)]
+    inputs = {"scan1": scan_specs[0], "scan2": scan_specs[1], "register": settings}
+    ids = stage_ids(inputs, study.hypotheses, study.base_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    run = {
+        "scan1": str(scan1), "scan2": str(scan2), "config": str(config_path), "register": settings, "sensor": sensor,
+        "poses": poses,
+    }  # fmt: skip
+    write_text(out_dir / RUN_MARKER, json.dumps({**run, "stages": ids}, indent=1) + "\n")
+    write_scan(scans[0], out_dir / "scan1.parquet")
+    write_scan(scans[1], out_dir / "scan2.parquet")
+    write_pair(out_dir / "registered.parquet", pair)
+    write_neighbours(out_dir / "neighbours.parquet", pair)  # what stage 0's suggestions searched
+    pair_name = out_dir.resolve().name
+    folders = [out_dir / "stages" / stage_id for stage_id in ids]
+    for stage, stage_id, folder, table in zip(stages, ids, folders, tables):
+        write_stage(stage, stage_id, folder / "points.parquet", folder / "removed.parquet")
+        field_stage(
+            folder / "points.parquet", folder / "removed.parquet", study.grid_section, pair_name,
+            folder / "field.parquet", folder / "stats.json",
+        )  # fmt: skip
+        write_suggestions(folder / "suggestions.parquet", table, stage_id, candidates[stage.level], study.grid_section)
+        if study.rematch:
+            from ..analysis.rematch import rematch_stage
+
+            rematch_stage(folder / "points.parquet", study.rematch, folder / "rematch.parquet")
+    stats = [folder / "stats.json" for folder in folders]
+    rematched = [folder / "rematch.parquet" for folder in folders] if study.rematch else []
+    write_summary(stats, out_dir / "summary.parquet", out_dir / "summary.csv", rematched)
+    return read_stats(stats, rematched)

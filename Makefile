@@ -9,7 +9,7 @@ PYTHON ?= python3
 VENV ?= .venv
 CORES ?= 2
 # The extras the lock holds and the set-up installs (ouster is left out: it pins an old click).
-LOCK_EXTRAS ?= test slurm
+LOCK_EXTRAS ?= test slurm docs
 UV_VERSION ?= 0.13.9
 
 # The lock is the whole environment (--no-deps: lock-excludes.txt leaves out packages that a

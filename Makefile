@@ -22,7 +22,7 @@ BIN := $(abspath $(VENV))/bin
 export PATH := $(BIN):$(PATH)
 export VIRTUAL_ENV := $(abspath $(VENV))
 
-.PHONY: run test setup setup-test bench lint lock
+.PHONY: run test setup setup-test bench lint lock docs
 
 run: setup
 	snakemake --cores $(CORES)
@@ -49,6 +49,10 @@ bench: setup
 	python bench/field_kernel.py
 	python bench/hypotheses.py
 	python bench/raycast.py
+
+# The documentation site (docs/, mkdocs.yml) into site/; --strict fails on any warning.
+docs: setup
+	mkdocs build --strict --site-dir site
 
 lint: setup
 	snakemake --lint

@@ -9,7 +9,7 @@ PYTHON ?= python3
 VENV ?= .venv
 CORES ?= 2
 # The extras the lock holds and the set-up installs (ouster is left out: it pins an old click).
-LOCK_EXTRAS ?= test slurm
+LOCK_EXTRAS ?= test slurm docs
 UV_VERSION ?= 0.13.9
 
 # The lock is the whole environment (--no-deps: lock-excludes.txt leaves out packages that a
@@ -22,7 +22,7 @@ BIN := $(abspath $(VENV))/bin
 export PATH := $(BIN):$(PATH)
 export VIRTUAL_ENV := $(abspath $(VENV))
 
-.PHONY: run test setup setup-test bench lint lock
+.PHONY: run test setup setup-test bench lint lock docs
 
 run: setup
 	snakemake --cores $(CORES)
@@ -49,6 +49,10 @@ bench: setup
 	python bench/field_kernel.py
 	python bench/hypotheses.py
 	python bench/raycast.py
+
+# The documentation site (docs/, mkdocs.yml) into site/; --strict fails on any warning.
+docs: setup
+	mkdocs build --strict --site-dir site
 
 lint: setup
 	snakemake --lint

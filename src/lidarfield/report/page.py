@@ -13,9 +13,11 @@ from ..plots.png import compact_file, compact_png
 STYLE = """
 body { font-family: system-ui, -apple-system, "Segoe UI", sans-serif; margin: 1.5em auto; max-width: 1800px; padding: 0 1.5em; color: #222; }
 h1 { margin-bottom: 0.2em; } h2 { border-bottom: 1px solid #ccc; padding-bottom: 0.2em; margin-top: 1.6em; }
-table { border-collapse: collapse; font-size: 0.85em; margin: 0.6em 0; }
+.table-box { max-width: 100%; max-height: 90vh; overflow: auto; margin: 0.6em 0; }
+table { border-collapse: collapse; font-size: 0.85em; }
 th, td { border: 1px solid #ccc; padding: 2px 6px; text-align: right; white-space: nowrap; }
-th { background: #f0f0f0; position: sticky; top: 0; } td.text, th.text { text-align: left; }
+th { background: #f0f0f0; position: sticky; top: 0; white-space: normal; vertical-align: bottom; }
+td.text, th.text { text-align: left; } td.prose { white-space: normal; min-width: 16em; }
 tr.flag td { background: #fde2e2; color: #a00; font-weight: 600; }
 ul.findings li { color: #a00; font-weight: 600; }
 td.better { color: #17741b; } td.worse { color: #b00; }
@@ -96,19 +98,29 @@ def format_cell(value) -> str:
     return esc(value)
 
 
-def table(headers: list[str], rows: list[list], row_classes: list[str] | None = None, text_columns: int = 0, cell_classes: list[list[str]] | None = None) -> str:
-    """An HTML table; the first ``text_columns`` columns are left-aligned text."""
-    def cls(i: int) -> str:
-        return ' class="text"' if i < text_columns else ""
+def header(text: str) -> str:
+    """A column header, escaped, that wraps at its spaces except around a slash ("removed 1 / 2"),
+    and may break after the underscores of a column name ("p95_magnitude")."""
+    return esc(text).replace(" / ", "\u00a0/\u00a0").replace("_", "_<wbr>")
 
-    head = "".join(f"<th{cls(i)}>{esc(h)}</th>" for i, h in enumerate(headers))
+
+def table(headers: list[str], rows: list[list], row_classes: list[str] | None = None, text_columns: int = 0,
+          cell_classes: list[list[str]] | None = None, prose_columns: tuple[int, ...] = ()) -> str:
+    """An HTML table in its own box, which scrolls sideways when the table is wider than the page
+    (and down, its header kept in view, when it is taller than the window). Headers wrap; the
+    first ``text_columns`` columns are left-aligned text, the ``prose_columns`` (indices) too,
+    and these wrap at their spaces when the table would be wider than the page."""
+    def kind(i: int) -> str:
+        return "text prose" if i in prose_columns else "text" if i < text_columns else ""
+
+    head = "".join(f'<th class="{kind(i)}">{header(h)}</th>' if kind(i) else f"<th>{header(h)}</th>" for i, h in enumerate(headers))
     body = []
     for r, row in enumerate(rows):
         row_cls = f' class="{row_classes[r]}"' if row_classes and row_classes[r] else ""
         cells = []
         for i, v in enumerate(row):
             extra = cell_classes[r][i] if cell_classes else ""
-            klass = " ".join(c for c in ("text" if i < text_columns else "", extra) if c)
+            klass = " ".join(c for c in (kind(i), extra) if c)
             cells.append(f'<td class="{klass}">{format_cell(v)}</td>' if klass else f"<td>{format_cell(v)}</td>")
         body.append(f"<tr{row_cls}>" + "".join(cells) + "</tr>")
-    return f"<table><thead><tr>{head}</tr></thead><tbody>" + "".join(body) + "</tbody></table>"
+    return f'<div class="table-box"><table><thead><tr>{head}</tr></thead><tbody>' + "".join(body) + "</tbody></table></div>"

@@ -74,7 +74,8 @@ def stages_table(rows: list[dict]) -> str:
         problem, found = registration_problem(r), "; ".join(stage_findings(r))
         body.append([r.get(c, "") for c in headers] + [problem, found])
         classes.append("flag" if problem or found else "")
-    return table(headers + ["registration problem", "findings"], body, classes, text_columns=2)
+    prose = (len(headers), len(headers) + 1)  # the two sentences last, wrapped
+    return table(headers + ["registration problem", "findings"], body, classes, text_columns=2, prose_columns=prose)
 
 
 def findings_parts(rows: list[dict]) -> list[str]:

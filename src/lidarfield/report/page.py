@@ -6,6 +6,7 @@ import base64
 import html
 import math
 import os
+import struct
 from pathlib import Path
 
 from ..plots.png import compact_file, compact_png
@@ -22,15 +23,22 @@ tr.flag td { background: #fde2e2; color: #a00; font-weight: 600; }
 ul.findings li { color: #a00; font-weight: 600; }
 td.better { color: #17741b; } td.worse { color: #b00; }
 pre { background: #f7f7f7; border: 1px solid #ddd; padding: 0.8em; overflow-x: auto; font-size: 0.85em; }
-.figures { display: flex; flex-wrap: wrap; gap: 10px; align-items: flex-start; }
-figure { margin: 0; } figure img { max-width: 100%; height: auto; border: 1px solid #ddd; }
+.figures { display: flex; flex-direction: column; gap: 14px; align-items: flex-start; }
+.figures.side-by-side { flex-direction: row; }
+.figures.side-by-side > figure { flex: 1 1 0; min-width: 0; }
+figure { margin: 0; width: 100%; } figure img { display: block; width: 100%; height: auto; border: 1px solid #ddd; box-sizing: border-box; }
 figcaption { font-size: 0.8em; color: #555; }
-figure.linked { border: 1px dashed #bbb; padding: 4px 8px; font-size: 0.9em; }
+figure.linked { width: auto; border: 1px dashed #bbb; padding: 4px 8px; font-size: 0.9em; }
 details > summary { cursor: pointer; font-size: 1.15em; font-weight: 600; margin: 0.6em 0; }
 nav { font-size: 0.9em; margin-bottom: 0.5em; }
 .budget { background: #fff6d5; border: 1px solid #e0c96a; padding: 0.5em 0.8em; }
 .note { color: #666; font-size: 0.9em; } .missing { color: #a00; font-size: 0.85em; }
 """
+# A figure takes the page's width up to its display_width: its own pixel width, or FIGURE_MIN_PX
+# when smaller (the page copies are 825 to 1100 px wide, EMBED_MAX_WIDTH at most), upscaled by
+# MAX_UPSCALE at most. One figure a row: at 1400 px every figure takes 75% of the content or more.
+FIGURE_MIN_PX = 1000
+MAX_UPSCALE = 1.25
 
 
 class Html(str):
@@ -61,14 +69,27 @@ def data_uri(png: bytes) -> str:
     return "data:image/png;base64," + base64.b64encode(png).decode("ascii")
 
 
-def embedded_image(compact: bytes, caption: str, width_px: int | None = None) -> str:
-    """A figure element holding an already compacted PNG (see ``plots.png.compact_image``)."""
-    width = f' style="width:{width_px}px"' if width_px else ""
-    return f'<figure{width}><img src="{data_uri(compact)}" alt="{esc(caption)}"><figcaption>{esc(caption)}</figcaption></figure>'
+def png_size(png: bytes) -> tuple[int, int]:
+    """A PNG's width and height in pixels, from its header."""
+    return struct.unpack(">II", png[16:24])
 
 
-def image(png: bytes, caption: str, width_px: int | None = None) -> str:
-    return embedded_image(compact_png(png), caption, width_px)
+def display_width(pixels: int) -> int:
+    """The widest a figure of ``pixels`` width is shown, in CSS px (the page narrower: the page's
+    width): its own width, brought up to FIGURE_MIN_PX but never more than MAX_UPSCALE times it."""
+    return min(max(pixels, FIGURE_MIN_PX), round(pixels * MAX_UPSCALE))
+
+
+def embedded_image(compact: bytes, caption: str) -> str:
+    """A figure element holding an already compacted PNG (see ``plots.png.compact_image``): as wide
+    as the page up to its ``display_width``; its size in the img tag gives its box before it decodes."""
+    width, height = png_size(compact)
+    return (f'<figure style="max-width:{display_width(width)}px"><img src="{data_uri(compact)}" alt="{esc(caption)}" '
+            f'width="{width}" height="{height}"><figcaption>{esc(caption)}</figcaption></figure>')
+
+
+def image(png: bytes, caption: str) -> str:
+    return embedded_image(compact_png(png), caption)
 
 
 def linked_image(href: str, caption: str) -> str:
@@ -81,11 +102,11 @@ def missing_image(caption: str, path: Path) -> str:
     return f'<p class="missing">{esc(caption)}: not drawn ({esc(path.name)} missing)</p>'
 
 
-def image_file(path: Path, caption: str, width_px: int | None = None) -> str:
+def image_file(path: Path, caption: str) -> str:
     """An embedded PNG file (its page copy), or a visible note when the figure was not drawn."""
     if not path.is_file():
         return missing_image(caption, path)
-    return embedded_image(compact_file(path), caption, width_px)
+    return embedded_image(compact_file(path), caption)
 
 
 def format_cell(value) -> str:

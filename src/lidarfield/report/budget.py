@@ -30,12 +30,11 @@ class Figure:
 
     tier: str  # the tier's name, as the page's note says it
     caption: str
-    width_px: int
     href: str | None  # its PNG file relative to the page; None when it was drawn for the page only
     compact: Callable[[], bytes]  # its page copy, read (or drawn) only when its tier is tried
 
     def embedded(self, compact: bytes) -> str:
-        return embedded_image(compact, self.caption, self.width_px)
+        return embedded_image(compact, self.caption)
 
     def linked(self) -> str:
         if self.href is None:
@@ -43,11 +42,11 @@ class Figure:
         return linked_image(self.href, self.caption)
 
 
-def file_figure(tier: str, path: Path, caption: str, width_px: int, out_dir: Path) -> Figure | str:
+def file_figure(tier: str, path: Path, caption: str, out_dir: Path) -> Figure | str:
     """A figure drawn to a PNG file, or the note that it was not drawn."""
     if not path.is_file():
         return missing_image(caption, path)
-    return Figure(tier, caption, width_px, relative_href(path, out_dir), partial(compact_file, path))
+    return Figure(tier, caption, relative_href(path, out_dir), partial(compact_file, path))
 
 
 class Note:

@@ -103,7 +103,7 @@ def compare_studies(results_a: str | Path, results_b: str | Path, out_html: str 
             cells = []
             for label, dirs in (("A", dirs_a), ("B", dirs_b)):
                 d = dirs.get(level)
-                cells.append(image_file(d / "figures" / "field_top.png", f"{label}: {d.name}: field from above", 560) if d else f'<p class="missing">{label}: no stage {level:02d}</p>')
-            body.append('<div class="figures">' + "".join(cells) + "</div>")
+                cells.append(image_file(d / "figures" / "field_top.png", f"{label}: {d.name}: field from above") if d else f'<p class="missing">{label}: no stage {level:02d}</p>')
+            body.append('<div class="figures side-by-side">' + "".join(cells) + "</div>")  # A beside B
     write_text(out_html, page("lidarfield: two studies compared", body))
     return out_html

@@ -6,6 +6,7 @@ import base64
 import html
 import math
 import os
+import struct
 from pathlib import Path
 
 from ..plots.png import compact_file, compact_png
@@ -13,22 +14,31 @@ from ..plots.png import compact_file, compact_png
 STYLE = """
 body { font-family: system-ui, -apple-system, "Segoe UI", sans-serif; margin: 1.5em auto; max-width: 1800px; padding: 0 1.5em; color: #222; }
 h1 { margin-bottom: 0.2em; } h2 { border-bottom: 1px solid #ccc; padding-bottom: 0.2em; margin-top: 1.6em; }
-table { border-collapse: collapse; font-size: 0.85em; margin: 0.6em 0; }
+.table-box { max-width: 100%; max-height: 90vh; overflow: auto; margin: 0.6em 0; }
+table { border-collapse: collapse; font-size: 0.85em; }
 th, td { border: 1px solid #ccc; padding: 2px 6px; text-align: right; white-space: nowrap; }
-th { background: #f0f0f0; position: sticky; top: 0; } td.text, th.text { text-align: left; }
+th { background: #f0f0f0; position: sticky; top: 0; white-space: normal; vertical-align: bottom; }
+td.text, th.text { text-align: left; } td.prose { white-space: normal; min-width: 16em; }
 tr.flag td { background: #fde2e2; color: #a00; font-weight: 600; }
 ul.findings li { color: #a00; font-weight: 600; }
 td.better { color: #17741b; } td.worse { color: #b00; }
 pre { background: #f7f7f7; border: 1px solid #ddd; padding: 0.8em; overflow-x: auto; font-size: 0.85em; }
-.figures { display: flex; flex-wrap: wrap; gap: 10px; align-items: flex-start; }
-figure { margin: 0; } figure img { max-width: 100%; height: auto; border: 1px solid #ddd; }
+.figures { display: flex; flex-direction: column; gap: 14px; align-items: flex-start; }
+.figures.side-by-side { flex-direction: row; }
+.figures.side-by-side > figure { flex: 1 1 0; min-width: 0; }
+figure { margin: 0; width: 100%; } figure img { display: block; width: 100%; height: auto; border: 1px solid #ddd; box-sizing: border-box; }
 figcaption { font-size: 0.8em; color: #555; }
-figure.linked { border: 1px dashed #bbb; padding: 4px 8px; font-size: 0.9em; }
+figure.linked { width: auto; border: 1px dashed #bbb; padding: 4px 8px; font-size: 0.9em; }
 details > summary { cursor: pointer; font-size: 1.15em; font-weight: 600; margin: 0.6em 0; }
 nav { font-size: 0.9em; margin-bottom: 0.5em; }
 .budget { background: #fff6d5; border: 1px solid #e0c96a; padding: 0.5em 0.8em; }
 .note { color: #666; font-size: 0.9em; } .missing { color: #a00; font-size: 0.85em; }
 """
+# A figure takes the page's width up to its display_width: its own pixel width, or FIGURE_MIN_PX
+# when smaller (the page copies are 825 to 1100 px wide, EMBED_MAX_WIDTH at most), upscaled by
+# MAX_UPSCALE at most. One figure a row: at 1400 px every figure takes 75% of the content or more.
+FIGURE_MIN_PX = 1000
+MAX_UPSCALE = 1.25
 
 
 class Html(str):
@@ -59,14 +69,27 @@ def data_uri(png: bytes) -> str:
     return "data:image/png;base64," + base64.b64encode(png).decode("ascii")
 
 
-def embedded_image(compact: bytes, caption: str, width_px: int | None = None) -> str:
-    """A figure element holding an already compacted PNG (see ``plots.png.compact_image``)."""
-    width = f' style="width:{width_px}px"' if width_px else ""
-    return f'<figure{width}><img src="{data_uri(compact)}" alt="{esc(caption)}"><figcaption>{esc(caption)}</figcaption></figure>'
+def png_size(png: bytes) -> tuple[int, int]:
+    """A PNG's width and height in pixels, from its header."""
+    return struct.unpack(">II", png[16:24])
 
 
-def image(png: bytes, caption: str, width_px: int | None = None) -> str:
-    return embedded_image(compact_png(png), caption, width_px)
+def display_width(pixels: int) -> int:
+    """The widest a figure of ``pixels`` width is shown, in CSS px (the page narrower: the page's
+    width): its own width, brought up to FIGURE_MIN_PX but never more than MAX_UPSCALE times it."""
+    return min(max(pixels, FIGURE_MIN_PX), round(pixels * MAX_UPSCALE))
+
+
+def embedded_image(compact: bytes, caption: str) -> str:
+    """A figure element holding an already compacted PNG (see ``plots.png.compact_image``): as wide
+    as the page up to its ``display_width``; its size in the img tag gives its box before it decodes."""
+    width, height = png_size(compact)
+    return (f'<figure style="max-width:{display_width(width)}px"><img src="{data_uri(compact)}" alt="{esc(caption)}" '
+            f'width="{width}" height="{height}"><figcaption>{esc(caption)}</figcaption></figure>')
+
+
+def image(png: bytes, caption: str) -> str:
+    return embedded_image(compact_png(png), caption)
 
 
 def linked_image(href: str, caption: str) -> str:
@@ -79,11 +102,11 @@ def missing_image(caption: str, path: Path) -> str:
     return f'<p class="missing">{esc(caption)}: not drawn ({esc(path.name)} missing)</p>'
 
 
-def image_file(path: Path, caption: str, width_px: int | None = None) -> str:
+def image_file(path: Path, caption: str) -> str:
     """An embedded PNG file (its page copy), or a visible note when the figure was not drawn."""
     if not path.is_file():
         return missing_image(caption, path)
-    return embedded_image(compact_file(path), caption, width_px)
+    return embedded_image(compact_file(path), caption)
 
 
 def format_cell(value) -> str:
@@ -96,19 +119,29 @@ def format_cell(value) -> str:
     return esc(value)
 
 
-def table(headers: list[str], rows: list[list], row_classes: list[str] | None = None, text_columns: int = 0, cell_classes: list[list[str]] | None = None) -> str:
-    """An HTML table; the first ``text_columns`` columns are left-aligned text."""
-    def cls(i: int) -> str:
-        return ' class="text"' if i < text_columns else ""
+def header(text: str) -> str:
+    """A column header, escaped, that wraps at its spaces except around a slash ("removed 1 / 2"),
+    and may break after the underscores of a column name ("p95_magnitude")."""
+    return esc(text).replace(" / ", "\u00a0/\u00a0").replace("_", "_<wbr>")
 
-    head = "".join(f"<th{cls(i)}>{esc(h)}</th>" for i, h in enumerate(headers))
+
+def table(headers: list[str], rows: list[list], row_classes: list[str] | None = None, text_columns: int = 0,
+          cell_classes: list[list[str]] | None = None, prose_columns: tuple[int, ...] = ()) -> str:
+    """An HTML table in its own box, which scrolls sideways when the table is wider than the page
+    (and down, its header kept in view, when it is taller than the window). Headers wrap; the
+    first ``text_columns`` columns are left-aligned text, the ``prose_columns`` (indices) too,
+    and these wrap at their spaces when the table would be wider than the page."""
+    def kind(i: int) -> str:
+        return "text prose" if i in prose_columns else "text" if i < text_columns else ""
+
+    head = "".join(f'<th class="{kind(i)}">{header(h)}</th>' if kind(i) else f"<th>{header(h)}</th>" for i, h in enumerate(headers))
     body = []
     for r, row in enumerate(rows):
         row_cls = f' class="{row_classes[r]}"' if row_classes and row_classes[r] else ""
         cells = []
         for i, v in enumerate(row):
             extra = cell_classes[r][i] if cell_classes else ""
-            klass = " ".join(c for c in ("text" if i < text_columns else "", extra) if c)
+            klass = " ".join(c for c in (kind(i), extra) if c)
             cells.append(f'<td class="{klass}">{format_cell(v)}</td>' if klass else f"<td>{format_cell(v)}</td>")
         body.append(f"<tr{row_cls}>" + "".join(cells) + "</tr>")
-    return f"<table><thead><tr>{head}</tr></thead><tbody>" + "".join(body) + "</tbody></table>"
+    return f'<div class="table-box"><table><thead><tr>{head}</tr></thead><tbody>' + "".join(body) + "</tbody></table></div>"

@@ -50,7 +50,6 @@ PAIR_TIER = "pair figures"
 # The order in which figures are embedded while the page fits its budget: the pair's summary
 # first, then the stage figures that say most about a stage.
 TIERS = (PAIR_TIER, *(caption for _, caption in STAGE_FIGURES))
-WIDE = {"before_after": 1130, "top_voxels": 1130}  # two-panel figures take a whole row
 DPI = 110
 
 
@@ -74,7 +73,8 @@ def stages_table(rows: list[dict]) -> str:
         problem, found = registration_problem(r), "; ".join(stage_findings(r))
         body.append([r.get(c, "") for c in headers] + [problem, found])
         classes.append("flag" if problem or found else "")
-    return table(headers + ["registration problem", "findings"], body, classes, text_columns=2)
+    prose = (len(headers), len(headers) + 1)  # the two sentences last, wrapped
+    return table(headers + ["registration problem", "findings"], body, classes, text_columns=2, prose_columns=prose)
 
 
 def findings_parts(rows: list[dict]) -> list[str]:
@@ -97,12 +97,12 @@ def pair_figures(name: str, pair_dir: Path | None, rows: list[dict], out_dir: Pa
     for stem, caption in PAIR_FIGURES:
         path = pair_dir / "figures" / f"{stem}.png" if pair_dir else None
         if path is not None and path.is_file():
-            figures.append(file_figure(PAIR_TIER, path, f"{name}: {caption}", 640, out_dir))
+            figures.append(file_figure(PAIR_TIER, path, f"{name}: {caption}", out_dir))
         elif rows:
-            figures.append(Figure(PAIR_TIER, f"{name}: {caption}", 640, None, partial(drawn_pair_figure, stem, rows)))
+            figures.append(Figure(PAIR_TIER, f"{name}: {caption}", None, partial(drawn_pair_figure, stem, rows)))
     stem, caption = REMATCH_FIGURE
     if pair_dir is not None and (pair_dir / "figures" / f"{stem}.png").is_file():
-        figures.append(file_figure(PAIR_TIER, pair_dir / "figures" / f"{stem}.png", f"{name}: {caption}", 640, out_dir))
+        figures.append(file_figure(PAIR_TIER, pair_dir / "figures" / f"{stem}.png", f"{name}: {caption}", out_dir))
     return figures
 
 
@@ -119,7 +119,7 @@ def stage_parts(name: str, stage_dir: Path, out_dir: Path, settings: PlotSetting
     level = level_of(stage_dir.name) or 0
     drawn = stage_figures(settings, level, has_previous=level > 0)
     stems = [(s, c) for s, c in STAGE_FIGURES if s in drawn]
-    figures = [file_figure(c, fig_dir / f"{s}.png", f"{stage_dir.name}: {c}", WIDE.get(s, 560), out_dir) for s, c in stems]
+    figures = [file_figure(c, fig_dir / f"{s}.png", f"{stage_dir.name}: {c}", out_dir) for s, c in stems]
     return parts + ['<div class="figures">', *figures, "</div>"]
 
 

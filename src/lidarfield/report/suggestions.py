@@ -12,6 +12,7 @@ from .page import esc, table
 FILE = "suggestions.parquet"
 HEADERS = ("rank", "hypothesis", "params", "energy reduction", "removed 1 / 2", "removed share",
            "voxels emptied", "their energy", "max after (m)", "p95 after (m)")  # fmt: skip
+PARAMS = HEADERS.index("params")  # a candidate's parameters, JSON: wrapped when the table is too wide
 EXPLAINER = (
     "Each candidate applied on its own to this stage's survivors. Energy reduction: 1 − energy after / "
     "energy before, Σ min(n1, n2)·|v|² over the voxels valid before and after; voxels emptied below "
@@ -61,7 +62,7 @@ def stage_suggestions(stage_dir: Path) -> str:
         return f'<p class="missing">what to try next: not computed ({FILE} missing)</p>'
     return (
         f'<p class="note"><b>What to try next.</b> {esc(EXPLAINER)}</p>'
-        + table(list(HEADERS), [_cells(r) for r in rows], text_columns=3)
+        + table(list(HEADERS), [_cells(r) for r in rows], text_columns=3, prose_columns=(PARAMS,))
     )
 
 
@@ -82,5 +83,5 @@ def study_suggestions(pairs: dict[str, list[Path]], best: int = 3) -> str:
     return (
         '<p class="note">Per pair, the best candidates on the survivors of its last stage (the full '
         "tables are in each pair's section).</p>"
-        + table(["pair", "last stage", *HEADERS], body, text_columns=5)
+        + table(["pair", "last stage", *HEADERS], body, text_columns=5, prose_columns=(2 + PARAMS,))
     )

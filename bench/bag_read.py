@@ -20,9 +20,8 @@ from pathlib import Path
 import numpy as np
 
 from lidarfield.io import read_scan
-from lidarfield.io.rosbag.writer import CloudMessage, write_bag
 from lidarfield.io.rosbag.bag import _open_reader, open_bag
-
+from lidarfield.io.rosbag.writer import CloudMessage, write_bag
 from timing import best_time, machine  # bench/timing.py
 
 DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
@@ -56,7 +55,9 @@ def main() -> None:
     parser.add_argument("--repeat", type=int, default=3, help="best of this many runs")
     args = parser.parse_args()
     print(machine())
-    print(f"bags of ~{args.gigabytes:g} GB: {OUSTER_TOPIC} (48-byte points) and {VELODYNE_TOPIC} at 10 Hz, /odom at 100 Hz")
+    print(
+        f"bags of ~{args.gigabytes:g} GB: {OUSTER_TOPIC} (48-byte points) and {VELODYNE_TOPIC} at 10 Hz, /odom at 100 Hz"
+    )
     for storage in ("ros1", "mcap", "sqlite3"):
         folder = Path(tempfile.mkdtemp(prefix="lidarfield-bench-", dir=args.dir))
         try:

@@ -12,10 +12,9 @@ import argparse
 
 import numpy as np
 
+from lidarfield.field.grid import CartesianGrid, FieldSettings, SphericalGrid
 from lidarfield.field.kernel import discrepancy_field, field_from_voxel_ids
 from lidarfield.field.reference import discrepancy_field_reference, field_from_voxel_ids_reference
-from lidarfield.field.grid import CartesianGrid, FieldSettings, SphericalGrid
-
 from timing import best_time, machine  # bench/timing.py
 
 
@@ -24,7 +23,9 @@ def clouds(n: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
     azimuth = rng.uniform(-np.pi, np.pi, n)
     elevation = np.radians(rng.uniform(-16.0, 16.0, n))
     r = rng.uniform(2.0, 60.0, n)
-    xyz1 = np.column_stack([r * np.cos(elevation) * np.cos(azimuth), r * np.cos(elevation) * np.sin(azimuth), r * np.sin(elevation)])
+    xyz1 = np.column_stack(
+        [r * np.cos(elevation) * np.cos(azimuth), r * np.cos(elevation) * np.sin(azimuth), r * np.sin(elevation)]
+    )
     xyz2 = xyz1 + np.array([0.03, -0.02, 0.01]) + rng.normal(scale=0.02, size=xyz1.shape)
     return xyz1, xyz2
 

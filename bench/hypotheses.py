@@ -23,7 +23,6 @@ from lidarfield.hypotheses.shadow import first_cluster_keep, first_cluster_keep_
 from lidarfield.pair import RegisteredPair
 from lidarfield.poses import pose_from_xyzrpy
 from lidarfield.sensors.models import PRESETS
-
 from timing import best_time, machine  # bench/timing.py
 
 
@@ -52,7 +51,9 @@ def shadow_with(kernel, pair: RegisteredPair, params) -> tuple[np.ndarray, np.nd
     return keeps[0], keeps[1]
 
 
-def naive_field_of_view(pair: RegisteredPair, lo: float, hi: float, r_min: float, r_max: float) -> tuple[np.ndarray, np.ndarray]:
+def naive_field_of_view(
+    pair: RegisteredPair, lo: float, hi: float, r_min: float, r_max: float
+) -> tuple[np.ndarray, np.ndarray]:
     def inside(xyz, pose):
         local = (np.linalg.inv(pose) @ np.column_stack([xyz, np.ones(len(xyz))]).T).T[:, :3]
         r = np.linalg.norm(local, axis=1)
@@ -65,7 +66,9 @@ def naive_field_of_view(pair: RegisteredPair, lo: float, hi: float, r_min: float
 def main(n: int) -> None:
     rng = np.random.default_rng(0)
     T_1_2 = pose_from_xyzrpy([0.3, 3.0, 0.0, 0.0, 0.01, 0.02])
-    pair = RegisteredPair(street_scan(n, np.eye(4), rng), street_scan(n, T_1_2, rng), T_1_2, PRESETS["vlp16"], PRESETS["vlp16"])
+    pair = RegisteredPair(
+        street_scan(n, np.eye(4), rng), street_scan(n, T_1_2, rng), T_1_2, PRESETS["vlp16"], PRESETS["vlp16"]
+    )
     grid = {"azimuth_bins": 36, "elevation_deg": [-20, 20], "elevation_bins": 5}
     _, shadow_params = parse_step({"shadow": {"origins": [1, 2], "grid": grid}})
     _, fov_params = parse_step({"field_of_view": {}})
@@ -80,8 +83,10 @@ def main(n: int) -> None:
     t_loop = time.perf_counter() - start
     same = all(np.array_equal(a, b) for a, b in zip(fast, reference))
     removed = sum(int((~k).sum()) for k in fast)
-    print(f"shadow          {t_shadow:7.3f} s   loop reference {t_loop:7.2f} s   speed-up {t_loop / t_shadow:6.1f}x   "
-          f"same masks: {same}   removed {removed:,}")  # fmt: skip
+    print(
+        f"shadow          {t_shadow:7.3f} s   loop reference {t_loop:7.2f} s   speed-up {t_loop / t_shadow:6.1f}x   "
+        f"same masks: {same}   removed {removed:,}"
+    )
 
     cells, r = shadow_params.angular_grid().assign(pair.xyz1), ranges(pair.xyz1)
     t_kernel = best_time(lambda: first_cluster_keep(cells, r, 1.0, 30))[0]
@@ -92,7 +97,9 @@ def main(n: int) -> None:
     vlp16 = (-15.0, 15.0, PRESETS["vlp16"].min_range_m, PRESETS["vlp16"].max_range_m)
     t_naive = best_time(lambda: naive_field_of_view(pair, *vlp16))[0]
     same = all(np.array_equal(a, b) for a, b in zip(fov, naive_field_of_view(pair, *vlp16)))
-    print(f"field_of_view   {t_fov:7.3f} s   naive          {t_naive:7.3f} s   speed-up {t_naive / t_fov:6.1f}x   same masks: {same}")
+    print(
+        f"field_of_view   {t_fov:7.3f} s   naive          {t_naive:7.3f} s   speed-up {t_naive / t_fov:6.1f}x   same masks: {same}"
+    )
 
 
 if __name__ == "__main__":

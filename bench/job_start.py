@@ -28,7 +28,19 @@ from timing import machine  # bench/timing.py
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "src"))
 from lidarfield.runner import server as worker  # noqa: E402
 
-HEAVY = ("numpy", "pyarrow", "pandas", "matplotlib", "open3d", "scipy", "trimesh", "plotly", "yaml", "jsonschema", "lidarfield")
+HEAVY = (
+    "numpy",
+    "pyarrow",
+    "pandas",
+    "matplotlib",
+    "open3d",
+    "scipy",
+    "trimesh",
+    "plotly",
+    "yaml",
+    "jsonschema",
+    "lidarfield",
+)
 
 
 def one_job_per_rule(workdir: Path) -> dict[str, str]:
@@ -53,8 +65,12 @@ def import_times(command: str, workdir: Path) -> dict[str, float]:
     env = {**os.environ, "LIDARFIELD_WORKER": "off"}
     stderr = subprocess.run(
         command.replace(" -m lidarfield", " -X importtime -m lidarfield").split(" > ")[0],
-        shell=True, cwd=workdir, env=env, capture_output=True, text=True,
-    ).stderr  # fmt: skip
+        shell=True,
+        cwd=workdir,
+        env=env,
+        capture_output=True,
+        text=True,
+    ).stderr
     seconds: dict[str, float] = defaultdict(float)
     for line in stderr.splitlines():
         match = re.match(r"import time:\s+\d+ \|\s+(\d+) \| (\s*)(\S+)", line)
@@ -65,7 +81,9 @@ def import_times(command: str, workdir: Path) -> dict[str, float]:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("workdir", type=Path, nargs="?", default=Path("."), help="where the study ran (holds .snakemake/)")
+    parser.add_argument(
+        "workdir", type=Path, nargs="?", default=Path("."), help="where the study ran (holds .snakemake/)"
+    )
     parser.add_argument("--results", default="results")
     parser.add_argument("--repeat", type=int, default=5)
     args = parser.parse_args()
@@ -93,7 +111,9 @@ def main() -> None:
     print("imports of the plain job (cumulative s, python -X importtime):")
     for rule, command in jobs.items():
         seconds = import_times(command, args.workdir)
-        print(f"{rule:<12} " + ", ".join(f"{name} {s:.2f}" for name, s in sorted(seconds.items(), key=lambda kv: -kv[1])))
+        print(
+            f"{rule:<12} " + ", ".join(f"{name} {s:.2f}" for name, s in sorted(seconds.items(), key=lambda kv: -kv[1]))
+        )
 
 
 if __name__ == "__main__":

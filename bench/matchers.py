@@ -31,14 +31,23 @@ SMALL_GICP_TYPES = {"icp": "ICP", "icp_point_to_plane": "PLANE_ICP", "gicp": "GI
 def pairs():
     """(name, xyz1, xyz2 in its own frame, reference T_1_2) of each shared real pair."""
     from lidarfield.io import read_scan
-    from lidarfield.poses import relative_pose
     from lidarfield.io.pose_files import read_kitti_poses, read_pose
+    from lidarfield.poses import relative_pose
 
     hdl = DATA / "hdl32-pair"
-    yield "hdl32-pair", read_scan(hdl / "target.ply").xyz, read_scan(hdl / "source.ply").xyz, read_pose(hdl / "T_target_source.txt")
+    yield (
+        "hdl32-pair",
+        read_scan(hdl / "target.ply").xyz,
+        read_scan(hdl / "source.ply").xyz,
+        read_pose(hdl / "T_target_source.txt"),
+    )
     expd = DATA / "expd-vlp16"
-    yield ("expd-vlp16", read_scan(expd / "Cloud1_ExpD.txt").xyz, read_scan(expd / "Cloud10_ExpD.txt").xyz,
-           read_pose(ROOT / "config" / "expd-T_1_10.txt"))  # fmt: skip
+    yield (
+        "expd-vlp16",
+        read_scan(expd / "Cloud1_ExpD.txt").xyz,
+        read_scan(expd / "Cloud10_ExpD.txt").xyz,
+        read_pose(ROOT / "config" / "expd-T_1_10.txt"),
+    )
     ouster = DATA / "ouster-os1-128"
     poses = read_kitti_poses(ouster / "OS-1-128_v2.3.0_1024x10_lb_n3_poses_kitti.txt")
     scans = [read_scan(ouster / f"lb_n3_scan{k}_xyz_refl_float32.bin").xyz for k in (0, 1)]
@@ -65,21 +74,31 @@ def small_gicp_runs(method, clouds, guesses, p, threads, epsilon):
     tree = small_gicp.KdTree(target, num_threads=threads)
     if method != "icp":
         small_gicp.estimate_normals_covariances(target, tree, p["normal_max_nn"], threads)
-        small_gicp.estimate_normals_covariances(source, small_gicp.KdTree(source, num_threads=threads), p["normal_max_nn"], threads)
+        small_gicp.estimate_normals_covariances(
+            source, small_gicp.KdTree(source, num_threads=threads), p["normal_max_nn"], threads
+        )
     prepared = time.perf_counter() - started
     estimates = [
-        small_gicp.align(target, source, tree, init_T_target_source=guess, registration_type=SMALL_GICP_TYPES[method],
-                         max_correspondence_distance=p["max_correspondence_m"], num_threads=threads,
-                         max_iterations=p["max_iterations"], **epsilon).T_target_source
+        small_gicp.align(
+            target,
+            source,
+            tree,
+            init_T_target_source=guess,
+            registration_type=SMALL_GICP_TYPES[method],
+            max_correspondence_distance=p["max_correspondence_m"],
+            num_threads=threads,
+            max_iterations=p["max_iterations"],
+            **epsilon,
+        ).T_target_source
         for guess in guesses
-    ]  # fmt: skip
+    ]
     return estimates, prepared, time.perf_counter() - started
 
 
 def main() -> int:
+    from lidarfield.analysis.rematch import perturbed, start_offsets
     from lidarfield.poses import pose_error
     from lidarfield.registration import DEFAULTS, matching
-    from lidarfield.analysis.rematch import perturbed, start_offsets
 
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--trials", type=int, default=8)
@@ -91,22 +110,33 @@ def main() -> int:
     p = dict(DEFAULTS)
     offsets = start_offsets(args.trials, 0.5, 2.0, seed=0)
     print(machine())
-    print(f"{args.trials} starts within 0.5 m and 2 deg of the reference; small_gicp with {args.threads} threads, "
-          f"epsilon {args.epsilon or 'its default'}; times: preparation + all trials")  # fmt: skip
-    print(f"{'pair':15s} {'method':19s} {'backend':10s} {'prep s':>7s} {'total s':>8s} {'ratio':>6s} "
-          f"{'med err cm':>10s} {'max err cm':>10s} {'med deg':>8s} {'fitness':>8s} {'vs open3d cm':>12s}")  # fmt: skip
+    print(
+        f"{args.trials} starts within 0.5 m and 2 deg of the reference; small_gicp with {args.threads} threads, "
+        f"epsilon {args.epsilon or 'its default'}; times: preparation + all trials"
+    )
+    print(
+        f"{'pair':15s} {'method':19s} {'backend':10s} {'prep s':>7s} {'total s':>8s} {'ratio':>6s} "
+        f"{'med err cm':>10s} {'max err cm':>10s} {'med deg':>8s} {'fitness':>8s} {'vs open3d cm':>12s}"
+    )
     for name, xyz1, xyz2, reference in pairs():
         guesses = [perturbed(reference, o) for o in offsets]
         for method in args.methods:
             o3d_T, o3d_prep, o3d_total, clouds = open3d_runs(method, xyz1, xyz2, guesses, p)
             sg_T, sg_prep, sg_total = small_gicp_runs(method, clouds, guesses, p, args.threads, epsilon)
-            for backend, estimates, prep, total in (("open3d", o3d_T, o3d_prep, o3d_total), ("small_gicp", sg_T, sg_prep, sg_total)):
+            for backend, estimates, prep, total in (
+                ("open3d", o3d_T, o3d_prep, o3d_total),
+                ("small_gicp", sg_T, sg_prep, sg_total),
+            ):
                 errors = np.array([pose_error(T, reference) for T in estimates])
-                fitness = np.median([matching.evaluate(clouds.source, clouds.target, T, p["fitness_distance_m"])[0] for T in estimates])
+                fitness = np.median(
+                    [matching.evaluate(clouds.source, clouds.target, T, p["fitness_distance_m"])[0] for T in estimates]
+                )
                 apart = np.median([pose_error(T, T0)[0] for T, T0 in zip(estimates, o3d_T)]) * 100
-                print(f"{name:15s} {method:19s} {backend:10s} {prep:7.3f} {total:8.3f} {total / o3d_total:6.2f} "
-                      f"{np.median(errors[:, 0]) * 100:10.2f} {errors[:, 0].max() * 100:10.2f} {np.median(errors[:, 1]):8.3f} "
-                      f"{fitness:8.3f} {apart:12.2f}")  # fmt: skip
+                print(
+                    f"{name:15s} {method:19s} {backend:10s} {prep:7.3f} {total:8.3f} {total / o3d_total:6.2f} "
+                    f"{np.median(errors[:, 0]) * 100:10.2f} {errors[:, 0].max() * 100:10.2f} {np.median(errors[:, 1]):8.3f} "
+                    f"{fitness:8.3f} {apart:12.2f}"
+                )
     return 0
 
 

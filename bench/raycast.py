@@ -15,7 +15,7 @@ import argparse
 
 import numpy as np
 
-from lidarfield.simulation.scene import load_scene
+from lidarfield.poses import pose_from_xyzrpy as pose_from_values
 from lidarfield.sensors.models import PRESETS
 from lidarfield.simulation.raycast import (
     azimuth_steps,
@@ -24,8 +24,7 @@ from lidarfield.simulation.raycast import (
     first_hits_reference,
     simulate_scan,
 )
-from lidarfield.poses import pose_from_xyzrpy as pose_from_values
-
+from lidarfield.simulation.scene import load_scene
 from timing import best_time, machine  # bench/timing.py
 
 
@@ -45,13 +44,19 @@ def main() -> None:
     print(machine())
     print(f"scene: paper-intersection ({len(mesh.faces)} triangles), sensor paper-sim-80, {rays:,} rays")
     scan_s, scan = best_time(lambda: simulate_scan(scene, sensor, pose), args.repeat)
-    rolling_s, _ = best_time(lambda: simulate_scan(scene, sensor, pose, rolling_shutter=True,
-                                                   linear_velocity_mps=(5, 0, 0), angular_velocity_rps=(0, 0, 0.5)), args.repeat)
+    rolling_s, _ = best_time(
+        lambda: simulate_scan(
+            scene, sensor, pose, rolling_shutter=True, linear_velocity_mps=(5, 0, 0), angular_velocity_rps=(0, 0, 0.5)
+        ),
+        args.repeat,
+    )
     kernel_s, (fast, _) = best_time(lambda: first_hits(mesh, origins, directions), args.repeat)
     reference_s, (plain, _) = best_time(lambda: first_hits_reference(mesh, origins, directions), 1)
     agree = np.array_equal(np.isfinite(fast), np.isfinite(plain))
-    print(f"simulate_scan (whole scan):      {scan_s:.3f} s/scan  {rays / scan_s / 1e6:6.2f} M rays/s  "
-          f"({len(scan):,} points; target < 0.5 s: {'met' if scan_s < 0.5 else 'MISSED'})")
+    print(
+        f"simulate_scan (whole scan):      {scan_s:.3f} s/scan  {rays / scan_s / 1e6:6.2f} M rays/s  "
+        f"({len(scan):,} points; target < 0.5 s: {'met' if scan_s < 0.5 else 'MISSED'})"
+    )
     print(f"  with rolling shutter:          {rolling_s:.3f} s/scan  {rays / rolling_s / 1e6:6.2f} M rays/s")
     print(f"first_hits (Open3D + float64):   {kernel_s:.3f} s       {rays / kernel_s / 1e6:6.2f} M rays/s")
     print(f"first_hits_reference (numpy):    {reference_s:.3f} s       {rays / reference_s / 1e6:6.2f} M rays/s")

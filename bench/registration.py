@@ -9,7 +9,6 @@ from __future__ import annotations
 import argparse
 import os
 import sys
-
 from pathlib import Path
 
 from timing import best_time, machine  # bench/timing.py
@@ -37,8 +36,10 @@ def main() -> int:
         best, pair = best_time(lambda: register_pair(*scans, {"method": method}), args.repeat)
         baseline = baseline or best
         reg = pair.registration
-        print(f"{method:20s} {best:7.3f} s  x{best / baseline:5.2f} of icp   error {reg['translation_error_m'] * 100:5.2f} cm "
-              f"{reg['rotation_error_deg']:.3f} deg  fitness {reg['fitness']:.3f}")
+        print(
+            f"{method:20s} {best:7.3f} s  x{best / baseline:5.2f} of icp   error {reg['translation_error_m'] * 100:5.2f} cm "
+            f"{reg['rotation_error_deg']:.3f} deg  fitness {reg['fitness']:.3f}"
+        )
     return 0
 
 

@@ -16,11 +16,11 @@ from pathlib import Path
 import pandas as pd
 
 from lidarfield.plots.study import plot_study
+
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))  # the tests' synthetic study
-from synthetic_study import write_field_study  # noqa: E402
 from lidarfield.report import write_overview
 from lidarfield.study.tables import read_study_tables, write_study_tables, write_study_voxels
-
+from synthetic_study import write_field_study  # noqa: E402
 from timing import machine  # bench/timing.py
 
 
@@ -49,14 +49,30 @@ def main() -> None:
     print(machine())
     with tempfile.TemporaryDirectory() as tmp:
         root = Path(tmp)
-        timed(f"synthetic study of {n_pairs} pairs x {levels} stages", lambda: write_field_study(root, n_pairs, levels, n=3000))
+        timed(
+            f"synthetic study of {n_pairs} pairs x {levels} stages",
+            lambda: write_field_study(root, n_pairs, levels, n=3000),
+        )
         fields = sorted(root.glob("*/stages/*/field.parquet"))
-        ours, _ = timed(f"voxels.parquet from {len(fields)} field files", lambda: write_study_voxels(fields, root / "study" / "voxels.parquet"))
+        ours, _ = timed(
+            f"voxels.parquet from {len(fields)} field files",
+            lambda: write_study_voxels(fields, root / "study" / "voxels.parquet"),
+        )
         plain, _ = timed("the same medians by a pandas groupby of whole fields", lambda: pandas_voxels(fields))
         print(f"ratio pandas / ours: {plain / ours:.2f}")
-        timed("hypotheses.parquet and pairs.parquet", lambda: write_study_tables(root / "summary.parquet", root / "study" / "hypotheses.parquet", root / "study" / "pairs.parquet"))
+        timed(
+            "hypotheses.parquet and pairs.parquet",
+            lambda: write_study_tables(
+                root / "summary.parquet", root / "study" / "hypotheses.parquet", root / "study" / "pairs.parquet"
+            ),
+        )
         tables = read_study_tables(root / "summary.parquet", root / "study")
-        timed("study figures", lambda: plot_study(tables.summary, tables.voxels, tables.hypotheses, tables.pairs, tables.grid, root / "study" / "figures"))
+        timed(
+            "study figures",
+            lambda: plot_study(
+                tables.summary, tables.voxels, tables.hypotheses, tables.pairs, tables.grid, root / "study" / "figures"
+            ),
+        )
         _, out = timed("overview", lambda: write_overview({}, tables, root / "report.html", root / "study" / "figures"))
         print(f"overview: {out.stat().st_size / 1e6:.2f} MB for {n_pairs} pairs")
         print(f"peak memory of this process: {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e3:.0f} MB")

@@ -46,9 +46,23 @@ def study_config(config: Path, pairs: int | None) -> dict:
 
 def snakemake(workdir: Path, worker: str, extra: list[str]) -> tuple[float, float]:
     """One workflow run in ``workdir``: (wall seconds, CPU seconds of all its processes)."""
-    env = {**os.environ, "LIDARFIELD_WORKER": "off"} if worker == "off" else {k: v for k, v in os.environ.items() if k != "LIDARFIELD_WORKER"}
-    command = [sys.executable, "-m", "snakemake", "--snakefile", str(ROOT / "Snakefile"), "--directory", str(workdir),
-               "--configfile", str(workdir / "study.yaml"), *extra]  # fmt: skip
+    env = (
+        {**os.environ, "LIDARFIELD_WORKER": "off"}
+        if worker == "off"
+        else {k: v for k, v in os.environ.items() if k != "LIDARFIELD_WORKER"}
+    )
+    command = [
+        sys.executable,
+        "-m",
+        "snakemake",
+        "--snakefile",
+        str(ROOT / "Snakefile"),
+        "--directory",
+        str(workdir),
+        "--configfile",
+        str(workdir / "study.yaml"),
+        *extra,
+    ]
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     start = time.perf_counter()
     with open(workdir / "snakemake.log", "a") as log:
@@ -84,7 +98,9 @@ def cold_and_append(config: Path, pairs: int | None, worker: str, workdir: Path,
     (workdir / "study.yaml").write_text(yaml.safe_dump(study, sort_keys=False))
     since = time.time()
     rerun, rerun_cpu = snakemake(workdir, worker, extra)
-    print(f"worker {worker}: appending {APPENDED} reruns in {rerun:.1f} s wall ({rerun_cpu:.1f} s CPU), {rerun / cold:.1%} of cold")
+    print(
+        f"worker {worker}: appending {APPENDED} reruns in {rerun:.1f} s wall ({rerun_cpu:.1f} s CPU), {rerun / cold:.1%} of cold"
+    )
     print_rules("rerun", per_rule(workdir / "results", since))
 
 
@@ -112,7 +128,9 @@ def main() -> None:
     parser.add_argument("--scheduler", choices=("greedy", "ilp"), help="default: the profile's (greedy)")
     parser.add_argument("--plan-pairs", type=int, help="also time snakemake -n of a drive this long")
     parser.add_argument("--plan-only", action="store_true", help="only the planning")
-    parser.add_argument("--schedulers", action="store_true", help="then compare the ILP and greedy schedulers' own cost")
+    parser.add_argument(
+        "--schedulers", action="store_true", help="then compare the ILP and greedy schedulers' own cost"
+    )
     parser.add_argument("--workdir", type=Path, help="where the runs go (default: a new temporary folder)")
     args = parser.parse_args()
     workdir = args.workdir or Path(tempfile.mkdtemp(prefix="study-scale-"))

@@ -44,7 +44,9 @@ def main() -> None:
     print(f"{results}: {sum(len(t) for t in by_rule.values())} jobs, {total:.1f} s of job time")
     print(f"{'rule':<12} {'jobs':>5} {'total s':>9} {'mean s':>8} {'share':>7}")
     for rule, times in sorted(by_rule.items(), key=lambda kv: -sum(kv[1])):
-        print(f"{rule:<12} {len(times):>5} {sum(times):>9.1f} {sum(times) / len(times):>8.2f} {sum(times) / total:>7.1%}")
+        print(
+            f"{rule:<12} {len(times):>5} {sum(times):>9.1f} {sum(times) / len(times):>8.2f} {sum(times) / total:>7.1%}"
+        )
     plot = sum(sum(by_rule.get(r, [])) for r in PLOT_RULES)
     print(f"plot jobs ({', '.join(PLOT_RULES)}): {plot:.1f} s, {plot / total:.1%} of job time")
 

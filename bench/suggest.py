@@ -20,25 +20,34 @@ import time
 
 import numpy as np
 
-from lidarfield.field.reference import discrepancy_field_reference
+from hypotheses import street_scan  # bench/hypotheses.py
+from lidarfield.analysis.suggest import candidate_steps, compare_fields, suggestions
 from lidarfield.field.grid import field_settings_from_config
+from lidarfield.field.reference import discrepancy_field_reference
 from lidarfield.hypotheses import apply_step
 from lidarfield.pair import RegisteredPair
 from lidarfield.poses import pose_from_xyzrpy
 from lidarfield.sensors.models import PRESETS
-from lidarfield.analysis.suggest import candidate_steps, compare_fields, suggestions
-
-from hypotheses import street_scan  # bench/hypotheses.py
 from timing import best_time, machine  # bench/timing.py
 
-GRID = {"kind": "spherical", "azimuth_bins": 36, "azimuth_offset_deg": 0.0, "elevation_deg": [-20.0, 20.0], "elevation_bins": 5,
-        "range_edges_m": None, "min_points": 30, "max_component_m": None}  # fmt: skip
+GRID = {
+    "kind": "spherical",
+    "azimuth_bins": 36,
+    "azimuth_offset_deg": 0.0,
+    "elevation_deg": [-20.0, 20.0],
+    "elevation_bins": 5,
+    "range_edges_m": None,
+    "min_points": 30,
+    "max_component_m": None,
+}
 
 
 def main(n: int) -> None:
     rng = np.random.default_rng(0)
     T_1_2 = pose_from_xyzrpy([0.3, 3.0, 0.0, 0.0, 0.01, 0.02])
-    pair = RegisteredPair(street_scan(n, np.eye(4), rng), street_scan(n, T_1_2, rng), T_1_2, PRESETS["vlp16"], PRESETS["vlp16"])
+    pair = RegisteredPair(
+        street_scan(n, np.eye(4), rng), street_scan(n, T_1_2, rng), T_1_2, PRESETS["vlp16"], PRESETS["vlp16"]
+    )
     settings = field_settings_from_config(GRID)
     candidates = candidate_steps(None, [], ".", GRID)
     print(machine())
@@ -49,22 +58,33 @@ def main(n: int) -> None:
         total, table = best_time(lambda: suggestions(pair, settings, [spec], ".", GRID))
         hypothesis, masks = best_time(lambda: apply_step(pair, spec, ".", GRID))
         baseline = best_time(lambda: _baseline(pair, settings, spec), repeat=1)[0]
-        print(f"{name:15s} {total:7.3f}s {hypothesis:10.3f}s {total - hypothesis:7.3f}s | {baseline:8.3f}s {baseline / total:5.1f}x"
-              f"   energy reduction {table['energy_reduction'][0]:+.3f}")  # fmt: skip
+        print(
+            f"{name:15s} {total:7.3f}s {hypothesis:10.3f}s {total - hypothesis:7.3f}s | {baseline:8.3f}s {baseline / total:5.1f}x"
+            f"   energy reduction {table['energy_reduction'][0]:+.3f}"
+        )
         if name == "outliers":
-            previous, previous_masks = best_time(lambda: [_open3d_inliers(xyz, **spec[name]) for xyz in (pair.xyz1, pair.xyz2)])
+            previous, previous_masks = best_time(
+                lambda: [_open3d_inliers(xyz, **spec[name]) for xyz in (pair.xyz1, pair.xyz2)]
+            )
             assert all(np.array_equal(a, b) for a, b in zip(masks, previous_masks))
-            print(f"{'':15s} {'':8s} {previous:10.3f}s with Open3D (imported): {previous / hypothesis:.2f}x the k-d tree's time")
+            print(
+                f"{'':15s} {'':8s} {previous:10.3f}s with Open3D (imported): {previous / hypothesis:.2f}x the k-d tree's time"
+            )
     for module in ("open3d", "scipy.spatial"):
         code = f"import time; t = time.perf_counter(); import {module}; print(time.perf_counter() - t)"
-        seconds = min(float(subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout) for _ in range(3))
+        seconds = min(
+            float(subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout)
+            for _ in range(3)
+        )
         print(f"import {module}: {seconds:.2f} s in a fresh process (best of 3)")
 
 
 def _open3d_inliers(xyz, nb_neighbors, std_ratio):
     import open3d as o3d
 
-    _, index = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(xyz)).remove_statistical_outlier(nb_neighbors, std_ratio)
+    _, index = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(xyz)).remove_statistical_outlier(
+        nb_neighbors, std_ratio
+    )
     return np.isin(np.arange(len(xyz)), np.asarray(index))
 
 

@@ -20,7 +20,6 @@ from lidarfield.hypotheses.outliers import after_removal, neighbour_distances
 from lidarfield.io import read_scan
 from lidarfield.pair import RegisteredPair
 from lidarfield.study.stack import apply_stack
-
 from timing import best_time, machine  # bench/timing.py
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "hdl32-pair"
@@ -35,7 +34,9 @@ def main() -> None:
     settings = field_settings_from_config(GRID)
     print(machine())
     print(f"HDL-32E pair: {len(pair.xyz1)} + {len(pair.xyz2)} points")
-    registered = {(cloud, 20): neighbour_distances(xyz, 20, workers=1) for cloud, xyz in ((1, pair.xyz1), (2, pair.xyz2))}
+    registered = {
+        (cloud, 20): neighbour_distances(xyz, 20, workers=1) for cloud, xyz in ((1, pair.xyz1), (2, pair.xyz2))
+    }
     survivors = {1: np.arange(len(pair.xyz1)), 2: np.arange(len(pair.xyz2))}  # rows of the registered pair
     previous_pair, previous = pair, registered  # the stage before's points and distances
     applied = []
@@ -51,7 +52,9 @@ def main() -> None:
             return after_removal(distances, pair.xyz1 if cloud == 1 else pair.xyz2, keep, workers=1)
 
         def from_previous(cloud, k, distances):
-            return after_removal(previous[(cloud, k)], previous_pair.xyz1 if cloud == 1 else previous_pair.xyz2, keeps[cloud], workers=1)
+            return after_removal(
+                previous[(cloud, k)], previous_pair.xyz1 if cloud == 1 else previous_pair.xyz2, keeps[cloud], workers=1
+            )
 
         def suggest(carry) -> dict:
             stage.pair.neighbours.clear()
@@ -65,10 +68,12 @@ def main() -> None:
         assert all(np.array_equal(carried[c], searched[c]) for c in carried), "carried suggestions differ"
         previous_s, carried = best_time(lambda: suggest(from_previous))
         assert all(np.array_equal(carried[c], searched[c]) for c in carried), "carried suggestions differ"
-        print(f"stage {stage.level} ({stage.name}, {len(pair.xyz1) - len(survivors[1])} + {len(pair.xyz2) - len(survivors[2])} "
-              f"removed so far): suggestions {searched_s * 1000:.0f} ms searching anew, {registered_s * 1000:.0f} ms carried "
-              f"from the registered pair ({registered_s / searched_s:.2f}x), {previous_s * 1000:.0f} ms from the stage before "
-              f"({previous_s / searched_s:.2f}x)")  # fmt: skip
+        print(
+            f"stage {stage.level} ({stage.name}, {len(pair.xyz1) - len(survivors[1])} + {len(pair.xyz2) - len(survivors[2])} "
+            f"removed so far): suggestions {searched_s * 1000:.0f} ms searching anew, {registered_s * 1000:.0f} ms carried "
+            f"from the registered pair ({registered_s / searched_s:.2f}x), {previous_s * 1000:.0f} ms from the stage before "
+            f"({previous_s / searched_s:.2f}x)"
+        )
         # the last timed run carried from the stage before: its distances start the next stage
         previous_pair, previous = stage.pair, {key: stage.pair.neighbours[key] for key in registered}
 

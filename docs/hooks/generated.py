@@ -56,9 +56,13 @@ def _cell(text: str) -> str:
 
 
 def _plural(label: str) -> str:
-    return {"number": "numbers", "integer": "integers", "string": "strings", "object": "objects", "boolean": "booleans"}.get(
-        label, label
-    )
+    return {
+        "number": "numbers",
+        "integer": "integers",
+        "string": "strings",
+        "object": "objects",
+        "boolean": "booleans",
+    }.get(label, label)
 
 
 def _anchor(name: str) -> str:

@@ -150,7 +150,9 @@ def interpolate_pose(stamps_s: np.ndarray, poses: np.ndarray, at_s: float) -> np
     return T
 
 
-def weighted_rigid_transform(source: np.ndarray, target: np.ndarray, weight: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def weighted_rigid_transform(
+    source: np.ndarray, target: np.ndarray, weight: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     """R (3x3) and t (3,) minimising sum w |R source + t - target|^2 (weighted Kabsch).
 
     NaN-filled when fewer than 3 points carry weight (the rotation is then undetermined).

@@ -23,8 +23,8 @@ import math
 
 import numpy as np
 
-from ..field.kernel import field_from_voxel_ids
 from ..field.grid import FieldSettings
+from ..field.kernel import field_from_voxel_ids
 from ..pair import RegisteredPair
 from ..poses import rotation_angle, weighted_rigid_transform
 from .randomness import neighbour_pairs, randomness_tests, unit_vectors

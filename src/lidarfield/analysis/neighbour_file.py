@@ -40,10 +40,14 @@ def write_neighbours(path: str | Path, pair: RegisteredPair) -> None:
     columns = {"cloud": np.repeat(np.array([1, 2], dtype=np.uint8), [sizes[1], sizes[2]])}
     for k in sorted({k for _, k in pair.neighbours}):
         for name in ("mean", "reach"):
-            columns[f"{name}_k{k}"] = np.concatenate([
-                getattr(pair.neighbours[(cloud, k)], name) if (cloud, k) in pair.neighbours else np.full(sizes[cloud], np.nan)
-                for cloud in (1, 2)
-            ])  # fmt: skip
+            columns[f"{name}_k{k}"] = np.concatenate(
+                [
+                    getattr(pair.neighbours[(cloud, k)], name)
+                    if (cloud, k) in pair.neighbours
+                    else np.full(sizes[cloud], np.nan)
+                    for cloud in (1, 2)
+                ]
+            )
     write_table(path, columns, {"points": sizes})
 
 
@@ -81,7 +85,9 @@ def carry_to_stage(
     previous stage's points). Returns, by (cloud, k), the distances before stage k's search
     (stage k-1's kept rows) and after it, for :func:`write_changes`."""
     if len(change_paths) != max(len(removed_paths) - 1, 0):
-        raise ValueError(f"stage {len(removed_paths)} needs the changes of the {max(len(removed_paths) - 1, 0)} stages before it, got {len(change_paths)}")
+        raise ValueError(
+            f"stage {len(removed_paths)} needs the changes of the {max(len(removed_paths) - 1, 0)} stages before it, got {len(change_paths)}"
+        )
     removed = [read_table(path, required=("cloud", "x", "y", "z"))[0] for path in removed_paths]
     if any("row" not in table for table in removed):  # written before the column existed
         log.info("a removed.parquet without its row column: the neighbour distances are searched again")
@@ -90,11 +96,15 @@ def carry_to_stage(
     carried = {}
     for (cloud, k), distances in read_neighbours(neighbours_path).items():
         for table, path, change in zip(removed, removed_paths, changes):  # stages 1..k-1
-            distances = apply_change(kept(distances, removal_keep(table, cloud, len(distances), path)), change.get((cloud, k)), path)
+            distances = apply_change(
+                kept(distances, removal_keep(table, cloud, len(distances), path)), change.get((cloud, k)), path
+            )
         kept_xyz = pair.xyz1 if cloud == 1 else pair.xyz2
         if not removed:  # stage 0: the registered pair's own points
             if len(distances) != len(kept_xyz):
-                raise InputError(f"has {len(distances)} points in cloud {cloud}, not the stage's {len(kept_xyz)}", neighbours_path)
+                raise InputError(
+                    f"has {len(distances)} points in cloud {cloud}, not the stage's {len(kept_xyz)}", neighbours_path
+                )
             carried[(cloud, k)] = (distances, distances)
             pair.neighbours[(cloud, k)] = distances
             continue
@@ -103,8 +113,9 @@ def carry_to_stage(
         if np.count_nonzero(keep) != len(kept_xyz):
             raise InputError(
                 f"has {len(distances)} points in cloud {cloud} before stage {len(removed)}, not its {len(kept_xyz)} survivors "
-                f"and {np.count_nonzero(~keep)} removed points", neighbours_path,
-            )  # fmt: skip
+                f"and {np.count_nonzero(~keep)} removed points",
+                neighbours_path,
+            )
         mine = table["cloud"] == cloud
         xyz = np.empty((len(distances), 3))
         xyz[table["row"][mine]] = np.column_stack([table["x"][mine], table["y"][mine], table["z"][mine]])
@@ -138,7 +149,9 @@ def kept(distances: NeighbourDistances, keep: np.ndarray) -> NeighbourDistances:
     return NeighbourDistances(distances.k, distances.mean[keep], distances.reach[keep])
 
 
-def apply_change(distances: NeighbourDistances, change: NeighbourDistances | tuple | None, path: str | Path) -> NeighbourDistances:
+def apply_change(
+    distances: NeighbourDistances, change: NeighbourDistances | tuple | None, path: str | Path
+) -> NeighbourDistances:
     """Stage j's distances from stage j-1's kept rows and stage j's change: (rows, mean,
     reach), or whole distances where the stage searched anew or k changed."""
     if change is None:
@@ -155,7 +168,9 @@ def apply_change(distances: NeighbourDistances, change: NeighbourDistances | tup
     return distances
 
 
-def write_changes(path: str | Path, carried: dict[tuple[int, int], tuple[NeighbourDistances | None, NeighbourDistances]]) -> None:
+def write_changes(
+    path: str | Path, carried: dict[tuple[int, int], tuple[NeighbourDistances | None, NeighbourDistances]]
+) -> None:
     """``neighbour_changes.parquet`` of a stage: the rows whose distances differ from the
     previous stage's kept rows (every row where it searched anew or k changed), atomically."""
     columns = {name: [] for name in ("cloud", "k", "row", "mean", "reach")}
@@ -166,12 +181,23 @@ def write_changes(path: str | Path, carried: dict[tuple[int, int], tuple[Neighbo
             whole.append([cloud, k, after.k])
         else:
             rows = np.flatnonzero((before.mean != after.mean) | (before.reach != after.reach))
-        for name, values in (("cloud", np.full(len(rows), cloud)), ("k", np.full(len(rows), k)), ("row", rows),
-                             ("mean", after.mean[rows]), ("reach", after.reach[rows])):  # fmt: skip
+        for name, values in (
+            ("cloud", np.full(len(rows), cloud)),
+            ("k", np.full(len(rows), k)),
+            ("row", rows),
+            ("mean", after.mean[rows]),
+            ("reach", after.reach[rows]),
+        ):
             columns[name].append(values)
     types = {"cloud": np.uint8, "k": np.int64, "row": np.int64, "mean": np.float64, "reach": np.float64}
-    write_table(path, {name: np.concatenate(parts).astype(types[name]) if parts else np.zeros(0, types[name]) for name, parts in columns.items()},
-                {"whole": whole})  # fmt: skip
+    write_table(
+        path,
+        {
+            name: np.concatenate(parts).astype(types[name]) if parts else np.zeros(0, types[name])
+            for name, parts in columns.items()
+        },
+        {"whole": whole},
+    )
 
 
 def read_changes(path: str | Path) -> dict[tuple[int, int], NeighbourDistances | tuple]:

@@ -15,20 +15,33 @@ from pathlib import Path
 
 import numpy as np
 
+from ..checks import is_number
 from ..errors import RegistrationError
 from ..io.parquet_table import read_table, write_table
 from ..pair import read_pair
 from ..poses import apply_pose, invert_pose, pose_error
-from ..checks import is_number
 
 log = logging.getLogger(__name__)
 
 # The per-trial table's columns, in order.
 COLUMNS = (
-    "method", "trial", "start_dx_m", "start_dy_m", "start_dz_m", "start_rx_deg", "start_ry_deg", "start_rz_deg",
-    "start_translation_m", "start_rotation_deg", "translation_error_m", "rotation_error_deg", "converged",
-    "fitness", "seconds", "failure",
-)  # fmt: skip
+    "method",
+    "trial",
+    "start_dx_m",
+    "start_dy_m",
+    "start_dz_m",
+    "start_rx_deg",
+    "start_ry_deg",
+    "start_rz_deg",
+    "start_translation_m",
+    "start_rotation_deg",
+    "translation_error_m",
+    "rotation_error_deg",
+    "converged",
+    "fitness",
+    "seconds",
+    "failure",
+)
 # Summary columns per method: rematch_{method}_{error}_{statistic}.
 ERRORS = {"translation": ("translation_error_m", "m"), "rotation": ("rotation_error_deg", "deg")}
 STATISTICS = {"median": 50, "p90": 90}
@@ -71,7 +84,9 @@ def rematch(xyz1: np.ndarray, xyz2_sensor: np.ndarray, reference: np.ndarray, se
     from ..registration import matching, parse_settings
     from ..registration.core import require_points, scan_match
 
-    offsets = start_offsets(settings["trials"], settings["max_translation_m"], settings["max_rotation_deg"], settings["seed"])
+    offsets = start_offsets(
+        settings["trials"], settings["max_translation_m"], settings["max_rotation_deg"], settings["seed"]
+    )
     rows = []
     for method in settings["methods"]:
         params = parse_settings({"method": method, **settings["parameters"]}).params
@@ -91,14 +106,19 @@ def rematch(xyz1: np.ndarray, xyz2_sensor: np.ndarray, reference: np.ndarray, se
             seconds = time.perf_counter() - started
             estimated = not record.get("failure") and np.isfinite(T).all()
             errors = pose_error(T, reference) if estimated else (np.nan, np.nan)
-            rows.append({
-                "method": method, "trial": trial,
-                **dict(zip(COLUMNS[2:8], [*offset[:3], *np.degrees(offset[3:])])),
-                **dict(zip(COLUMNS[8:12], [*pose_error(guess, reference), *errors])),
-                "converged": bool(record["converged"]), "fitness": float(record["fitness"]), "seconds": seconds,
-                "failure": "" if record["converged"] else record.get("warning", record.get("failure", "")),
-            })  # fmt: skip
-        log.info("rematch %s: %d trials, %s", method, len(offsets), _medians(rows[-len(offsets):]))
+            rows.append(
+                {
+                    "method": method,
+                    "trial": trial,
+                    **dict(zip(COLUMNS[2:8], [*offset[:3], *np.degrees(offset[3:])])),
+                    **dict(zip(COLUMNS[8:12], [*pose_error(guess, reference), *errors])),
+                    "converged": bool(record["converged"]),
+                    "fitness": float(record["fitness"]),
+                    "seconds": seconds,
+                    "failure": "" if record["converged"] else record.get("warning", record.get("failure", "")),
+                }
+            )
+        log.info("rematch %s: %d trials, %s", method, len(offsets), _medians(rows[-len(offsets) :]))
     return {name: np.array([row[name] for row in rows]) for name in COLUMNS}
 
 
@@ -120,15 +140,23 @@ def summary_columns(table: dict[str, np.ndarray], methods: list[str] | None = No
             values = table[column][mine].astype(float)
             values = values[np.isfinite(values)]
             for statistic, q in STATISTICS.items():
-                columns[f"rematch_{method}_{error}_{statistic}_{unit}"] = float(np.percentile(values, q)) if len(values) else None
+                columns[f"rematch_{method}_{error}_{statistic}_{unit}"] = (
+                    float(np.percentile(values, q)) if len(values) else None
+                )
         columns[f"rematch_{method}_converged_share"] = float(np.mean(table["converged"][mine])) if mine.any() else None
     return columns
 
 
 # The summary's rematch columns as one row per stage and method (translation errors in cm).
 METHOD_COLUMNS = (
-    "stage", "method", "translation_median_cm", "translation_p90_cm", "rotation_median_deg", "rotation_p90_deg", "converged",
-)  # fmt: skip
+    "stage",
+    "method",
+    "translation_median_cm",
+    "translation_p90_cm",
+    "rotation_median_deg",
+    "rotation_p90_deg",
+    "converged",
+)
 
 
 def method_rows(rows: list[dict]) -> list[dict]:
@@ -136,13 +164,22 @@ def method_rows(rows: list[dict]) -> list[dict]:
     ``rematch_{method}_...`` columns; none for rows without them."""
     out = []
     for row in rows:
-        methods = [k.removeprefix("rematch_").removesuffix("_converged_share") for k in row if k.endswith("_converged_share")]
+        methods = [
+            k.removeprefix("rematch_").removesuffix("_converged_share") for k in row if k.endswith("_converged_share")
+        ]
         for method in methods:
             values = {}
             for name in METHOD_COLUMNS[2:-1]:
                 value = row.get(f"rematch_{method}_{name.replace('_cm', '_m')}")
                 values[name] = value * 100 if name.endswith("_cm") and is_number(value, finite=True) else value
-            out.append({"stage": row.get("stage"), "method": method, **values, "converged": row[f"rematch_{method}_converged_share"]})
+            out.append(
+                {
+                    "stage": row.get("stage"),
+                    "method": method,
+                    **values,
+                    "converged": row[f"rematch_{method}_converged_share"],
+                }
+            )
     return out
 
 
@@ -164,10 +201,18 @@ def rematch_stage(points_path: str | Path, settings: dict, out: str | Path) -> d
     reference, kind = reference_pose(meta)
     # The survivors of scan 2 are in frame 1 by the study's T_1_2: back to sensor 2's frame.
     xyz2_sensor = apply_pose(invert_pose(pair.T_1_2), pair.xyz2)
-    log.info("rematch stage %s: %d + %d points, reference: %s", meta.get("stage"), len(pair.xyz1), len(xyz2_sensor), kind)
+    log.info(
+        "rematch stage %s: %d + %d points, reference: %s", meta.get("stage"), len(pair.xyz1), len(xyz2_sensor), kind
+    )
     table = rematch(pair.xyz1, xyz2_sensor, reference, settings)
-    out_meta = {"stage": meta.get("stage"), "level": meta.get("level"), "hypothesis": meta.get("hypothesis"),
-                "reference": kind, "reference_T_1_2": reference.tolist(), "settings": settings}  # fmt: skip
+    out_meta = {
+        "stage": meta.get("stage"),
+        "level": meta.get("level"),
+        "hypothesis": meta.get("hypothesis"),
+        "reference": kind,
+        "reference_T_1_2": reference.tolist(),
+        "settings": settings,
+    }
     write_table(out, table, out_meta)
     return table
 

@@ -29,21 +29,31 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import HypothesisError, NotApplicableError
-from ..field.kernel import field_from_voxel_ids
 from ..field.grid import FieldSettings, field_settings_from_config
+from ..field.kernel import field_from_voxel_ids
 from ..hypotheses import BUILTINS, apply_step, validate_step
+from ..hypotheses.steps import canonical_json, step_name
 from ..io.parquet_table import write_table
 from ..pair import RegisteredPair, read_pair
-from ..hypotheses.steps import canonical_json, step_name
 from .neighbour_file import carry_to_stage, write_changes
 from .tags import voxel_energy
 
 log = logging.getLogger(__name__)
 
 SUGGESTION_COLUMNS = (
-    "rank", "hypothesis", "params", "removed1", "removed2", "removed_share", "voxels_invalidated",
-    "energy_invalidated", "max_after", "p95_after", "energy_after", "energy_reduction",
-)  # fmt: skip
+    "rank",
+    "hypothesis",
+    "params",
+    "removed1",
+    "removed2",
+    "removed_share",
+    "voxels_invalidated",
+    "energy_invalidated",
+    "max_after",
+    "p95_after",
+    "energy_after",
+    "energy_reduction",
+)
 
 
 def candidate_steps(
@@ -104,8 +114,15 @@ def suggestions(
             "removed_share": (removed1 + removed2) / total if total else math.nan,
             **compare_fields(before, after),
         }
-        log.info("candidate %s %s: energy reduction %.3f, %d + %d points removed (%.2f s)",
-                 row["hypothesis"], row["params"], row["energy_reduction"], removed1, removed2, time.perf_counter() - start)  # fmt: skip
+        log.info(
+            "candidate %s %s: energy reduction %.3f, %d + %d points removed (%.2f s)",
+            row["hypothesis"],
+            row["params"],
+            row["energy_reduction"],
+            removed1,
+            removed2,
+            time.perf_counter() - start,
+        )
         rows.append(row)
     order = sorted(range(len(rows)), key=lambda i: _rank_key(rows[i]))
     columns = {name: [] for name in SUGGESTION_COLUMNS}
@@ -113,7 +130,14 @@ def suggestions(
         rows[i]["rank"] = rank
         for name in SUGGESTION_COLUMNS:
             columns[name].append(rows[i][name])
-    types = {"rank": np.int64, "removed1": np.int64, "removed2": np.int64, "voxels_invalidated": np.int64, "hypothesis": str, "params": str}
+    types = {
+        "rank": np.int64,
+        "removed1": np.int64,
+        "removed2": np.int64,
+        "voxels_invalidated": np.int64,
+        "hypothesis": str,
+        "params": str,
+    }
     return {name: np.asarray(values, dtype=types.get(name, np.float64)) for name, values in columns.items()}
 
 
@@ -175,6 +199,8 @@ def suggest_stage(
     return table
 
 
-def write_suggestions(out: str | Path, table: dict[str, np.ndarray], stage_id: str | None, candidates: list[dict], grid_section: dict) -> None:
+def write_suggestions(
+    out: str | Path, table: dict[str, np.ndarray], stage_id: str | None, candidates: list[dict], grid_section: dict
+) -> None:
     """Write a suggestion table (atomically) with the stage, candidates and grid as metadata."""
     write_table(out, table, {"stage": stage_id, "candidates": candidates, "grid": grid_section})

@@ -59,7 +59,10 @@ def voxel_energy(columns: dict[str, np.ndarray]) -> np.ndarray:
 
 
 def voxel_tags(
-    columns: dict[str, np.ndarray], pair: RegisteredPair, settings: FieldSettings, ids: tuple[np.ndarray, np.ndarray] | None = None
+    columns: dict[str, np.ndarray],
+    pair: RegisteredPair,
+    settings: FieldSettings,
+    ids: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> dict[str, np.ndarray]:
     """``{tag_column(tag): bool (V,)}`` for the field ``columns`` of ``pair`` (binned about
     sensor 1); ``ids``: each cloud's voxel ids, when the caller has them."""
@@ -139,7 +142,10 @@ def _on_depth_edge(pair: RegisteredPair, settings: FieldSettings) -> list[np.nda
 
 def _radial(columns: dict[str, np.ndarray]) -> np.ndarray:
     uvw = np.column_stack([columns[c] for c in ("u", "v", "w")])
-    sight = 0.5 * (np.column_stack([columns[c] for c in ("x1", "y1", "z1")]) + np.column_stack([columns[c] for c in ("x2", "y2", "z2")]))
+    sight = 0.5 * (
+        np.column_stack([columns[c] for c in ("x1", "y1", "z1")])
+        + np.column_stack([columns[c] for c in ("x2", "y2", "z2")])
+    )
     with np.errstate(invalid="ignore", divide="ignore"):
         cosine = np.einsum("ij,ij->i", uvw, sight) / (np.linalg.norm(uvw, axis=1) * np.linalg.norm(sight, axis=1))
     return np.abs(cosine) >= math.cos(math.radians(RADIAL_DEG))

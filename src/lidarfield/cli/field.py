@@ -36,34 +36,41 @@ def add_parser(subparsers) -> None:
     p.add_argument("scan2", help="scan 2")
     p.add_argument("--out", required=True, type=Path, help="output folder: field.parquet and summary.json")
     where = p.add_mutually_exclusive_group()
-    where.add_argument("--transform", type=Path, help="pose of sensor 2 in frame 1: 4x4 / 3x4 matrix or KITTI line file")
     where.add_argument(
-        "--pose2", help="pose of sensor 2 in frame 1: x,y,z,roll,pitch,yaw (m, rad); negative first value: --pose2=-1,..."
+        "--transform", type=Path, help="pose of sensor 2 in frame 1: 4x4 / 3x4 matrix or KITTI line file"
+    )
+    where.add_argument(
+        "--pose2",
+        help="pose of sensor 2 in frame 1: x,y,z,roll,pitch,yaw (m, rad); negative first value: --pose2=-1,...",
     )
     p.add_argument("--format", help="scan file format of both scans (default: from the extension)")
     p.add_argument("--grid", type=Path, help="YAML with the grid keys (top level or under 'grid:')")
     p.add_argument("--kind", choices=("spherical", "cartesian"), help="grid kind (default spherical)")
     p.add_argument("--azimuth-bins", type=int, help="azimuth bins over 360 deg (default 36)")
     p.add_argument("--azimuth-offset-deg", type=float, help="start of azimuth bin 0 (default 0)")
-    p.add_argument("--elevation-deg", type=float, nargs=2, metavar=("LO", "HI"), help="elevation range (default -20 20)")
+    p.add_argument(
+        "--elevation-deg", type=float, nargs=2, metavar=("LO", "HI"), help="elevation range (default -20 20)"
+    )
     p.add_argument("--elevation-bins", type=int, help="elevation bins (default 5)")
     p.add_argument("--range-edges-m", type=float, nargs="+", metavar="EDGE", help="range shell edges (default: none)")
     p.add_argument("--cell-m", type=float, help="Cartesian cell size (default 1)")
     p.add_argument("--min-points", type=int, help="points per cloud for a valid vector (default 30)")
-    p.add_argument("--max-component-m", type=float, help="invalidate vectors with a larger |u|, |v| or |w| (default off)")
+    p.add_argument(
+        "--max-component-m", type=float, help="invalidate vectors with a larger |u|, |v| or |w| (default off)"
+    )
     p.add_argument("--z-min", type=float, help="a vector is significant when |z| >= this (default 3)")
     p.set_defaults(func=run)
 
 
 def run(args) -> int:
-    from ..field.file import field_meta, write_field
     from ..analysis.field_stats import analyse_field, summary_json_safe
+    from ..field.file import field_meta, write_field
     from ..field.grid import field_settings_from_config
     from ..io import read_scan
     from ..io.atomic import write_text
+    from ..io.pose_files import read_pose
     from ..pair import RegisteredPair
     from ..poses import apply_pose, parse_pose_arg
-    from ..io.pose_files import read_pose
 
     # Everything that can fail on the user's input happens before the first file is written.
     settings = field_settings_from_config(_grid_config(args))
@@ -127,10 +134,16 @@ def _table(summary: dict) -> str:
         ("points", f"{summary['n1']:,} / {summary['n2']:,}"),
         ("out of grid", f"{summary['out_of_grid1']:,} / {summary['out_of_grid2']:,}"),
         ("voxels (valid)", f"{s['voxels']} ({s['voxels_valid']})"),
-        ("magnitude max / mean / p95", f"{s['max_magnitude']:.4f} / {s['mean_magnitude']:.4f} / {s['p95_magnitude']:.4f} m"),
+        (
+            "magnitude max / mean / p95",
+            f"{s['max_magnitude']:.4f} / {s['mean_magnitude']:.4f} / {s['p95_magnitude']:.4f} m",
+        ),
         ("paper max metric", f"{s['paper_max_metric']:.4f} m"),
-        ("rigid part", f"t = ({t[0]:+.4f}, {t[1]:+.4f}, {t[2]:+.4f}) m, {s['rigid_rotation_deg']:.4f} deg, "
-         f"energy share {s['rigid_energy_share']:.3f}"),
+        (
+            "rigid part",
+            f"t = ({t[0]:+.4f}, {t[1]:+.4f}, {t[2]:+.4f}) m, {s['rigid_rotation_deg']:.4f} deg, "
+            f"energy share {s['rigid_energy_share']:.3f}",
+        ),
         ("mean resultant length", f"{s['mean_resultant_length']:.3f}"),
         ("significant voxels", f"{s['voxels_significant']} (|z| >= {summary['z_min']:g})"),
         ("randomness", f"{s['verdict']} (p_direction {_p(s['p_direction'])}, p_coherence {_p(s['p_coherence'])})"),

@@ -59,12 +59,16 @@ def add_parser(subparsers) -> None:
     p = jobs.add_parser("suggest")
     p.add_argument("--points", required=True)
     p.add_argument("--candidates", type=_json, required=True, help="normalised hypothesis entries")
-    p.add_argument("--default-candidates", action="store_true", help="skip the candidates that cannot apply to the pair")
+    p.add_argument(
+        "--default-candidates", action="store_true", help="skip the candidates that cannot apply to the pair"
+    )
     p.add_argument("--grid", type=_json, required=True)
     p.add_argument("--out", required=True)
     p.add_argument("--neighbours", default="", help="the pair's neighbours.parquet (none: searched here)")
     p.add_argument("--removed", nargs="*", default=[], help="with --neighbours: the removed.parquet of stages 1..k")
-    p.add_argument("--changes", nargs="*", default=[], help="with --neighbours: the neighbour_changes.parquet of stages 1..k-1")
+    p.add_argument(
+        "--changes", nargs="*", default=[], help="with --neighbours: the neighbour_changes.parquet of stages 1..k-1"
+    )
     p.add_argument("--changes-out", help="this stage's neighbour_changes.parquet")
     p.set_defaults(func=_suggest)
 
@@ -134,7 +138,12 @@ def add_parser(subparsers) -> None:
     p.set_defaults(func=_pair_report)
 
     p = jobs.add_parser("report")
-    p.add_argument("--config", type=_json_or_stdin, required=True, help="the study's config (JSON, or - for stdin), folded at the end of the page")
+    p.add_argument(
+        "--config",
+        type=_json_or_stdin,
+        required=True,
+        help="the study's config (JSON, or - for stdin), folded at the end of the page",
+    )
     p.add_argument("--summary", required=True)
     p.add_argument("--study-dir", required=True)
     p.add_argument("--figures", required=True, help="the study figures' folder")
@@ -172,15 +181,24 @@ def _suggest(args: argparse.Namespace) -> None:
     from ..analysis.suggest import suggest_stage
 
     suggest_stage(
-        args.points, args.candidates, args.grid, args.out, defaults=args.default_candidates,
-        neighbours=args.neighbours, removed_paths=args.removed, change_paths=args.changes, changes_out=args.changes_out,
-    )  # fmt: skip
+        args.points,
+        args.candidates,
+        args.grid,
+        args.out,
+        defaults=args.default_candidates,
+        neighbours=args.neighbours,
+        removed_paths=args.removed,
+        change_paths=args.changes,
+        changes_out=args.changes_out,
+    )
 
 
 def _neighbours(args: argparse.Namespace) -> None:
     from ..analysis.neighbour_file import neighbours_job
 
     neighbours_job(args.points, args.k, args.out)
+
+
 def _rematch(args: argparse.Namespace) -> None:
     from ..analysis.rematch import rematch_stage
 
@@ -200,8 +218,8 @@ def _plotly_js(args: argparse.Namespace) -> None:
 
 
 def _plot_pair(args: argparse.Namespace) -> None:
-    from ..study.summary import read_stats
     from ..plots import plot_pair
+    from ..study.summary import read_stats
 
     plot_pair(read_stats(args.stats), args.out)
     if args.rematch:
@@ -237,11 +255,20 @@ def _study_figures(args: argparse.Namespace) -> None:
 
 
 def _pair_report(args: argparse.Namespace) -> None:
-    from ..study.summary import read_stats
     from ..report import write_pair_page
+    from ..study.summary import read_stats
 
-    write_pair_page(args.pair, args.stage_dirs, read_stats(args.stats, args.rematch), args.out, args.plots, args.figures,
-                    overview_href="../report.html", on_demand=args.on_demand, max_mb=args.max_mb)
+    write_pair_page(
+        args.pair,
+        args.stage_dirs,
+        read_stats(args.stats, args.rematch),
+        args.out,
+        args.plots,
+        args.figures,
+        overview_href="../report.html",
+        on_demand=args.on_demand,
+        max_mb=args.max_mb,
+    )
 
 
 def _report(args: argparse.Namespace) -> None:

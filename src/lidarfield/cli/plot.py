@@ -14,13 +14,17 @@ def add_parser(subparsers) -> None:
     p.add_argument("stage_dir", type=Path, help="stage folder, e.g. results/PAIR/stages/01-ego_vehicle-1a2b3c4d")
     p.add_argument("--prev", type=Path, help="the previous stage's folder: adds before_after and shares its axes")
     p.add_argument("--out", required=True, type=Path, help="output folder for the figures")
-    p.add_argument("--config", type=Path, help="study YAML (validated; paths relative to the working directory): its plots section sets magnification, top_k, ...")
+    p.add_argument(
+        "--config",
+        type=Path,
+        help="study YAML (validated; paths relative to the working directory): its plots section sets magnification, top_k, ...",
+    )
     p.set_defaults(func=run)
 
 
 def run(args) -> int:
-    from ..study.config import load_config
     from ..plots import plot_stage
+    from ..study.config import load_config
 
     settings = load_config(args.config, require_pairs=False).plots if args.config else {}
     for path in plot_stage(args.stage_dir, args.prev, args.out, settings):

@@ -22,15 +22,26 @@ def add_parser(subparsers) -> None:
     )
     p.add_argument("scans", nargs="*", metavar="SCAN", help="SCAN1 SCAN2 (a file, or file#k for scan k of a container)")
     p.add_argument("--out", required=True, type=Path, help="registered.parquet, or T.txt with --from-aligned")
-    p.add_argument("--from-aligned", nargs=2, type=Path, metavar=("ORIGINAL", "ALIGNED"),
-                   help="derive the translation ORIGINAL -> ALIGNED (row-aligned x y z text files)")
-    p.add_argument("--method", default="identity",
-                   choices=("identity", "truth", "icp", "icp_point_to_plane", "gicp", "ndt"),
-                   help="registration method (default identity)")
+    p.add_argument(
+        "--from-aligned",
+        nargs=2,
+        type=Path,
+        metavar=("ORIGINAL", "ALIGNED"),
+        help="derive the translation ORIGINAL -> ALIGNED (row-aligned x y z text files)",
+    )
+    p.add_argument(
+        "--method",
+        default="identity",
+        choices=("identity", "truth", "icp", "icp_point_to_plane", "gicp", "ndt"),
+        help="registration method (default identity)",
+    )
     p.add_argument("--transform", type=Path, help="fixed pose of sensor 2 in frame 1 (4x4 / 3x4 / KITTI file)")
     guess = p.add_mutually_exclusive_group()
-    guess.add_argument("--guess", help="initial T_1_2: x,y,z,roll,pitch,yaw (m, rad) or 16 numbers; "
-                       "negative first value: --guess=-1,...; 'truth' = the scans' reference poses")
+    guess.add_argument(
+        "--guess",
+        help="initial T_1_2: x,y,z,roll,pitch,yaw (m, rad) or 16 numbers; "
+        "negative first value: --guess=-1,...; 'truth' = the scans' reference poses",
+    )
     guess.add_argument("--guess-file", type=Path, help="initial T_1_2 from a pose file")
     p.add_argument("--pose1", help="world-from-sensor pose of scan 1: a pose file, or FILE#k for KITTI line k")
     p.add_argument("--pose2", help="world-from-sensor pose of scan 2 (same forms)")
@@ -104,8 +115,10 @@ def _print_registration(pair) -> None:
     reg = pair.registration
     x, y, z, _, _, yaw = xyzrpy_from_pose(pair.T_1_2)
     rmse = "none" if reg["inlier_rmse"] is None else f"{reg['inlier_rmse']:.4f} m"
-    print(f"method {reg['method']}: converged {reg['converged']}, fitness {reg['fitness']:.4f} "
-          f"(within {reg['fitness_distance_m']} m), inlier RMSE {rmse}")
+    print(
+        f"method {reg['method']}: converged {reg['converged']}, fitness {reg['fitness']:.4f} "
+        f"(within {reg['fitness_distance_m']} m), inlier RMSE {rmse}"
+    )
     print(f"T_1_2: translation ({x:.4f}, {y:.4f}, {z:.4f}) m, yaw {np.degrees(yaw):.4f} deg")
     if "translation_error_m" in reg:
         print(f"against the reference poses: {reg['translation_error_m']:.4f} m, {reg['rotation_error_deg']:.4f} deg")
@@ -125,8 +138,10 @@ def _from_aligned(original: Path, aligned: Path, out: Path) -> int:
     T = translation_from_aligned_copy(rows_original, rows_aligned)
     offsets = translation_offsets(rows_original, rows_aligned)
     spread = np.abs(offsets - T[:3, 3]).max()
-    comment = (f"pose of the sensor of {original.name} in the frame of {aligned.name}: the translation mapping "
-               f"it onto {aligned.name} row for row\n{len(offsets)} rows, offsets spread {spread:.3g} m")
+    comment = (
+        f"pose of the sensor of {original.name} in the frame of {aligned.name}: the translation mapping "
+        f"it onto {aligned.name} row for row\n{len(offsets)} rows, offsets spread {spread:.3g} m"
+    )
     write_transform(out, T, comment)
     print(f"translation {T[:3, 3].tolist()} m from {len(offsets)} rows; spread {spread:.3g} m")
     print(f"wrote {out}")

@@ -27,13 +27,15 @@ def add_parser(subparsers) -> None:
     p.add_argument("results_dir", type=Path, help="results folder")
     p.add_argument("--out", required=True, type=Path, help="the HTML file to write")
     p.add_argument("--config", type=Path, help="the study YAML, shown in the report")
-    p.add_argument("--max-mb", type=positive_mb, help="size budget of the page in MB (default: report.max_mb of --config, else 20)")
+    p.add_argument(
+        "--max-mb", type=positive_mb, help="size budget of the page in MB (default: report.max_mb of --config, else 20)"
+    )
     p.set_defaults(func=run)
 
 
 def run(args) -> int:
-    from ..study.config import load_config
     from ..report import discover, write_report
+    from ..study.config import load_config
 
     study = load_config(args.config, require_pairs=False).config if args.config else {}
     pairs, rows = discover(args.results_dir)

@@ -5,10 +5,17 @@ from __future__ import annotations
 import argparse
 import math
 
-
 TABLE_COLUMNS = (
-    "stage", "hypothesis", "n1", "n2", "removed1", "removed2", "voxels_valid", "max_magnitude", "paper_max_metric",
-)  # fmt: skip
+    "stage",
+    "hypothesis",
+    "n1",
+    "n2",
+    "removed1",
+    "removed2",
+    "voxels_valid",
+    "max_magnitude",
+    "paper_max_metric",
+)
 
 
 def add_parser(subparsers) -> None:
@@ -22,30 +29,40 @@ def add_parser(subparsers) -> None:
     parser.add_argument("scan1", help="scan 1 (its sensor frame is the frame of the results)")
     parser.add_argument("scan2", help="scan 2")
     parser.add_argument("--config", required=True, help="study YAML: its grid, hypotheses and rematch section are used")
-    parser.add_argument("--out", required=True, metavar="DIR", help="output folder (new, empty, or from an earlier run)")
+    parser.add_argument(
+        "--out", required=True, metavar="DIR", help="output folder (new, empty, or from an earlier run)"
+    )
     how = parser.add_mutually_exclusive_group()
-    how.add_argument("--register", metavar="METHOD", help="identity (default), truth, icp, icp_point_to_plane, gicp or ndt")
+    how.add_argument(
+        "--register", metavar="METHOD", help="identity (default), truth, icp, icp_point_to_plane, gicp or ndt"
+    )
     how.add_argument("--transform", metavar="FILE", help="file holding the pose of sensor 2 in frame 1")
     parser.add_argument("--sensor", metavar="NAME", help="sensor preset or YAML file of both scans (e.g. vlp16)")
     parser.add_argument(
-        "--poses", metavar="TOPIC", help="ROS bag scans: take their poses from this topic (Odometry, PoseStamped, TF) for --register truth"
+        "--poses",
+        metavar="TOPIC",
+        help="ROS bag scans: take their poses from this topic (Odometry, PoseStamped, TF) for --register truth",
     )
     parser.add_argument("--pose-frame", metavar="FRAME", help="with --poses on a TF topic: the sensor's child frame")
     parser.set_defaults(func=_run)
 
 
 def _run(args: argparse.Namespace) -> int:
-    from ..study.run import run_pair
     from ..analysis.rematch import METHOD_COLUMNS, method_rows
+    from ..study.run import run_pair
 
-    poses = None if args.poses is None else {"topic": args.poses, **({"frame": args.pose_frame} if args.pose_frame else {})}
+    poses = (
+        None if args.poses is None else {"topic": args.poses, **({"frame": args.pose_frame} if args.pose_frame else {})}
+    )
     rows = run_pair(args.scan1, args.scan2, args.config, args.out, args.register, args.transform, args.sensor, poses)
     print(format_table(rows))
     for line in findings_lines(rows):
         print(line)
     rematched = method_rows(rows)
     if rematched:
-        print("\nrematch: pose error of each method from the stage's survivors (median and 90th percentile over trials)")
+        print(
+            "\nrematch: pose error of each method from the stage's survivors (median and 90th percentile over trials)"
+        )
         print(format_table(rematched, METHOD_COLUMNS))
     print(format_next_steps(rows, args.out))
     print(f"wrote {args.out}/stages/*/ and {args.out}/summary.parquet, summary.csv")
@@ -61,7 +78,9 @@ def format_next_steps(rows: list[dict], out_dir) -> str:
     lines = ["what to try next (best candidate alone on each stage's survivors):"]
     for row in rows:
         best = (read_suggestions(Path(out_dir) / "stages" / row["stage"]) or [None])[0]
-        field = f"{row.get('verdict')}, {row.get('voxels_significant')} of {row.get('voxels_valid')} vectors significant"
+        field = (
+            f"{row.get('verdict')}, {row.get('voxels_significant')} of {row.get('voxels_valid')} vectors significant"
+        )
         if best is None or not best["energy_reduction"] > 0:
             lines.append(f"  {row['stage']} ({field}): no candidate reduces the energy")
             continue
@@ -76,7 +95,10 @@ def format_table(rows: list[dict], columns: tuple[str, ...] = TABLE_COLUMNS) -> 
     """The rows as an aligned text table (floats with 3 decimals; the first two columns text)."""
     cells = [[_cell(row.get(column)) for column in columns] for row in rows]
     widths = [max(len(c), *(len(r[i]) for r in cells)) for i, c in enumerate(columns)]
-    lines = ["  ".join(c.ljust(w) if i < 2 else c.rjust(w) for i, (c, w) in enumerate(zip(line, widths))) for line in [list(columns), *cells]]
+    lines = [
+        "  ".join(c.ljust(w) if i < 2 else c.rjust(w) for i, (c, w) in enumerate(zip(line, widths)))
+        for line in [list(columns), *cells]
+    ]
     return "\n".join(lines)
 
 

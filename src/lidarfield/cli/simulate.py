@@ -19,14 +19,30 @@ def _numbers(text: str, count: int, what: str) -> list[float]:
 def add_parser(subparsers) -> None:
     p = subparsers.add_parser("simulate", help="ray-cast one scan of a scene at a pose")
     p.add_argument("--scene", required=True, help="built-in scene name (e.g. paper-intersection) or a scene YAML")
-    p.add_argument("--sensor", required=True, help="sensor preset (paper-sim-80, vlp16, hdl32, hdl64, os1-128) or a YAML model")
-    p.add_argument("--pose", required=True, help="x,y,z,roll,pitch,yaw (m, rad): world-from-sensor at the sweep start (negative first value: --pose=-1,...)")
+    p.add_argument(
+        "--sensor", required=True, help="sensor preset (paper-sim-80, vlp16, hdl32, hdl64, os1-128) or a YAML model"
+    )
+    p.add_argument(
+        "--pose",
+        required=True,
+        help="x,y,z,roll,pitch,yaw (m, rad): world-from-sensor at the sweep start (negative first value: --pose=-1,...)",
+    )
     p.add_argument("--out", required=True, help="output scan Parquet")
     p.add_argument("--time", type=float, default=0.0, help="scene time in seconds: places moving objects (default 0)")
     p.add_argument("--seed", type=int, default=0, help="seed of the noise and dropout (default 0)")
-    p.add_argument("--range-noise", type=float, default=0.0, metavar="M", help="Gaussian range noise sigma, metres (default 0)")
-    p.add_argument("--dropout", type=float, default=0.0, metavar="P", help="probability of losing each return (default 0)")
-    p.add_argument("--max-range", type=float, default=None, metavar="M", help="range limit below the model's (default: the model's)")
+    p.add_argument(
+        "--range-noise", type=float, default=0.0, metavar="M", help="Gaussian range noise sigma, metres (default 0)"
+    )
+    p.add_argument(
+        "--dropout", type=float, default=0.0, metavar="P", help="probability of losing each return (default 0)"
+    )
+    p.add_argument(
+        "--max-range",
+        type=float,
+        default=None,
+        metavar="M",
+        help="range limit below the model's (default: the model's)",
+    )
     p.add_argument("--rolling-shutter", action="store_true", help="move the sensor during the sweep")
     p.add_argument("--velocity", default="0,0,0", help="vx,vy,vz m/s, world frame (rolling shutter)")
     p.add_argument("--angular-velocity", default="0,0,0", help="wx,wy,wz rad/s, sensor frame (rolling shutter)")
@@ -35,10 +51,10 @@ def add_parser(subparsers) -> None:
 
 def run(args) -> int:
     from ..io import write_scan
-    from ..simulation.scene import load_scene
+    from ..poses import pose_from_xyzrpy
     from ..sensors.models import sensor_model
     from ..simulation.raycast import simulate_scan
-    from ..poses import pose_from_xyzrpy
+    from ..simulation.scene import load_scene
 
     pose = pose_from_xyzrpy(_numbers(args.pose, 6, "--pose"))
     velocity = _numbers(args.velocity, 3, "--velocity")

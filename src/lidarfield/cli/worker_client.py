@@ -49,6 +49,7 @@ def recv_exact(sock: socket.socket, size: int) -> bytes:
 def recv_message(sock: socket.socket) -> dict:
     return json.loads(recv_exact(sock, int.from_bytes(recv_exact(sock, 4), "big")))
 
+
 # Exit status of a job whose worker vanished before reporting it.
 LOST = 1
 

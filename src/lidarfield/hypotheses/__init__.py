@@ -69,7 +69,9 @@ def parse_step(step: dict, base_dir: str | Path = ".", study_grid: dict | None =
         raise HypothesisError(f"{at}a stack entry is a one-key mapping {{name: {{parameters}}}}, got {step!r}")
     ((name, raw),) = step.items()
     if name != PLUGIN.name and name not in BUILTINS:
-        raise HypothesisError(f"{_where(name, level)}: unknown hypothesis; available: {', '.join(available_hypotheses())}")
+        raise HypothesisError(
+            f"{_where(name, level)}: unknown hypothesis; available: {', '.join(available_hypotheses())}"
+        )
     entry = PLUGIN if name == PLUGIN.name else BUILTINS[name]
     params = parse_params(entry.params, raw, _where(name, level))
     if entry is PLUGIN:
@@ -79,7 +81,9 @@ def parse_step(step: dict, base_dir: str | Path = ".", study_grid: dict | None =
     return name, params
 
 
-def validate_step(step: dict, base_dir: str | Path = ".", study_grid: dict | None = None, level: int | None = None) -> dict:
+def validate_step(
+    step: dict, base_dir: str | Path = ".", study_grid: dict | None = None, level: int | None = None
+) -> dict:
     """The normalised entry ``{name: {params}}`` (defaults filled in), or a HypothesisError.
 
     Idempotent: validating a normalised entry gives it back unchanged.
@@ -102,7 +106,11 @@ def validate_stack(stack: list[dict] | None, base_dir: str | Path = ".", study_g
 
 
 def apply_step(
-    pair: RegisteredPair, step: dict, base_dir: str | Path = ".", study_grid: dict | None = None, level: int | None = None
+    pair: RegisteredPair,
+    step: dict,
+    base_dir: str | Path = ".",
+    study_grid: dict | None = None,
+    level: int | None = None,
 ) -> Masks:
     """Validate one stack entry and apply it: the keep-masks of both clouds."""
     name, params = parse_step(step, base_dir, study_grid, level)

@@ -19,9 +19,12 @@ from .params import doc
 @dataclass(frozen=True)
 class Params:
     min_range_m: float = field(default=0.0, metadata=doc("remove points nearer than this to their own sensor"))
-    max_range_m: float | None = field(default=None, metadata=doc("remove points farther than this from their own sensor (null: no limit)"))
+    max_range_m: float | None = field(
+        default=None, metadata=doc("remove points farther than this from their own sensor (null: no limit)")
+    )
     box_m: Box | None = field(
-        default=None, metadata=doc("keep only points inside [xmin, xmax, ymin, ymax, zmin, zmax] in frame 1 (null: no box)")
+        default=None,
+        metadata=doc("keep only points inside [xmin, xmax, ymin, ymax, zmin, zmax] in frame 1 (null: no box)"),
     )
 
     def __post_init__(self):

@@ -26,7 +26,9 @@ class Params:
     )
     box_m: Box | None = field(
         default=None,
-        metadata=doc("vehicle footprint [xmin, xmax, ymin, ymax, zmin, zmax] in each sensor's frame (points inside removed)"),
+        metadata=doc(
+            "vehicle footprint [xmin, xmax, ymin, ymax, zmin, zmax] in each sensor's frame (points inside removed)"
+        ),
     )
 
     def __post_init__(self):

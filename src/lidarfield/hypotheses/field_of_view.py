@@ -25,14 +25,20 @@ from .params import doc
 @dataclass(frozen=True)
 class Params:
     elevation_deg: tuple[float, float] | None = field(
-        default=None, metadata=doc("[lo, hi] elevation limits for both sensors (null: each sensor model's lowest and highest channel)")
+        default=None,
+        metadata=doc(
+            "[lo, hi] elevation limits for both sensors (null: each sensor model's lowest and highest channel)"
+        ),
     )
     range_m: tuple[float, float] | None = field(
-        default=None, metadata=doc("[min, max] range limits for both sensors (null: the sensor models' range limits, if any)")
+        default=None,
+        metadata=doc("[min, max] range limits for both sensors (null: the sensor models' range limits, if any)"),
     )
     azimuth_deg: tuple[float, float] | None = field(
         default=None,
-        metadata=doc("[start, end] azimuth sector, counter-clockwise from +x, for both sensors (null: the models' sector, or 360 deg)"),
+        metadata=doc(
+            "[start, end] azimuth sector, counter-clockwise from +x, for both sensors (null: the models' sector, or 360 deg)"
+        ),
     )
     margin_deg: float = field(
         default=0.0, metadata=doc("widen the angular limits by this much on each side (negative: narrow them)")

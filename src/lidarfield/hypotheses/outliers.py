@@ -33,8 +33,12 @@ from .params import doc
 
 @dataclass(frozen=True)
 class Params:
-    nb_neighbors: int = field(default=20, metadata=doc("neighbours in each point's mean distance (the point itself included)"))
-    std_ratio: float = field(default=2.0, metadata=doc("standard deviations above the mean beyond which a point is removed"))
+    nb_neighbors: int = field(
+        default=20, metadata=doc("neighbours in each point's mean distance (the point itself included)")
+    )
+    std_ratio: float = field(
+        default=2.0, metadata=doc("standard deviations above the mean beyond which a point is removed")
+    )
 
     def __post_init__(self):
         if self.nb_neighbors < 1 or not self.std_ratio > 0:
@@ -73,7 +77,9 @@ def neighbour_distances(xyz: np.ndarray, k: int, workers: int | None = None) -> 
     return NeighbourDistances(k, mean, reach)
 
 
-def after_removal(before: NeighbourDistances, xyz_before: np.ndarray, keep: np.ndarray, workers: int | None = None) -> NeighbourDistances:
+def after_removal(
+    before: NeighbourDistances, xyz_before: np.ndarray, keep: np.ndarray, workers: int | None = None
+) -> NeighbourDistances:
     """The neighbour distances of ``xyz_before[keep]``, from those of ``xyz_before``: equal to
     :func:`neighbour_distances` of the survivors, bit for bit.
 
@@ -111,7 +117,9 @@ def _reaches(points: np.ndarray, reach: np.ndarray, others: np.ndarray, workers:
     for upper in np.quantile(reach, [0.5, 0.9, 0.99, 0.999, 1.0]):
         tier = (reach > lower) & (reach <= upper)
         if tier.any():
-            distance, _ = tree.query(points[tier], k=1, distance_upper_bound=np.nextafter(upper, np.inf), workers=_workers(workers))
+            distance, _ = tree.query(
+                points[tier], k=1, distance_upper_bound=np.nextafter(upper, np.inf), workers=_workers(workers)
+            )
             reached[tier] = distance <= reach[tier]
         lower = upper
     return reached
@@ -137,7 +145,11 @@ def _workers(workers: int | None) -> int:
 
 
 def statistical_inliers(
-    xyz: np.ndarray, nb_neighbors: int, std_ratio: float, workers: int | None = None, distances: NeighbourDistances | None = None
+    xyz: np.ndarray,
+    nb_neighbors: int,
+    std_ratio: float,
+    workers: int | None = None,
+    distances: NeighbourDistances | None = None,
 ) -> np.ndarray:
     """Keep-mask of Open3D's ``remove_statistical_outlier`` on one cloud (see the module);
     ``distances``: the cloud's, when already known."""
@@ -177,6 +189,11 @@ def carry_neighbours(before: RegisteredPair, keep1: np.ndarray, keep2: np.ndarra
 def outliers(pair: RegisteredPair, params: Params) -> tuple[np.ndarray, np.ndarray]:
     """Keep-masks of the statistical inliers of each cloud."""
     return tuple(
-        statistical_inliers(xyz, params.nb_neighbors, params.std_ratio, distances=cloud_neighbour_distances(pair, cloud, params.nb_neighbors))
+        statistical_inliers(
+            xyz,
+            params.nb_neighbors,
+            params.std_ratio,
+            distances=cloud_neighbour_distances(pair, cloud, params.nb_neighbors),
+        )
         for cloud, xyz in ((1, pair.xyz1), (2, pair.xyz2))
     )

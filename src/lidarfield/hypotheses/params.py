@@ -57,7 +57,9 @@ def parse_params(cls: type, raw: dict | None, where: str):
         raise HypothesisError(f"{where}: unknown parameter(s) {', '.join(unknown)}; expected: {expected}")
     missing = [f.name for f in dataclasses.fields(cls) if f.name not in raw and _default(f) is dataclasses.MISSING]
     if missing:
-        raise HypothesisError(f"{where}: missing parameter(s) " + ", ".join(f"{n} ({type_label(hints[n])})" for n in missing))
+        raise HypothesisError(
+            f"{where}: missing parameter(s) " + ", ".join(f"{n} ({type_label(hints[n])})" for n in missing)
+        )
     values = {name: _coerce(value, hints[name], f"{where}: parameter {name!r}") for name, value in raw.items()}
     try:
         return cls(**values)

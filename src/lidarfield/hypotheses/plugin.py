@@ -71,8 +71,14 @@ def _load_function(path: Path, name: str, what: str):
         raise HypothesisError(f"{what}: importing the file raised {type(e).__name__}: {e}", path) from e
     function = getattr(module, name, None)
     if not callable(function):
-        found = sorted(k for k, v in vars(module).items() if callable(v) and not k.startswith("_") and getattr(v, "__module__", None) == module.__name__)
-        raise HypothesisError(f"{what}: the file has no function {name!r} (functions: {', '.join(found) or 'none'})", path)
+        found = sorted(
+            k
+            for k, v in vars(module).items()
+            if callable(v) and not k.startswith("_") and getattr(v, "__module__", None) == module.__name__
+        )
+        raise HypothesisError(
+            f"{what}: the file has no function {name!r} (functions: {', '.join(found) or 'none'})", path
+        )
     return function
 
 

@@ -33,12 +33,20 @@ ANGULAR_KEYS = ("azimuth_bins", "azimuth_offset_deg", "elevation_deg", "elevatio
 
 @dataclass(frozen=True)
 class Params:
-    jump_m: float = field(default=1.0, metadata=doc("a gap between consecutive ranges larger than this starts a new segment"))
-    min_points: int = field(default=30, metadata=doc("the first segment with MORE than this many points is the visible surface"))
-    origins: tuple[int, ...] = field(default=(1, 2), metadata=doc("the sensors about which cells are formed (1, 2 or both); removals are united"))
+    jump_m: float = field(
+        default=1.0, metadata=doc("a gap between consecutive ranges larger than this starts a new segment")
+    )
+    min_points: int = field(
+        default=30, metadata=doc("the first segment with MORE than this many points is the visible surface")
+    )
+    origins: tuple[int, ...] = field(
+        default=(1, 2), metadata=doc("the sensors about which cells are formed (1, 2 or both); removals are united")
+    )
     grid: dict | None = field(
         default=None,
-        metadata=doc("angular grid {azimuth_bins, azimuth_offset_deg, elevation_deg, elevation_bins}; null: the study's grid"),
+        metadata=doc(
+            "angular grid {azimuth_bins, azimuth_offset_deg, elevation_deg, elevation_bins}; null: the study's grid"
+        ),
     )
 
     def __post_init__(self):
@@ -46,12 +54,18 @@ class Params:
             raise ValueError(f"jump_m must be > 0, got {self.jump_m}")
         if self.min_points < 0:
             raise ValueError(f"min_points must be >= 0, got {self.min_points}")
-        if not self.origins or any(o not in (1, 2) for o in self.origins) or len(set(self.origins)) != len(self.origins):
+        if (
+            not self.origins
+            or any(o not in (1, 2) for o in self.origins)
+            or len(set(self.origins)) != len(self.origins)
+        ):
             raise ValueError(f"origins must list sensor 1, sensor 2 or both, got {list(self.origins)}")
         if self.grid is not None:
             unknown = sorted(set(self.grid) - set(ANGULAR_KEYS) - {"kind"})
             if unknown or self.grid.get("kind", "spherical") != "spherical":
-                raise ValueError(f"grid takes the angular keys {', '.join(ANGULAR_KEYS)} of a spherical grid, got {self.grid}")
+                raise ValueError(
+                    f"grid takes the angular keys {', '.join(ANGULAR_KEYS)} of a spherical grid, got {self.grid}"
+                )
             try:
                 grid_from_config(self.grid)
             except ConfigError as e:

@@ -186,5 +186,12 @@ def write_scan(scan: Scan, path: str | Path, format: str | None = None) -> None:
 
 
 __all__ = [
-    "FORMATS", "ScanFormat", "ScanReference", "known_formats", "read_scan", "scan_count", "split_reference", "write_scan",
-]  # fmt: skip
+    "FORMATS",
+    "ScanFormat",
+    "ScanReference",
+    "known_formats",
+    "read_scan",
+    "scan_count",
+    "split_reference",
+    "write_scan",
+]

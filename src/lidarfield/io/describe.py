@@ -8,8 +8,8 @@ from pathlib import Path
 
 import numpy as np
 
-from . import read_scan, scan_count, scan_format, split_reference
 from ..scan import Scan
+from . import read_scan, scan_count, scan_format, split_reference
 
 MAX_TOPICS = 15  # one screen
 MAX_CLOUD_TOPICS = 4
@@ -54,15 +54,17 @@ def _span(start_s: float, end_s: float) -> str:
 
 
 def _describe_bag(path: Path) -> str:
-    from .rosbag.poses import POSE_OF, TF
     from .rosbag.bag import bag_topics, message_times, nth_message, open_bag, topic_connections
+    from .rosbag.poses import POSE_OF, TF
     from .rosbag.reader import POINTCLOUD2
 
     reader = open_bag(path)
     topics = bag_topics(reader)
     kind = "ROS 1 bag" if not reader.is2 else "ROS 2 bag" + (" folder" if path.is_dir() else "")
     total = sum(t.count for t in topics)
-    lines = [f"{path}: {kind}, {total:,} messages on {len(topics)} topics, {_span(reader.start_time * 1e-9, reader.end_time * 1e-9)}"]
+    lines = [
+        f"{path}: {kind}, {total:,} messages on {len(topics)} topics, {_span(reader.start_time * 1e-9, reader.end_time * 1e-9)}"
+    ]
     roles = {**{msgtype: "poses" for msgtype in (*POSE_OF, TF)}, POINTCLOUD2: "scans"}
     order = {"poses": 0, "scans": 1, "": 2}  # the few pose topics stay in view
     topics.sort(key=lambda t: (order[roles.get(t.msgtype, "")], t.name))

@@ -26,7 +26,9 @@ def write_table(path: str | Path, columns: dict[str, np.ndarray], meta: dict | N
         pq.write_table(table, tmp, use_dictionary=repeating)
 
 
-def read_table(path: str | Path, required: tuple[str, ...] = (), columns: tuple[str, ...] | None = None) -> tuple[dict[str, np.ndarray], dict]:
+def read_table(
+    path: str | Path, required: tuple[str, ...] = (), columns: tuple[str, ...] | None = None
+) -> tuple[dict[str, np.ndarray], dict]:
     """Columns as numpy arrays (only ``columns`` when given, each of them required), and the
     lidarfield metadata ({} when absent)."""
     path = Path(path)
@@ -61,7 +63,9 @@ def arrow_array(values) -> pa.Array:
         encoded = [v.encode() for v in values.tolist()]
         offsets = np.zeros(len(encoded) + 1, np.int64)
         np.cumsum([len(b) for b in encoded], out=offsets[1:])
-        return pa.Array.from_buffers(pa.large_string(), len(encoded), [None, pa.py_buffer(offsets), pa.py_buffer(b"".join(encoded))]).cast(pa.string())
+        return pa.Array.from_buffers(
+            pa.large_string(), len(encoded), [None, pa.py_buffer(offsets), pa.py_buffer(b"".join(encoded))]
+        ).cast(pa.string())
     if values.ndim != 1 or values.dtype.kind not in "biuf":
         return pa.array(values)
     values = np.ascontiguousarray(values)

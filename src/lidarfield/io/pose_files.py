@@ -11,6 +11,7 @@ from ..errors import InputError
 from ..poses import NUMBER_SEPARATORS, pose_from_numbers, rigid_pose
 from .atomic import write_text
 
+
 def read_pose(path: str | Path, line: int = 0) -> np.ndarray:
     """A 4x4 pose from a text file: a 4x4 matrix (4 rows of 4, or one row of 16), a 3x4 matrix
     (3 rows of 4), or KITTI pose lines of 12 numbers, of which ``line`` (0-based) is taken."""

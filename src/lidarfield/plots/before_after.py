@@ -6,14 +6,16 @@ from pathlib import Path
 
 import numpy as np
 
+from .field_views import colour_bar, draw_field_top
 from .output import save
 from .settings import PlotSettings
 from .stage_data import StageData, background
 from .style import figure, magnitude_norm
-from .field_views import colour_bar, draw_field_top
 
 
-def plot_before_after(before: StageData, after: StageData, limits: np.ndarray, out_dir: Path, settings: PlotSettings) -> list[Path]:
+def plot_before_after(
+    before: StageData, after: StageData, limits: np.ndarray, out_dir: Path, settings: PlotSettings
+) -> list[Path]:
     norm = magnitude_norm(before.field, after.field)
     fig = figure(16.0, 7.5, settings.dpi)
     axes = fig.subplots(1, 2, sharex=True, sharey=True)
@@ -24,5 +26,8 @@ def plot_before_after(before: StageData, after: StageData, limits: np.ndarray, o
     colour_bar(fig, axes, norm)
     pair_name = after.path.parent.parent.name
     a, b = before.field.max_magnitude, after.field.max_magnitude
-    fig.suptitle(f"{pair_name} · before / after {after.hypothesis}: largest vector {a:.3f} → {b:.3f} m ({b - a:+.3f} m)", fontsize=11)
+    fig.suptitle(
+        f"{pair_name} · before / after {after.hypothesis}: largest vector {a:.3f} → {b:.3f} m ({b - a:+.3f} m)",
+        fontsize=11,
+    )
     return save(fig, out_dir, "before_after", settings)

@@ -12,8 +12,8 @@ from ..io.atomic import atomic_path
 from .png import compact_image, encode_png, figure_image, figure_png, page_copy_path
 from .settings import PlotSettings
 
-
 SVG_MAX_BYTES = 2_000_000  # "SVG where it stays small": above this only the PNG is kept
+
 
 def save(fig, out_dir: Path, stem: str, settings: PlotSettings) -> list[Path]:
     """Write ``stem.png`` (and ``stem.svg`` when asked and small enough) atomically; close.
@@ -40,6 +40,7 @@ def save(fig, out_dir: Path, stem: str, settings: PlotSettings) -> list[Path]:
     finally:
         plt.close(fig)
     return written
+
 
 def png_bytes(fig, dpi: int) -> bytes:
     """The figure as PNG bytes (for embedding in a report); closes the figure."""

@@ -82,7 +82,9 @@ def rigid_randomness_figure(rows: list[dict], dpi: int):
     ax_share.set_ylabel("share (0..1)")
     ax_share.legend(fontsize=8)
     ax_share.grid(True, lw=0.3, alpha=0.6)
-    ax_share.set_title(f"{rows[0].get('pair', '') if rows else ''} · rigid part and randomness of the field", fontsize=10)
+    ax_share.set_title(
+        f"{rows[0].get('pair', '') if rows else ''} · rigid part and randomness of the field", fontsize=10
+    )
     ax_rigid.plot(x, translation_norm(rows), "o-", color="C2", label="rigid translation ‖t‖ (m)")
     ax_rigid.set_ylabel("translation (m)")
     ax_rot = ax_rigid.twinx()
@@ -103,17 +105,26 @@ def tags_figure(rows: list[dict], dpi: int):
     x = column(rows, "level")
     width = 0.8 / len(TAGS)
     for i, tag in enumerate(TAGS):
-        ax.bar(x + (i - (len(TAGS) - 1) / 2) * width, column(rows, f"energy_share_{tag}"), width, label=tag.replace("_", " "))
+        ax.bar(
+            x + (i - (len(TAGS) - 1) / 2) * width,
+            column(rows, f"energy_share_{tag}"),
+            width,
+            label=tag.replace("_", " "),
+        )
     ax.set_ylim(0, 1.02)
     ax.set_ylabel("share of the field energy Σ min(n1, n2)·|v|² (0..1)")
     levels = [f"{int(lv):02d} {r.get('hypothesis', '')}" for lv, r in zip(x, rows)]
-    verdicts = [f"{r.get('verdict') or '?'} · {r.get('voxels_significant', '?')}/{r.get('voxels_valid', '?')}" for r in rows]
+    verdicts = [
+        f"{r.get('verdict') or '?'} · {r.get('voxels_significant', '?')}/{r.get('voxels_valid', '?')}" for r in rows
+    ]
     ax.set_xticks(x, [f"{a}\n{b}" for a, b in zip(levels, verdicts)], fontsize=8)
     ax.set_xlabel("stage (verdict, voxels with |z| ≥ z_min / valid)")
     ax.grid(True, axis="y", lw=0.3, alpha=0.6)
     # The last stage's two-line tick label reaches past the axes: a wider gap keeps it off the legend.
     legend_at_right(fig, ax.get_legend_handles_labels()[0], gap_in=0.7, fontsize=8, title="voxel tag", title_fontsize=8)
-    ax.set_title(f"{rows[0].get('pair', '') if rows else ''} · where the field's energy sits, stage by stage", fontsize=10)
+    ax.set_title(
+        f"{rows[0].get('pair', '') if rows else ''} · where the field's energy sits, stage by stage", fontsize=10
+    )
     return fig
 
 

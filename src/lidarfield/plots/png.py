@@ -53,14 +53,16 @@ def encode_png(image: Image.Image, dpi: float) -> bytes:
     rows[:, 0] = NO_FILTER
     rows[:, 1:] = pixels.reshape(height, -1)
     per_metre = round(dpi / METRES_PER_INCH)
-    return b"".join([
-        SIGNATURE,
-        chunk(b"IHDR", struct.pack(">IIBBBBB", width, height, 8, COLOUR_TYPES[channels], 0, 0, 0)),
-        chunk(b"pHYs", struct.pack(">IIB", per_metre, per_metre, 1)),
-        chunk(b"tEXt", b"Software\0" + SOFTWARE.encode("latin-1")),
-        chunk(b"IDAT", zlib.compress(rows, ZLIB_LEVEL)),
-        chunk(b"IEND", b""),
-    ])
+    return b"".join(
+        [
+            SIGNATURE,
+            chunk(b"IHDR", struct.pack(">IIBBBBB", width, height, 8, COLOUR_TYPES[channels], 0, 0, 0)),
+            chunk(b"pHYs", struct.pack(">IIB", per_metre, per_metre, 1)),
+            chunk(b"tEXt", b"Software\0" + SOFTWARE.encode("latin-1")),
+            chunk(b"IDAT", zlib.compress(rows, ZLIB_LEVEL)),
+            chunk(b"IEND", b""),
+        ]
+    )
 
 
 def figure_image(fig, dpi: float) -> Image.Image:

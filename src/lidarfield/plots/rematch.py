@@ -9,9 +9,9 @@ import numpy as np
 
 from ..analysis.rematch import ERRORS, read_rematch
 from .output import save
+from .pair_stats import column
 from .settings import plot_settings
 from .style import Margins, figure
-from .pair_stats import column
 
 # A trial where no estimate was made has a NaN error: drawn at the top of the axes, as an x.
 _FLOOR = {"translation": 1e-5, "rotation": 1e-4}  # log axes: an error of 0 is drawn here (m, deg)
@@ -32,7 +32,10 @@ def pose_error_figure(stages: list[tuple[int, str, dict]], pair: str, dpi: int, 
     for ax, (error, (key, unit)) in zip(axes, ERRORS.items()):
         for i, method in enumerate(methods):
             x = levels + (i - (len(methods) - 1) / 2) * width
-            values = [np.clip(t[key][t["method"] == method].astype(float), _FLOOR[error], _CEILING[error]) for _, _, t in stages]
+            values = [
+                np.clip(t[key][t["method"] == method].astype(float), _FLOOR[error], _CEILING[error])
+                for _, _, t in stages
+            ]
             median = np.array([np.nanmedian(v) if np.isfinite(v).any() else np.nan for v in values])
             low = np.array([np.nanpercentile(v, 10) if np.isfinite(v).any() else np.nan for v in values])
             high = np.array([np.nanpercentile(v, 90) if np.isfinite(v).any() else np.nan for v in values])
@@ -78,7 +81,9 @@ def plot_pair_rematch(rematch_paths: list[str | Path], out_dir: str | Path, sett
     for path in rematch_paths:
         table, meta = read_rematch(path)
         stages.append((int(meta.get("level") or 0), str(meta.get("hypothesis")), table))
-        references.add({"truth": "truth", "registration": "study's registration"}.get(meta.get("reference"), "reference"))
+        references.add(
+            {"truth": "truth", "registration": "study's registration"}.get(meta.get("reference"), "reference")
+        )
     pair = Path(rematch_paths[0]).parents[2].name if rematch_paths else ""
     reference = references.pop() if len(references) == 1 else "reference"
     return save(pose_error_figure(stages, pair, s.dpi, reference), Path(out_dir), "pose_error", s)
@@ -128,13 +133,22 @@ def hypothesis_effects(rows: list[dict], methods: list[str]) -> list[dict]:
                 verdict = "worse"
             else:
                 verdict = "no clear change"
-            effects.append({
-                "level": level, "hypothesis": hypothesis, "method": method, "pairs": len(pairs),
-                "field_p95_change_m": field_change, "translation_change_m": change,
-                "translation_relative_change": relative,
-                "rotation_change_deg": median(after(f"rematch_{method}_rotation_median_deg") - before(f"rematch_{method}_rotation_median_deg")),
-                "verdict": verdict, "worse_matching": bool(field_change < 0 and verdict == "worse"),
-            })  # fmt: skip
+            effects.append(
+                {
+                    "level": level,
+                    "hypothesis": hypothesis,
+                    "method": method,
+                    "pairs": len(pairs),
+                    "field_p95_change_m": field_change,
+                    "translation_change_m": change,
+                    "translation_relative_change": relative,
+                    "rotation_change_deg": median(
+                        after(f"rematch_{method}_rotation_median_deg") - before(f"rematch_{method}_rotation_median_deg")
+                    ),
+                    "verdict": verdict,
+                    "worse_matching": bool(field_change < 0 and verdict == "worse"),
+                }
+            )
     return effects
 
 
@@ -151,8 +165,10 @@ def study_rematch_figure(rows: list[dict], methods: list[str], dpi: int):
     axes = fig.subplots(2, 1, sharex=True)
     width = 0.8 / max(len(methods), 1)
     floor_cm = ABSOLUTE_CHANGE_M * 100
-    for ax, key, scale, label, linear in ((axes[0], "translation_change_m", 100, "Δ median translation error (cm)", floor_cm),
-                                          (axes[1], "rotation_change_deg", 1, "Δ median rotation error (deg)", 0.01)):  # fmt: skip
+    for ax, key, scale, label, linear in (
+        (axes[0], "translation_change_m", 100, "Δ median translation error (cm)", floor_cm),
+        (axes[1], "rotation_change_deg", 1, "Δ median rotation error (deg)", 0.01),
+    ):
         ax.set_yscale("symlog", linthresh=linear, linscale=0.5)
         for i, method in enumerate(methods):
             mine = [e for e in effects if e["method"] == method]
@@ -168,9 +184,28 @@ def study_rematch_figure(rows: list[dict], methods: list[str], dpi: int):
     axes[0].axhspan(-floor_cm, floor_cm, color="0.85", zorder=0, lw=0)
     handles = [Patch(color=f"C{i}", label=m) for i, m in enumerate(methods)]
     handles.append(Patch(color="0.85", label=f"< {ABSOLUTE_CHANGE_M * 1000:g} mm: no clear change"))
-    handles.append(Patch(facecolor="white", edgecolor="red", hatch="//", label=f"field shrinks, matching worse (> {RELATIVE_CHANGE:.0%})"))
-    fig.legend(handles=handles, loc="upper center", ncol=len(handles), fontsize=7, frameon=False, bbox_to_anchor=(0.5, 1 - 0.32 / 6.5))
-    fig.suptitle("rematching: what each hypothesis does to the pose error (median over pairs; below 0: it helps)", fontsize=10, y=1 - 0.08 / 6.5, va="top")
+    handles.append(
+        Patch(
+            facecolor="white",
+            edgecolor="red",
+            hatch="//",
+            label=f"field shrinks, matching worse (> {RELATIVE_CHANGE:.0%})",
+        )
+    )
+    fig.legend(
+        handles=handles,
+        loc="upper center",
+        ncol=len(handles),
+        fontsize=7,
+        frameon=False,
+        bbox_to_anchor=(0.5, 1 - 0.32 / 6.5),
+    )
+    fig.suptitle(
+        "rematching: what each hypothesis does to the pose error (median over pairs; below 0: it helps)",
+        fontsize=10,
+        y=1 - 0.08 / 6.5,
+        va="top",
+    )
     names = {e["level"]: e["hypothesis"] for e in effects}
     axes[1].set_xticks(levels, [f"{level:02d}\n{names[level]}" for level in levels], fontsize=8)
     axes[1].set_xlabel("hypothesis (stage k against stage k-1)")

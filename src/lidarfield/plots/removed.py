@@ -6,11 +6,11 @@ from pathlib import Path
 
 import numpy as np
 
+from .field_views import PERSPECTIVE_VIEW
 from .output import save
 from .settings import PlotSettings
 from .stage_data import StageData, removed_xyz, sensor_origins, subsample
 from .style import CLOUD_COLOURS, KEPT_COLOUR, POINTS_3D, figure, legend, mark_sensors, set_equal_3d, set_top_axes
-from .field_views import PERSPECTIVE_VIEW
 
 
 def removed_title(stage: StageData, view: str) -> str:
@@ -44,11 +44,21 @@ def plot_removed(stage: StageData, view: str, limits: np.ndarray, out_dir: Path,
     ax = fig.add_subplot(projection="3d") if three_d else fig.add_subplot()
     axes = slice(0, 3) if three_d else slice(0, 2)
     extra = POINTS_3D if three_d else {}
-    ax.scatter(*kept[:, axes].T, s=0.5, c=KEPT_COLOUR, alpha=0.35, lw=0, rasterized=True, label="kept (both clouds)", **extra)
+    ax.scatter(
+        *kept[:, axes].T, s=0.5, c=KEPT_COLOUR, alpha=0.35, lw=0, rasterized=True, label="kept (both clouds)", **extra
+    )
     for c, xyz in removed.items():
         if len(xyz):
-            ax.scatter(*xyz[:, axes].T, s=3, c=CLOUD_COLOURS[c], alpha=0.8, lw=0, rasterized=True,
-                       label=_label(c, counts[c], len(xyz)), **extra)
+            ax.scatter(
+                *xyz[:, axes].T,
+                s=3,
+                c=CLOUD_COLOURS[c],
+                alpha=0.8,
+                lw=0,
+                rasterized=True,
+                label=_label(c, counts[c], len(xyz)),
+                **extra,
+            )
     mark_sensors(ax, sensor_origins(stage.pair), three_d=three_d)
     if three_d:
         set_equal_3d(ax, limits)

@@ -16,9 +16,13 @@ STAGE_FIGURES = tuple(section("plots")["properties"]["figures"]["items"]["enum"]
 class PlotSettings:
     """The ``plots`` section of the config (without ``pairs``, see :func:`figure_settings`)."""
 
-    magnification: float | str = default("plots", "magnification")  # vectors drawn this many times their length, or "auto"
+    magnification: float | str = default(
+        "plots", "magnification"
+    )  # vectors drawn this many times their length, or "auto"
     top_k: int = default("plots", "top_k")  # voxels drawn as wireframes in top_voxels.png
-    background_points: int = default("plots", "background_points")  # max points drawn faint behind the vectors, per figure
+    background_points: int = default(
+        "plots", "background_points"
+    )  # max points drawn faint behind the vectors, per figure
     figures: tuple[str, ...] = tuple(default("plots", "figures"))  # which of a stage's figures to draw
     formats: tuple[str, ...] = tuple(default("plots", "formats"))  # "svg" adds an SVG where it stays small
     dpi: int = default("plots", "dpi")

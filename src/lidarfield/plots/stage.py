@@ -16,12 +16,12 @@ from pathlib import Path
 import numpy as np
 
 from .before_after import plot_before_after
-from .settings import PlotSettings, plot_settings
-from .stage_data import background, load_stage, removed_xyz
-from .style import magnitude_norm, resolve_magnification, view_limits
 from .field_views import magnified_tips, plot_field_perspective, plot_field_top
 from .interactive import plot_interactive
 from .removed import plot_removed
+from .settings import PlotSettings, plot_settings
+from .stage_data import background, load_stage, removed_xyz
+from .style import magnitude_norm, resolve_magnification, view_limits
 from .top_voxels import plot_top_voxels
 
 log = logging.getLogger(__name__)
@@ -30,7 +30,8 @@ log = logging.getLogger(__name__)
 def stage_figures(settings: PlotSettings, level: int, has_previous: bool) -> list[str]:
     """The figures drawn for a stage: the selected ones that show something at this level."""
     return [
-        name for name in settings.figures
+        name
+        for name in settings.figures
         if not (name.startswith("removed_") and level == 0) and not (name == "before_after" and not has_previous)
     ]
 
@@ -57,13 +58,17 @@ def plot_stage(
     prev = load_stage(prev_stage_dir) if prev_stage_dir is not None else None
 
     reference = prev if prev is not None else stage
-    scene = np.vstack([background(reference.pair, s.background_points), removed_xyz(stage.removed, 1), removed_xyz(stage.removed, 2)])
+    scene = np.vstack(
+        [background(reference.pair, s.background_points), removed_xyz(stage.removed, 1), removed_xyz(stage.removed, 2)]
+    )
     shown = [st for st in (stage, prev) if st is not None]
     anchors = np.vstack([st.field.tails for st in shown] + [stage.pair.origin2[None, :], np.zeros((1, 3))])
     span = float(np.max(np.diff(view_limits(scene, anchors)[:2], axis=1)))
     # the stage's own figures fit its own vectors; before/after shares one factor for both
     own = replace(s, magnification=resolve_magnification(s.magnification, stage.field.max_magnitude, span))
-    both = replace(s, magnification=resolve_magnification(s.magnification, max(st.field.max_magnitude for st in shown), span))
+    both = replace(
+        s, magnification=resolve_magnification(s.magnification, max(st.field.max_magnitude for st in shown), span)
+    )
     tips = [magnified_tips(stage, own.magnification)] + [magnified_tips(st, both.magnification) for st in shown]
     limits = view_limits(scene, np.vstack([anchors, *tips]))
 

@@ -17,10 +17,10 @@ from ..io.parquet_table import read_table
 from ..layout import level_of
 from ..pair import RegisteredPair, read_pair
 
-
 FIELD_COLUMNS = ("voxel", "n1", "n2", "x1", "y1", "z1", "x2", "y2", "z2", "u", "v", "w", "magnitude", "valid")
 
 SUBSAMPLE_SEED = 0
+
 
 @dataclass
 class VectorField:
@@ -51,6 +51,7 @@ class VectorField:
     def faded_label(self) -> str:
         return f"faded: |z| < {self.z_min:g}, within sampling noise ({np.count_nonzero(~self.significant)} of {len(self.magnitude)})"
 
+
 @dataclass
 class StageData:
     """One stage folder, loaded."""
@@ -80,6 +81,7 @@ class StageData:
     def label(self) -> str:
         return f"stage {self.level:02d} {self.hypothesis}"
 
+
 def read_vector_field(path: str | Path) -> VectorField:
     """The valid rows of a field Parquet file (contract columns required)."""
     columns, meta = read_table(path, required=FIELD_COLUMNS)
@@ -88,6 +90,7 @@ def read_vector_field(path: str | Path) -> VectorField:
     tails = np.column_stack([columns["x1"], columns["y1"], columns["z1"]]).astype(np.float64)
     vectors = np.column_stack([columns["u"], columns["v"], columns["w"]]).astype(np.float64)
     return VectorField(tails, vectors, columns["magnitude"].astype(np.float64), columns, meta)
+
 
 def load_stage(stage_dir: str | Path) -> StageData:
     """Read a stage folder; a missing or malformed file raises InputError naming it."""
@@ -103,6 +106,7 @@ def load_stage(stage_dir: str | Path) -> StageData:
         removed = {"cloud": np.zeros(0, np.uint8), "x": np.zeros(0), "y": np.zeros(0), "z": np.zeros(0)}
     return StageData(stage_dir, pair, points_meta, removed, field)
 
+
 def subsample(xyz: np.ndarray, n: int, seed: int = SUBSAMPLE_SEED) -> np.ndarray:
     """At most ``n`` rows of ``xyz``, chosen with a fixed seed (same figure on every run)."""
     if len(xyz) <= n:
@@ -110,13 +114,16 @@ def subsample(xyz: np.ndarray, n: int, seed: int = SUBSAMPLE_SEED) -> np.ndarray
     rng = np.random.default_rng(seed)
     return xyz[np.sort(rng.choice(len(xyz), size=n, replace=False))]
 
+
 def removed_xyz(removed: dict[str, np.ndarray], cloud: int) -> np.ndarray:
     mask = np.asarray(removed["cloud"]) == cloud
     return np.column_stack([removed["x"][mask], removed["y"][mask], removed["z"][mask]]).astype(np.float64)
 
+
 def background(pair: RegisteredPair, n: int) -> np.ndarray:
     """Both clouds together, subsampled to at most ``n`` points."""
     return subsample(np.vstack([pair.xyz1, pair.xyz2]), n)
+
 
 def sensor_origins(pair: RegisteredPair) -> dict[int, np.ndarray]:
     return {1: pair.origin1, 2: pair.origin2}

@@ -90,7 +90,9 @@ def voxel_map_figure(voxels, grid: dict, level: int):
     pairs = int(rows["pairs"].max()) if len(rows) else 0
     shells = sorted(rows["r_bin"].unique()) if len(rows) else [-1]
     edges = grid.get("range_edges_m")
-    fig = figure(10.0, 4.2 * len(shells) + 0.6, DPI, Margins(left=0.4, right=0.4, bottom=0.3, top=0.9, wspace=0.55, hspace=0.35))
+    fig = figure(
+        10.0, 4.2 * len(shells) + 0.6, DPI, Margins(left=0.4, right=0.4, bottom=0.3, top=0.9, wspace=0.55, hspace=0.35)
+    )
     magnitude_max = np.nanmax(rows["magnitude_median"].to_numpy(dtype=float), initial=0.0) if len(rows) else 0.0
     magnitude_norm = Normalize(0.0, magnitude_max if magnitude_max > 0 else 1.0)
     share_norm = Normalize(0.0, 1.0)
@@ -115,7 +117,9 @@ def voxel_map_figure(voxels, grid: dict, level: int):
 
 
 def _by_level(hypotheses) -> list[tuple[str, object]]:
-    return [(level_label(level, rows["hypothesis"].iloc[0]), rows) for level, rows in hypotheses.groupby("level", sort=True)]
+    return [
+        (level_label(level, rows["hypothesis"].iloc[0]), rows) for level, rows in hypotheses.groupby("level", sort=True)
+    ]
 
 
 def _distribution(ax, groups: list[tuple[str, np.ndarray]], ylabel: str, zero_line: bool) -> None:
@@ -123,10 +127,18 @@ def _distribution(ax, groups: list[tuple[str, np.ndarray]], ylabel: str, zero_li
     rng = np.random.default_rng(0)
     data = [values[np.isfinite(values)] for _, values in groups]
     positions = np.arange(1, len(groups) + 1)
-    ax.boxplot(data, positions=positions, whis=(5, 95), showfliers=False, widths=0.5,
-               medianprops=dict(color="k", lw=1.5))
+    ax.boxplot(
+        data, positions=positions, whis=(5, 95), showfliers=False, widths=0.5, medianprops=dict(color="k", lw=1.5)
+    )
     for x, values in zip(positions, data):
-        ax.scatter(x + rng.uniform(-0.18, 0.18, len(values)), values, s=8, alpha=float(np.clip(30 / max(len(values), 1), 0.15, 0.8)), color="C0", lw=0)
+        ax.scatter(
+            x + rng.uniform(-0.18, 0.18, len(values)),
+            values,
+            s=8,
+            alpha=float(np.clip(30 / max(len(values), 1), 0.15, 0.8)),
+            color="C0",
+            lw=0,
+        )
     if zero_line:
         ax.axhline(0.0, color="C3", lw=0.8, ls="--")
     ax.set_xticks(positions, [label.replace(" ", "\n", 1) for label, _ in groups], fontsize=8)
@@ -138,7 +150,9 @@ def hypotheses_figure(hypotheses):
     """Per hypothesis, over pairs: the change of p95 and max magnitude, and the points removed."""
     groups = _by_level(hypotheses)
     n_pairs = hypotheses["pair"].nunique()
-    fig = figure(max(9.0, 1.6 * len(groups) * 3), 4.6, DPI, Margins(left=0.8, right=0.3, bottom=0.85, top=0.75, wspace=0.45))
+    fig = figure(
+        max(9.0, 1.6 * len(groups) * 3), 4.6, DPI, Margins(left=0.8, right=0.3, bottom=0.85, top=0.75, wspace=0.45)
+    )
     panels = (
         (lambda r: r["p95_magnitude_after"] - r["p95_magnitude_before"], "change of p95 magnitude (m)", True),
         (lambda r: r["max_magnitude_after"] - r["max_magnitude_before"], "change of max magnitude (m)", True),
@@ -147,7 +161,10 @@ def hypotheses_figure(hypotheses):
     for i, (value, ylabel, zero) in enumerate(panels):
         ax = fig.add_subplot(1, 3, i + 1)
         _distribution(ax, [(label, value(rows).to_numpy(dtype=float)) for label, rows in groups], ylabel, zero)
-    fig.suptitle(f"what each hypothesis changed, over {n_pairs} pairs (box: quartiles, whiskers: 5-95 %, dots: pairs; below the red line: smaller)", fontsize=10)
+    fig.suptitle(
+        f"what each hypothesis changed, over {n_pairs} pairs (box: quartiles, whiskers: 5-95 %, dots: pairs; below the red line: smaller)",
+        fontsize=10,
+    )
     return fig
 
 
@@ -158,19 +175,34 @@ def heatmap_figure(summary, ranking, key: str = "p95_magnitude", unit_label: str
     """``key`` per pair (rows, in rank order: most left at the last stage first) and stage level."""
     levels = sorted(summary["level"].astype(int).unique())
     order = list(ranking["pair"])
-    table = summary.pivot_table(index="pair", columns="level", values=key, aggfunc="first").reindex(index=order, columns=levels)
+    table = summary.pivot_table(index="pair", columns="level", values=key, aggfunc="first").reindex(
+        index=order, columns=levels
+    )
     names = summary.sort_values("level").groupby("level")["hypothesis"].first()
     n = len(order)
     height = min(14.0, max(3.5, 0.16 * n + 1.6))
     fig = figure(7.5, height, DPI, Margins(left=1.6, right=0.3, bottom=0.9, top=0.6))
     ax = fig.add_subplot()
-    image = ax.imshow(table.to_numpy(dtype=float), aspect="auto", interpolation="nearest", cmap=MAGNITUDE_CMAP,
-                      norm=Normalize(0.0, max(float(np.nanmax(table.to_numpy(dtype=float), initial=0.0)), 1e-9)))
-    ax.set_xticks(range(len(levels)), [level_label(lv, names.get(lv, "")).replace(" ", "\n", 1) for lv in levels], fontsize=8)
-    shown = np.arange(n) if n <= MAX_PAIR_LABELS else np.unique(np.linspace(0, n - 1, MAX_PAIR_LABELS).round().astype(int))
+    image = ax.imshow(
+        table.to_numpy(dtype=float),
+        aspect="auto",
+        interpolation="nearest",
+        cmap=MAGNITUDE_CMAP,
+        norm=Normalize(0.0, max(float(np.nanmax(table.to_numpy(dtype=float), initial=0.0)), 1e-9)),
+    )
+    ax.set_xticks(
+        range(len(levels)), [level_label(lv, names.get(lv, "")).replace(" ", "\n", 1) for lv in levels], fontsize=8
+    )
+    shown = (
+        np.arange(n) if n <= MAX_PAIR_LABELS else np.unique(np.linspace(0, n - 1, MAX_PAIR_LABELS).round().astype(int))
+    )
     ax.set_yticks(shown, [f"{i + 1}. {order[i]}" for i in shown], fontsize=7 if n <= MAX_PAIR_LABELS else 6)
     ax.set_xlabel("stage")
-    ax.set_ylabel(f"pair, ranked by {unit_label.split(' (')[0]} at the last stage" + ("" if n <= MAX_PAIR_LABELS else f" (every {n // MAX_PAIR_LABELS}th labelled)"), fontsize=8)
+    ax.set_ylabel(
+        f"pair, ranked by {unit_label.split(' (')[0]} at the last stage"
+        + ("" if n <= MAX_PAIR_LABELS else f" (every {n // MAX_PAIR_LABELS}th labelled)"),
+        fontsize=8,
+    )
     fig.colorbar(image, ax=ax, pad=0.02).set_label(unit_label, fontsize=9)
     ax.set_title(f"{unit_label.split(' (')[0]} of every pair at every stage ({n} pairs)", fontsize=10)
     return fig
@@ -183,12 +215,20 @@ def all_pairs_figure(summary, key: str = "max_magnitude", title: str = "largest 
     by_pair = list(summary.sort_values("level").groupby("pair", sort=True))
     many = len(by_pair) > MAX_LEGEND_PAIRS
     for name, rows in by_pair:
-        ax.plot(rows["level"], rows[key], "-" if many else "o-", lw=0.6 if many else 1.5,
-                alpha=max(0.05, min(0.4, 20.0 / len(by_pair))) if many else 1.0, color="C0" if many else None,
-                label=None if many else name)
+        ax.plot(
+            rows["level"],
+            rows[key],
+            "-" if many else "o-",
+            lw=0.6 if many else 1.5,
+            alpha=max(0.05, min(0.4, 20.0 / len(by_pair))) if many else 1.0,
+            color="C0" if many else None,
+            label=None if many else name,
+        )
     if many:
         medians = summary.groupby("level")[key].median()
-        ax.plot(medians.index, medians.to_numpy(), "ko-", lw=2.5, label=f"median of {len(by_pair)} pairs (blue: each pair)")
+        ax.plot(
+            medians.index, medians.to_numpy(), "ko-", lw=2.5, label=f"median of {len(by_pair)} pairs (blue: each pair)"
+        )
     levels = sorted(summary["level"].astype(int).unique())
     ax.set_xticks(levels)
     ax.set_xlabel("stage level")
@@ -206,18 +246,31 @@ def all_pairs_figure(summary, key: str = "max_magnitude", title: str = "largest 
 def study_figures(summary, voxels, hypotheses, ranking, grid: dict) -> list[StudyFigure]:
     """The study's figures, in the order the overview shows them."""
     figures = [
-        StudyFigure("heatmap", "p95 magnitude of every pair at every stage, pairs ranked by what remains", lambda: heatmap_figure(summary, ranking)),
+        StudyFigure(
+            "heatmap",
+            "p95 magnitude of every pair at every stage, pairs ranked by what remains",
+            lambda: heatmap_figure(summary, ranking),
+        ),
     ]
     if len(hypotheses):
-        figures.append(StudyFigure("hypotheses", "what each hypothesis changed, over the pairs", lambda: hypotheses_figure(hypotheses)))
-    figures.append(StudyFigure("all_pairs", "largest vector, stage by stage, all pairs", lambda: all_pairs_figure(summary)))
+        figures.append(
+            StudyFigure(
+                "hypotheses", "what each hypothesis changed, over the pairs", lambda: hypotheses_figure(hypotheses)
+            )
+        )
+    figures.append(
+        StudyFigure("all_pairs", "largest vector, stage by stage, all pairs", lambda: all_pairs_figure(summary))
+    )
     if grid.get("kind", "spherical") == "spherical" and voxels is not None and len(voxels):
         for level in sorted(voxels["level"].unique()):
             name = voxels.loc[voxels["level"] == level, "hypothesis"].iloc[0]
-            figures.append(StudyFigure(
-                f"voxels_{int(level):02d}", f"stage {level_label(level, name)}: voxels over the pairs (polar map)",
-                lambda level=level: voxel_map_figure(voxels, grid, level),
-            ))
+            figures.append(
+                StudyFigure(
+                    f"voxels_{int(level):02d}",
+                    f"stage {level_label(level, name)}: voxels over the pairs (polar map)",
+                    lambda level=level: voxel_map_figure(voxels, grid, level),
+                )
+            )
     return figures
 
 

@@ -17,7 +17,6 @@ from matplotlib.ticker import MaxNLocator  # noqa: E402
 
 from .stage_data import VectorField  # noqa: E402
 
-
 CLOUD_COLOURS = {1: "#d62728", 2: "#1f77b4"}  # red = cloud 1, blue = cloud 2 (removed figures)
 
 KEPT_COLOUR = "0.55"
@@ -28,11 +27,15 @@ MAGNITUDE_CMAP = "viridis"
 
 FADED_ALPHA = 0.2  # vectors within their sampling noise (|z| < grid.z_min) are drawn faint
 
-SENSOR_STYLE = {1: dict(marker="^", color="#d62728", label="sensor 1"), 2: dict(marker="v", color="#1f77b4", label="sensor 2")}
+SENSOR_STYLE = {
+    1: dict(marker="^", color="#d62728", label="sensor 1"),
+    2: dict(marker="v", color="#1f77b4", label="sensor 2"),
+}
 
 # 3-D point layers: flat colours, and nothing drawn outside the axes box (the view limits leave
 # out the farthest returns; mplot3d would draw them over the labels)
 POINTS_3D = dict(depthshade=False, axlim_clip=True)
+
 
 def vector_colours(field: VectorField, norm: Normalize) -> np.ndarray:
     """RGBA per vector: its magnitude's colour, faded to ``FADED_ALPHA`` where |z| < z_min."""
@@ -56,12 +59,15 @@ def view_limits(points: np.ndarray, extra: np.ndarray, pad: float = 0.05) -> np.
     span = np.maximum(hi - lo, 1e-6)
     return np.column_stack([lo - pad * span, hi + pad * span])
 
+
 def magnitude_norm(*fields_: VectorField) -> Normalize:
     """One colour scale (0 .. largest magnitude) shared by every field given."""
     vmax = max((f.max_magnitude for f in fields_), default=0.0)
     return Normalize(vmin=0.0, vmax=vmax if vmax > 0 else 1.0)
 
+
 AUTO_ARROW_SHARE = 1 / 16  # "auto": the largest vector is drawn about this share of the view's width
+
 
 def resolve_magnification(setting: float | str, max_magnitude: float, view_span_m: float) -> float:
     """The factor the vectors are drawn with. "auto" draws the largest vector at about 1/16 of
@@ -73,6 +79,7 @@ def resolve_magnification(setting: float | str, max_magnitude: float, view_span_
         return 1.0
     return max(1.0, nice_length(AUTO_ARROW_SHARE * view_span_m / max_magnitude))
 
+
 def nice_length(x: float) -> float:
     """A round number (1, 2 or 5 times a power of ten) not above ``x``: the scale arrow's length."""
     if not x > 0:
@@ -83,12 +90,14 @@ def nice_length(x: float) -> float:
             return float(step * power)
     return float(power)
 
+
 def format_length(metres: float) -> str:
     if metres >= 1:
         return f"{metres:g} m"
     if metres >= 0.01:
         return f"{metres * 100:g} cm"
     return f"{metres * 1000:g} mm"
+
 
 @dataclass(frozen=True)
 class Margins:
@@ -102,17 +111,22 @@ class Margins:
     wspace: float = 0.2
     hspace: float = 0.2
 
+
 def figure(width_in: float, height_in: float, dpi: int, margins: Margins = Margins()):
     """A figure whose subplots sit within fixed margins. A fixed layout because a layout engine
     (constrained, tight) draws the whole figure once more at save time to measure it: that
     was a third of the time of a stage's figures."""
     fig = plt.figure(figsize=(width_in, height_in), dpi=dpi)
     fig.subplots_adjust(
-        left=margins.left / width_in, right=1 - margins.right / width_in,
-        bottom=margins.bottom / height_in, top=1 - margins.top / height_in,
-        wspace=margins.wspace, hspace=margins.hspace,
+        left=margins.left / width_in,
+        right=1 - margins.right / width_in,
+        bottom=margins.bottom / height_in,
+        top=1 - margins.top / height_in,
+        wspace=margins.wspace,
+        hspace=margins.hspace,
     )
     return fig
+
 
 def legend_at_right(fig, handles: list, gap_in: float = 0.25, **kwargs):
     """A figure legend along the right edge, with the subplots moved out of its way: its width
@@ -122,6 +136,7 @@ def legend_at_right(fig, handles: list, gap_in: float = 0.25, **kwargs):
     fig.subplots_adjust(right=1 - (width_in + gap_in) / fig.get_figwidth())
     return box
 
+
 def mark_sensors(ax, origins: dict[int, np.ndarray], three_d: bool = False) -> None:
     for k, o in origins.items():
         style = SENSOR_STYLE[k]
@@ -129,6 +144,7 @@ def mark_sensors(ax, origins: dict[int, np.ndarray], three_d: bool = False) -> N
             ax.scatter([o[0]], [o[1]], [o[2]], s=50, edgecolors="k", zorder=5, depthshade=False, **style)
         else:
             ax.scatter([o[0]], [o[1]], s=80, edgecolors="k", zorder=5, **style)
+
 
 def legend(ax, **kwargs):
     """A legend whose markers stay readable even when the points themselves are drawn tiny."""
@@ -138,6 +154,7 @@ def legend(ax, **kwargs):
             handle.set_sizes([30])
         handle.set_alpha(1.0)
     return handle_box
+
 
 def set_equal_3d(ax, limits: np.ndarray, min_z_share: float = 0.3) -> None:
     """True-scale 3-D axes; a flat scene's z range is widened (never squashed) to stay readable."""
@@ -160,6 +177,7 @@ def set_equal_3d(ax, limits: np.ndarray, min_z_share: float = 0.3) -> None:
     ax.zaxis.set_major_locator(MaxNLocator(nbins=4, steps=[1, 2, 2.5, 5, 10]))
     for axis in (ax.xaxis, ax.yaxis, ax.zaxis):
         axis.pane.set_visible(False)  # white figures: no grey panes (hidden, not drawn transparent)
+
 
 def set_top_axes(ax, limits: np.ndarray) -> None:
     ax.set_xlim(*limits[0])

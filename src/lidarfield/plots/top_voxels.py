@@ -16,11 +16,11 @@ from mpl_toolkits.mplot3d.art3d import Line3DCollection
 
 from ..errors import InputError
 from ..field.grid import CartesianGrid, Grid, SphericalGrid, grid_from_config
+from .field_views import PERSPECTIVE_VIEW
 from .output import save
 from .settings import PlotSettings
 from .stage_data import StageData, sensor_origins, subsample
-from .style import CLOUD_COLOURS, Margins, POINTS_3D, figure, legend_at_right, mark_sensors, set_equal_3d, set_top_axes
-from .field_views import PERSPECTIVE_VIEW
+from .style import CLOUD_COLOURS, POINTS_3D, Margins, figure, legend_at_right, mark_sensors, set_equal_3d, set_top_axes
 
 ARC_SAMPLES = 16
 
@@ -30,7 +30,9 @@ def _spherical_to_xyz(az_deg: np.ndarray, el_deg: np.ndarray, r: np.ndarray) -> 
     return np.column_stack([r * np.cos(el) * np.cos(az), r * np.cos(el) * np.sin(az), r * np.sin(el)])
 
 
-def spherical_voxel_wireframe(az_deg: tuple[float, float], el_deg: tuple[float, float], r_m: tuple[float, float], n_arc: int = ARC_SAMPLES) -> list[np.ndarray]:
+def spherical_voxel_wireframe(
+    az_deg: tuple[float, float], el_deg: tuple[float, float], r_m: tuple[float, float], n_arc: int = ARC_SAMPLES
+) -> list[np.ndarray]:
     """The 12 edges of a spherical voxel as (n, 3) polylines: 4 radial segments, 4 azimuth
     arcs and 4 elevation arcs (arcs sampled with ``n_arc`` points)."""
     (a0, a1), (e0, e1), (r0, r1) = az_deg, el_deg, r_m
@@ -105,8 +107,14 @@ def plot_top_voxels(stage: StageData, limits: np.ndarray, out_dir: Path, setting
     k = min(settings.top_k, len(f.magnitude))
     top = np.argsort(f.magnitude)[::-1][:k]
     points = np.vstack([stage.pair.xyz1, stage.pair.xyz2])
-    point_ids = grid.assign(points) if k and isinstance(grid, SphericalGrid) and grid.range_edges_m is None else np.zeros(0, np.int64)
-    colours = plt.get_cmap("tab10" if k <= 10 else "turbo")(np.linspace(0, 1, max(k, 1)) if k > 10 else np.arange(max(k, 1)))
+    point_ids = (
+        grid.assign(points)
+        if k and isinstance(grid, SphericalGrid) and grid.range_edges_m is None
+        else np.zeros(0, np.int64)
+    )
+    colours = plt.get_cmap("tab10" if k <= 10 else "turbo")(
+        np.linspace(0, 1, max(k, 1)) if k > 10 else np.arange(max(k, 1))
+    )
     frames = [voxel_wireframe(grid, int(f.columns["voxel"][i]), point_ids, points) for i in top]
 
     fig = figure(14.0, 6.2, settings.dpi, Margins(top=0.5, bottom=0.55))
@@ -120,7 +128,9 @@ def plot_top_voxels(stage: StageData, limits: np.ndarray, out_dir: Path, setting
     handles = [Line2D([], [], ls="", marker=".", color=CLOUD_COLOURS[c], label=f"cloud {c}") for c in (1, 2)]
     # one collection per view for all edges: hundreds of Line2D artists would dominate the time
     edge_colours = [colour for edges, colour in zip(frames, colours) for _ in edges]
-    ax_top.add_collection(LineCollection([e[:, :2] for edges in frames for e in edges], colors=edge_colours, linewidths=1.2))
+    ax_top.add_collection(
+        LineCollection([e[:, :2] for edges in frames for e in edges], colors=edge_colours, linewidths=1.2)
+    )
     clipped = [clip_to_box(e, limits) for edges in frames for e in edges]
     kept = [(c, col) for c, col in zip(clipped, edge_colours) if len(c) >= 2]
     if kept:  # every edge may lie outside the view; mplot3d cannot add an empty collection
@@ -132,7 +142,9 @@ def plot_top_voxels(stage: StageData, limits: np.ndarray, out_dir: Path, setting
         ax_3d.plot(*np.column_stack([tail, tip]), color="k", lw=1.5)
         ax_3d.text(*tail, f"{rank}", fontsize=8, color=colour, fontweight="bold")
         voxel_id = int(f.columns["voxel"][i])
-        handles.append(Line2D([], [], color=colour, label=f"#{rank}: {f.magnitude[i]:.3f} m · {voxel_description(grid, voxel_id)}"))
+        handles.append(
+            Line2D([], [], color=colour, label=f"#{rank}: {f.magnitude[i]:.3f} m · {voxel_description(grid, voxel_id)}")
+        )
     for ax, three_d in ((ax_top, False), (ax_3d, True)):
         mark_sensors(ax, sensor_origins(stage.pair), three_d=three_d)
     set_top_axes(ax_top, limits)

@@ -3,16 +3,20 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from ..errors import RegistrationError
+from ..io.pose_files import read_pose
 from ..pair import RegisteredPair
 from ..poses import apply_pose, pose_error, relative_pose
-from ..io.pose_files import read_pose
 from ..scan import Scan
 from ..sensors.fit import sensor_fit
 from .settings import MATCHING_METHODS, RegistrationSettings, parse_settings
+
+if TYPE_CHECKING:  # Open3D: imported where a pair is matched, not by config checks
+    from . import matching
 
 # Fewer points than this after downsampling cannot constrain six degrees of freedom robustly.
 _MIN_POINTS = 10
@@ -73,7 +77,9 @@ def _reference(scan1: Scan, scan2: Scan) -> np.ndarray | None:
 def _require_reference(reference, scan1: Scan, scan2: Scan, what: str) -> np.ndarray:
     if reference is None:
         missing = [s.source or f"scan {k}" for k, s in ((1, scan1), (2, scan2)) if s.pose is None]
-        raise RegistrationError(f"{what} needs the world-from-sensor pose of both scans; missing for {', '.join(missing)}")
+        raise RegistrationError(
+            f"{what} needs the world-from-sensor pose of both scans; missing for {', '.join(missing)}"
+        )
     return reference
 
 

@@ -14,8 +14,8 @@ import numpy as np
 
 from ..checks import is_number
 from ..errors import ConfigError, InputError
-from ..poses import parse_pose_arg
 from ..io.pose_files import read_pose
+from ..poses import parse_pose_arg
 
 FIXED_METHODS = ("identity", "truth", "transform")
 MATCHING_METHODS = ("icp", "icp_point_to_plane", "gicp", "ndt")
@@ -99,7 +99,9 @@ def _check_params(params: dict) -> None:
     positive = ("voxel_m", "max_correspondence_m", "normal_radius_m", "fitness_distance_m")
     for key in positive:
         if not is_number(params[key], finite=True) or params[key] < 0 or (params[key] == 0 and key != "voxel_m"):
-            raise ConfigError(f"register.{key}: expected a positive number (voxel_m may be 0: no downsampling), got {params[key]!r}")
+            raise ConfigError(
+                f"register.{key}: expected a positive number (voxel_m may be 0: no downsampling), got {params[key]!r}"
+            )
     for key in ("max_iterations", "normal_max_nn"):
         if not isinstance(params[key], int) or params[key] < 1:
             raise ConfigError(f"register.{key}: expected a positive integer, got {params[key]!r}")
@@ -107,8 +109,14 @@ def _check_params(params: dict) -> None:
         raise ConfigError("register.ndt_min_points_per_voxel: expected an integer >= 4 (Open3D's minimum)")
     resolution = params["ndt_resolution_m"]
     resolution = [resolution] if is_number(resolution, finite=True) else resolution
-    if not isinstance(resolution, list) or not resolution or not all(is_number(r, finite=True) and r > 0 for r in resolution):
-        raise ConfigError(f"register.ndt_resolution_m: expected a positive number or a list of them, got {resolution!r}")
+    if (
+        not isinstance(resolution, list)
+        or not resolution
+        or not all(is_number(r, finite=True) and r > 0 for r in resolution)
+    ):
+        raise ConfigError(
+            f"register.ndt_resolution_m: expected a positive number or a list of them, got {resolution!r}"
+        )
     params["ndt_resolution_m"] = [float(r) for r in resolution]
     for key in ("min_range_m", "relative_fitness", "relative_rmse", "gicp_epsilon", "ndt_outlier_threshold"):
         if not is_number(params[key], finite=True) or params[key] < 0:

@@ -71,6 +71,7 @@ def budget_mb(study: dict | None, max_mb: float | None) -> float:
 
 def render(parts: list, embedded: dict[Figure, bytes], note: str) -> list[str]:
     """The page's HTML parts: each figure embedded or linked, the note in its place."""
+
     def html(part) -> str:
         if isinstance(part, Note):
             return note
@@ -93,7 +94,9 @@ def _compact_tier(tier: list[Figure], room_bytes: int) -> tuple[dict[Figure, byt
     return compacted, growth
 
 
-def embed_tiers(tiers: list[list[Figure]], linked_page_bytes: int, budget_bytes: int, note: Callable[[Collection[Figure]], str]) -> dict[Figure, bytes]:
+def embed_tiers(
+    tiers: list[list[Figure]], linked_page_bytes: int, budget_bytes: int, note: Callable[[Collection[Figure]], str]
+) -> dict[Figure, bytes]:
     """The compacted PNG of every figure to embed: whole tiers, in order, up to the first one
     that would take the page over ``budget_bytes``.
 
@@ -144,7 +147,14 @@ def write_within_budget(parts: list, tiers: tuple[str, ...], title: str, out_htm
     html = page(title, render(parts, embedded, note(embedded)))
     write_text(out_html, html)
     size = utf8_len(html)
-    log.info("%s: %.2f MB (budget %g MB), %d figures embedded, %d linked", out_html, size / MB, max_mb, len(embedded), len(figures) - len(embedded))
+    log.info(
+        "%s: %.2f MB (budget %g MB), %d figures embedded, %d linked",
+        out_html,
+        size / MB,
+        max_mb,
+        len(embedded),
+        len(figures) - len(embedded),
+    )
     if size > budget_bytes:
         log.warning("%s is over its %g MB budget even with every pair and stage figure linked", out_html, max_mb)
     return out_html

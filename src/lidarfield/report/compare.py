@@ -12,15 +12,20 @@ from pathlib import Path
 import numpy as np
 
 from ..io.atomic import write_text
-from ..plots.output import png_bytes
-from ..plots.style import figure
-from ..plots.pair_stats import column, sorted_rows, stage_ticks
 from ..layout import level_of
+from ..plots.output import png_bytes
+from ..plots.pair_stats import column, sorted_rows, stage_ticks
+from ..plots.style import figure
 from .discover import discover
 from .page import esc, image, image_file, page, table
 
-COMPARED = (("max_magnitude", "max (m)"), ("p95_magnitude", "p95 (m)"), ("mean_magnitude", "mean (m)"),
-            ("paper_max_metric", "paper metric (m)"), ("voxels_valid", "valid voxels"))
+COMPARED = (
+    ("max_magnitude", "max (m)"),
+    ("p95_magnitude", "p95 (m)"),
+    ("mean_magnitude", "mean (m)"),
+    ("paper_max_metric", "paper metric (m)"),
+    ("voxels_valid", "valid voxels"),
+)
 DPI = 110
 
 
@@ -50,7 +55,11 @@ def comparison_table(rows_a: list[dict], rows_b: list[dict]) -> str:
             delta = vb - va
             row += [va, vb, delta]
             # smaller magnitudes mean a better-explained field; a count has no better direction
-            sign = "" if key == "voxels_valid" or not np.isfinite(delta) or delta == 0 else ("better" if delta < 0 else "worse")
+            sign = (
+                ""
+                if key == "voxels_valid" or not np.isfinite(delta) or delta == 0
+                else ("better" if delta < 0 else "worse")
+            )
             classes += ["", "", sign]
         body.append(row)
         cell_classes.append(classes)
@@ -90,20 +99,34 @@ def compare_studies(results_a: str | Path, results_b: str | Path, out_html: str 
         "<h1>lidarfield: two studies compared</h1>",
         f"<p>A: <code>{esc(results_a)}</code> ({len(pairs_a)} pairs)<br>B: <code>{esc(results_b)}</code> ({len(pairs_b)} pairs)</p>",
         '<p class="note">Stages are matched by level. Δ = B − A; green: B smaller (more of the discrepancy explained), red: B larger.</p>',
-        "<ul>" + "".join(f'<li><a href="#pair-{esc(n)}">{esc(n)}</a>' + ("" if n in pairs_a and n in pairs_b else f" (only in {'A' if n in pairs_a else 'B'})") + "</li>" for n in names) + "</ul>",
+        "<ul>"
+        + "".join(
+            f'<li><a href="#pair-{esc(n)}">{esc(n)}</a>'
+            + ("" if n in pairs_a and n in pairs_b else f" (only in {'A' if n in pairs_a else 'B'})")
+            + "</li>"
+            for n in names
+        )
+        + "</ul>",
     ]
     for name in names:
         pa = [r for r in rows_a if str(r.get("pair")) == name]
         pb = [r for r in rows_b if str(r.get("pair")) == name]
-        body += [f'<h2 id="pair-{esc(name)}">pair {esc(name)}</h2>', comparison_table(pa, pb),
-                 image(png_bytes(comparison_figure(name, pa, pb), DPI), f"{name}: stage by stage, A and B")]
+        body += [
+            f'<h2 id="pair-{esc(name)}">pair {esc(name)}</h2>',
+            comparison_table(pa, pb),
+            image(png_bytes(comparison_figure(name, pa, pb), DPI), f"{name}: stage by stage, A and B"),
+        ]
         dirs_a, dirs_b = _stage_dir_by_level(pairs_a.get(name, [])), _stage_dir_by_level(pairs_b.get(name, []))
         for level in sorted(set(dirs_a) | set(dirs_b)):
             body.append(f"<h3>{esc(name)} · stage {level:02d}</h3>")
             cells = []
             for label, dirs in (("A", dirs_a), ("B", dirs_b)):
                 d = dirs.get(level)
-                cells.append(image_file(d / "figures" / "field_top.png", f"{label}: {d.name}: field from above") if d else f'<p class="missing">{label}: no stage {level:02d}</p>')
+                cells.append(
+                    image_file(d / "figures" / "field_top.png", f"{label}: {d.name}: field from above")
+                    if d
+                    else f'<p class="missing">{label}: no stage {level:02d}</p>'
+                )
             body.append('<div class="figures side-by-side">' + "".join(cells) + "</div>")  # A beside B
     write_text(out_html, page("lidarfield: two studies compared", body))
     return out_html

@@ -12,8 +12,8 @@ import json
 from pathlib import Path
 
 from ..errors import InputError
-from ..study.summary import read_stats, read_summary_frame
 from ..layout import level_of
+from ..study.summary import read_stats, read_summary_frame
 
 LIST_COLUMNS = ("rigid_translation_m",)
 
@@ -75,4 +75,3 @@ def discover(results_dir: str | Path) -> tuple[dict[str, list[Path]], list[dict]
         pairs[name] = stages
         rows += pair_rows
     return pairs, rows
-

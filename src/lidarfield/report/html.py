@@ -26,7 +26,13 @@ def has_stage_figures(stage_dirs: list[Path]) -> bool:
     return any((d / "figures").is_dir() for d in stage_dirs)
 
 
-def write_report(study: dict, pairs: dict[str, list[Path]], summary_rows: list[dict], out_html: str | Path, max_mb: float | None = None) -> Path:
+def write_report(
+    study: dict,
+    pairs: dict[str, list[Path]],
+    summary_rows: list[dict],
+    out_html: str | Path,
+    max_mb: float | None = None,
+) -> Path:
     """Write the overview at ``out_html`` and every pair's page at ``{out_html's folder}/{pair}/report.html``;
     returns the overview's path.
 
@@ -41,8 +47,16 @@ def write_report(study: dict, pairs: dict[str, list[Path]], summary_rows: list[d
     max_mb = max_mb if max_mb is not None else ((study or {}).get("report") or {}).get("max_mb")
     for name, dirs in pairs.items():
         rows = [r for r in summary_rows if str(r.get("pair")) == name]
-        write_pair_page(name, dirs, rows, out_html.parent / PAIR_PAGE.format(pair=name), (study or {}).get("plots"),
-                        with_figures=name in plotted, overview_href=f"../{out_html.name}", max_mb=max_mb)
+        write_pair_page(
+            name,
+            dirs,
+            rows,
+            out_html.parent / PAIR_PAGE.format(pair=name),
+            (study or {}).get("plots"),
+            with_figures=name in plotted,
+            overview_href=f"../{out_html.name}",
+            max_mb=max_mb,
+        )
     tables = compute_study_tables(pairs, summary_rows)
     last_stages = {name: dirs[-1] for name, dirs in pairs.items() if dirs}
     return write_overview(study, tables, out_html, stage_figures=plotted, last_stages=last_stages, max_mb=max_mb)

@@ -49,14 +49,35 @@ def header_parts(tables: StudyTables) -> list[str]:
 
 def hypotheses_table(hypotheses) -> str:
     """Per hypothesis, over the pairs: how often and how much it shrank the field."""
-    headers = ["stage", "hypothesis", "pairs", "p95 fell in", "median Δ p95 (m)", "median Δ max (m)", "median Δ rms (m)", "median removed (%)"]
+    headers = [
+        "stage",
+        "hypothesis",
+        "pairs",
+        "p95 fell in",
+        "median Δ p95 (m)",
+        "median Δ max (m)",
+        "median Δ rms (m)",
+        "median removed (%)",
+    ]
     body = []
     for level, rows in hypotheses.groupby("level", sort=True):
-        delta = {m: (rows[f"{m}_magnitude_after"] - rows[f"{m}_magnitude_before"]).to_numpy(dtype=float) for m in ("p95", "max", "rms")}
+        delta = {
+            m: (rows[f"{m}_magnitude_after"] - rows[f"{m}_magnitude_before"]).to_numpy(dtype=float)
+            for m in ("p95", "max", "rms")
+        }
         fell = np.count_nonzero(delta["p95"] < 0)
-        body.append([f"{int(level):02d}", rows["hypothesis"].iloc[0], len(rows), f"{fell} ({100 * fell / len(rows):.0f}%)",
-                     float(np.nanmedian(delta["p95"])), float(np.nanmedian(delta["max"])), float(np.nanmedian(delta["rms"])),
-                     float(100 * np.nanmedian(rows["removed_share"].to_numpy(dtype=float)))])
+        body.append(
+            [
+                f"{int(level):02d}",
+                rows["hypothesis"].iloc[0],
+                len(rows),
+                f"{fell} ({100 * fell / len(rows):.0f}%)",
+                float(np.nanmedian(delta["p95"])),
+                float(np.nanmedian(delta["max"])),
+                float(np.nanmedian(delta["rms"])),
+                float(100 * np.nanmedian(rows["removed_share"].to_numpy(dtype=float))),
+            ]
+        )
     return table(headers, body, text_columns=2)
 
 
@@ -72,36 +93,73 @@ def study_level_parts(tables: StudyTables, figures_dir: Path | None) -> list[str
     figures = study_figures(tables.summary, tables.voxels, tables.hypotheses, tables.pairs, tables.grid)
     maps = [f for f in figures if f.stem.startswith("voxels_")]
     others = [f for f in figures if f not in maps]
-    parts = ["<h2>The study level</h2>", '<div class="figures">', *(figure_html(f, figures_dir) for f in others), "</div>"]
+    parts = [
+        "<h2>The study level</h2>",
+        '<div class="figures">',
+        *(figure_html(f, figures_dir) for f in others),
+        "</div>",
+    ]
     if len(tables.hypotheses):
-        parts += ["<h3>What each hypothesis changed</h3>",
-                  '<p class="note">Δ = after − before (the previous stage), per pair; negative: the field shrank. '
-                  "Removed: points of both clouds the stage removed, in % of those that entered it.</p>",
-                  hypotheses_table(tables.hypotheses)]
+        parts += [
+            "<h3>What each hypothesis changed</h3>",
+            '<p class="note">Δ = after − before (the previous stage), per pair; negative: the field shrank. '
+            "Removed: points of both clouds the stage removed, in % of those that entered it.</p>",
+            hypotheses_table(tables.hypotheses),
+        ]
     parts.append("<h3>Voxels over the pairs, stage by stage</h3>")
     if maps:
-        parts += ['<p class="note">The grid is in sensor 1\'s frame, so a voxel is the same direction from the vehicle in '
-                  "every pair. Left: the median magnitude over the pairs where the voxel is valid. Right: the share of those "
-                  "pairs where its magnitude exceeds that pair-stage's median magnitude; about 0.5 everywhere means no "
-                  "direction stands out, red where the same direction is large along the drive (a ring, a sector of the "
-                  "own vehicle, a mounting effect). Table: <code>study/voxels.parquet</code>.</p>",
-                  '<div class="figures">', *(figure_html(f, figures_dir) for f in maps), "</div>"]
+        parts += [
+            '<p class="note">The grid is in sensor 1\'s frame, so a voxel is the same direction from the vehicle in '
+            "every pair. Left: the median magnitude over the pairs where the voxel is valid. Right: the share of those "
+            "pairs where its magnitude exceeds that pair-stage's median magnitude; about 0.5 everywhere means no "
+            "direction stands out, red where the same direction is large along the drive (a ring, a sector of the "
+            "own vehicle, a mounting effect). Table: <code>study/voxels.parquet</code>.</p>",
+            '<div class="figures">',
+            *(figure_html(f, figures_dir) for f in maps),
+            "</div>",
+        ]
     else:
-        parts.append('<p class="note">No polar voxel maps: they need a spherical grid and the stages\' field files.</p>')
+        parts.append(
+            '<p class="note">No polar voxel maps: they need a spherical grid and the stages\' field files.</p>'
+        )
     return parts
 
 
 def ranking_table(pairs, stage_figures: set[str]) -> str:
     """One row per pair, ranked; the pair's name links to its page."""
-    headers = ["rank", "pair", "last stage", "p95 (m)", "max (m)", "rms (m)", "valid voxels", "significant (|z| ≥ z_min)", "verdict",
-               "p95 at stage 00 (m)", "stage figures", "registration problem"]
+    headers = [
+        "rank",
+        "pair",
+        "last stage",
+        "p95 (m)",
+        "max (m)",
+        "rms (m)",
+        "valid voxels",
+        "significant (|z| ≥ z_min)",
+        "verdict",
+        "p95 at stage 00 (m)",
+        "stage figures",
+        "registration problem",
+    ]
     body, classes = [], []
     for r in pairs.to_dict("records"):
         problem = registration_problem(r)
-        body.append([int(r["rank"]), link(PAIR_PAGE.format(pair=quote(str(r["pair"]))), str(r["pair"])), f"{int(r['level']):02d} {r['hypothesis']}",
-                     r["p95_magnitude"], r["max_magnitude"], r["rms_magnitude"], r["voxels_valid"], r.get("voxels_significant", ""),
-                     r.get("verdict", ""), r["p95_magnitude_stage0"],
-                     "drawn" if r["pair"] in stage_figures else "", problem])
+        body.append(
+            [
+                int(r["rank"]),
+                link(PAIR_PAGE.format(pair=quote(str(r["pair"]))), str(r["pair"])),
+                f"{int(r['level']):02d} {r['hypothesis']}",
+                r["p95_magnitude"],
+                r["max_magnitude"],
+                r["rms_magnitude"],
+                r["voxels_valid"],
+                r.get("voxels_significant", ""),
+                r.get("verdict", ""),
+                r["p95_magnitude_stage0"],
+                "drawn" if r["pair"] in stage_figures else "",
+                problem,
+            ]
+        )
         classes.append("flag" if problem else "")
     return table(headers, body, classes, text_columns=3)
 
@@ -119,9 +177,14 @@ def ranking_parts(tables: StudyTables, stage_figures: set[str]) -> list[str]:
 def next_steps_parts(tables: StudyTables, last_stages: dict[str, Path]) -> list[str]:
     """The best candidates at the last stage of the pairs with the most left, in rank order."""
     ranked = [p for p in tables.pairs["pair"] if p in last_stages][:SUGGESTED_PAIRS]
-    note = "" if len(last_stages) <= SUGGESTED_PAIRS else (
-        f'<p class="note">The {SUGGESTED_PAIRS} pairs with the most left at their last stage, in rank order; '
-        "every pair's page has its own tables.</p>")
+    note = (
+        ""
+        if len(last_stages) <= SUGGESTED_PAIRS
+        else (
+            f'<p class="note">The {SUGGESTED_PAIRS} pairs with the most left at their last stage, in rank order; '
+            "every pair's page has its own tables.</p>"
+        )
+    )
     return ["<h2>What to try next</h2>", note, study_suggestions({p: [last_stages[p]] for p in ranked})]
 
 
@@ -133,20 +196,41 @@ def config_parts(config: dict | None) -> list[str]:
     ]
 
 
-def overview_parts(config: dict | None, tables: StudyTables, figures_dir: Path | None, stage_figures: set[str], last_stages: dict[str, Path]) -> list[str]:
+def overview_parts(
+    config: dict | None,
+    tables: StudyTables,
+    figures_dir: Path | None,
+    stage_figures: set[str],
+    last_stages: dict[str, Path],
+) -> list[str]:
     rows = tables.summary.to_dict("records")
-    return [*header_parts(tables), *findings_parts(rows), *study_level_parts(tables, figures_dir),
-            *study_rematch_parts(rows, DPI), *next_steps_parts(tables, last_stages),
-            *ranking_parts(tables, stage_figures), *config_parts(config)]
+    return [
+        *header_parts(tables),
+        *findings_parts(rows),
+        *study_level_parts(tables, figures_dir),
+        *study_rematch_parts(rows, DPI),
+        *next_steps_parts(tables, last_stages),
+        *ranking_parts(tables, stage_figures),
+        *config_parts(config),
+    ]
 
 
-def write_overview(config: dict | None, tables: StudyTables, out_html: str | Path, figures_dir: str | Path | None = None,
-                   stage_figures: set[str] = frozenset(), last_stages: dict[str, Path] | None = None, max_mb: float | None = None) -> Path:
+def write_overview(
+    config: dict | None,
+    tables: StudyTables,
+    out_html: str | Path,
+    figures_dir: str | Path | None = None,
+    stage_figures: set[str] = frozenset(),
+    last_stages: dict[str, Path] | None = None,
+    max_mb: float | None = None,
+) -> Path:
     """Write the study overview; returns its path. ``figures_dir``: the study figures drawn by
     the workflow (drawn here when absent); ``stage_figures``: the pairs whose stage figures are
     drawn; ``last_stages``: each pair's last stage folder (for what to try next)."""
     out_html = Path(out_html)
-    parts = overview_parts(config, tables, None if figures_dir is None else Path(figures_dir), set(stage_figures), last_stages or {})
+    parts = overview_parts(
+        config, tables, None if figures_dir is None else Path(figures_dir), set(stage_figures), last_stages or {}
+    )
     html = page(TITLE, parts)
     write_text(out_html, html)
     size, max_mb = utf8_len(html), budget_mb(config, max_mb)
@@ -154,4 +238,3 @@ def write_overview(config: dict | None, tables: StudyTables, out_html: str | Pat
     if size > max_mb * MB:
         log.warning("%s is over its %g MB budget", out_html, max_mb)
     return out_html
-

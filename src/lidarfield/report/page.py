@@ -60,7 +60,7 @@ def link(href: str, text: str) -> Html:
 
 def page(title: str, body: list[str]) -> str:
     return (
-        "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">"
+        '<!DOCTYPE html>\n<html lang="en"><head><meta charset="utf-8">'
         f"<title>{esc(title)}</title><style>{STYLE}</style></head><body>\n" + "\n".join(body) + "\n</body></html>\n"
     )
 
@@ -84,8 +84,10 @@ def embedded_image(compact: bytes, caption: str) -> str:
     """A figure element holding an already compacted PNG (see ``plots.png.compact_image``): as wide
     as the page up to its ``display_width``; its size in the img tag gives its box before it decodes."""
     width, height = png_size(compact)
-    return (f'<figure style="max-width:{display_width(width)}px"><img src="{data_uri(compact)}" alt="{esc(caption)}" '
-            f'width="{width}" height="{height}"><figcaption>{esc(caption)}</figcaption></figure>')
+    return (
+        f'<figure style="max-width:{display_width(width)}px"><img src="{data_uri(compact)}" alt="{esc(caption)}" '
+        f'width="{width}" height="{height}"><figcaption>{esc(caption)}</figcaption></figure>'
+    )
 
 
 def image(png: bytes, caption: str) -> str:
@@ -94,7 +96,9 @@ def image(png: bytes, caption: str) -> str:
 
 def linked_image(href: str, caption: str) -> str:
     """A figure element that links its PNG file (relative to the page) instead of embedding it."""
-    return f'<figure class="linked"><figcaption>{esc(caption)}</figcaption><a href="{esc(href)}">open figure</a></figure>'
+    return (
+        f'<figure class="linked"><figcaption>{esc(caption)}</figcaption><a href="{esc(href)}">open figure</a></figure>'
+    )
 
 
 def missing_image(caption: str, path: Path) -> str:
@@ -125,16 +129,25 @@ def header(text: str) -> str:
     return esc(text).replace(" / ", "\u00a0/\u00a0").replace("_", "_<wbr>")
 
 
-def table(headers: list[str], rows: list[list], row_classes: list[str] | None = None, text_columns: int = 0,
-          cell_classes: list[list[str]] | None = None, prose_columns: tuple[int, ...] = ()) -> str:
+def table(
+    headers: list[str],
+    rows: list[list],
+    row_classes: list[str] | None = None,
+    text_columns: int = 0,
+    cell_classes: list[list[str]] | None = None,
+    prose_columns: tuple[int, ...] = (),
+) -> str:
     """An HTML table in its own box, which scrolls sideways when the table is wider than the page
     (and down, its header kept in view, when it is taller than the window). Headers wrap; the
     first ``text_columns`` columns are left-aligned text, the ``prose_columns`` (indices) too,
     and these wrap at their spaces when the table would be wider than the page."""
+
     def kind(i: int) -> str:
         return "text prose" if i in prose_columns else "text" if i < text_columns else ""
 
-    head = "".join(f'<th class="{kind(i)}">{header(h)}</th>' if kind(i) else f"<th>{header(h)}</th>" for i, h in enumerate(headers))
+    head = "".join(
+        f'<th class="{kind(i)}">{header(h)}</th>' if kind(i) else f"<th>{header(h)}</th>" for i, h in enumerate(headers)
+    )
     body = []
     for r, row in enumerate(rows):
         row_cls = f' class="{row_classes[r]}"' if row_classes and row_classes[r] else ""
@@ -144,4 +157,8 @@ def table(headers: list[str], rows: list[list], row_classes: list[str] | None = 
             klass = " ".join(c for c in (kind(i), extra) if c)
             cells.append(f'<td class="{klass}">{format_cell(v)}</td>' if klass else f"<td>{format_cell(v)}</td>")
         body.append(f"<tr{row_cls}>" + "".join(cells) + "</tr>")
-    return f'<div class="table-box"><table><thead><tr>{head}</tr></thead><tbody>' + "".join(body) + "</tbody></table></div>"
+    return (
+        f'<div class="table-box"><table><thead><tr>{head}</tr></thead><tbody>'
+        + "".join(body)
+        + "</tbody></table></div>"
+    )

@@ -15,23 +15,42 @@ from pathlib import Path
 
 from .. import __version__
 from ..analysis.findings import findings_items, stage_findings
+from ..layout import level_of
 from ..plots import stage_figures
-from ..plots.settings import PlotSettings, plot_settings
 from ..plots.pair_stats import pair_figure_png
 from ..plots.png import compact_png
-from ..layout import level_of
+from ..plots.settings import PlotSettings, plot_settings
 from .budget import Figure, Note, budget_mb, file_figure, write_within_budget
 from .page import esc, relative_href, table
 from .rematch import pair_rematch_table
 from .suggestions import stage_suggestions
 
 SUMMARY_COLUMNS = (
-    "pair", "stage", "level", "hypothesis", "n1", "n2", "removed1", "removed2", "voxels_valid",
-    "max_magnitude", "p95_magnitude", "mean_magnitude", "rms_magnitude", "paper_max_metric",
-    "rigid_translation_m", "rigid_rotation_deg", "rigid_energy_share", "mean_resultant_length",
-    "voxels_significant", "p_direction", "p_coherence", "verdict",
-    "registration_method", "registration_fitness",
-)  # fmt: skip
+    "pair",
+    "stage",
+    "level",
+    "hypothesis",
+    "n1",
+    "n2",
+    "removed1",
+    "removed2",
+    "voxels_valid",
+    "max_magnitude",
+    "p95_magnitude",
+    "mean_magnitude",
+    "rms_magnitude",
+    "paper_max_metric",
+    "rigid_translation_m",
+    "rigid_rotation_deg",
+    "rigid_energy_share",
+    "mean_resultant_length",
+    "voxels_significant",
+    "p_direction",
+    "p_coherence",
+    "verdict",
+    "registration_method",
+    "registration_fitness",
+)
 STAGE_FIGURES = (
     ("field_top", "field from above"),
     ("before_after", "before / after (same axes, same colour scale)"),
@@ -106,7 +125,9 @@ def pair_figures(name: str, pair_dir: Path | None, rows: list[dict], out_dir: Pa
     return figures
 
 
-def stage_parts(name: str, stage_dir: Path, out_dir: Path, settings: PlotSettings, with_figures: bool = True) -> list[Figure | str]:
+def stage_parts(
+    name: str, stage_dir: Path, out_dir: Path, settings: PlotSettings, with_figures: bool = True
+) -> list[Figure | str]:
     """A stage's heading, what to try next, and (``with_figures``) the link to its 3-D view
     and the figures the settings draw for it."""
     fig_dir = stage_dir / "figures"
@@ -124,8 +145,11 @@ def stage_parts(name: str, stage_dir: Path, out_dir: Path, settings: PlotSetting
 
 
 def not_drawn_note(on_demand: str | None) -> str:
-    how = (f"<code>snakemake --cores 2 {esc(on_demand)}</code> draws them and writes that page, this one with its figures"
-           if on_demand else "<code>lidarfield plot STAGE_DIR --out STAGE_DIR/figures</code> draws a stage's figures")
+    how = (
+        f"<code>snakemake --cores 2 {esc(on_demand)}</code> draws them and writes that page, this one with its figures"
+        if on_demand
+        else "<code>lidarfield plot STAGE_DIR --out STAGE_DIR/figures</code> draws a stage's figures"
+    )
     return f'<p class="note">The figures of this pair are not drawn (the config\'s <code>plots.pairs</code> leaves it out): {how}.</p>'
 
 
@@ -140,14 +164,27 @@ def header_parts(name: str, stage_dirs: list[Path], overview_href: str | None) -
     ]
 
 
-def pair_page_parts(name: str, stage_dirs: list[Path], rows: list[dict], out_dir: Path, settings: PlotSettings,
-                    with_figures: bool = True, overview_href: str | None = None, on_demand: str | None = None) -> list:
+def pair_page_parts(
+    name: str,
+    stage_dirs: list[Path],
+    rows: list[dict],
+    out_dir: Path,
+    settings: PlotSettings,
+    with_figures: bool = True,
+    overview_href: str | None = None,
+    on_demand: str | None = None,
+) -> list:
     """The pair's page as parts (its figures still to be embedded or linked)."""
     pair_dir = stage_dirs[0].parent.parent if stage_dirs else None
     parts = header_parts(name, stage_dirs, overview_href) + findings_parts(rows)
     parts += ["<h2>Stages</h2>", stages_table(rows), pair_rematch_table(rows)]
     if with_figures:
-        parts += ["<h2>Stage by stage</h2>", '<div class="figures">', *pair_figures(name, pair_dir, rows, out_dir), "</div>"]
+        parts += [
+            "<h2>Stage by stage</h2>",
+            '<div class="figures">',
+            *pair_figures(name, pair_dir, rows, out_dir),
+            "</div>",
+        ]
     parts += ["<h2>Each stage: what to try next" + (", and its figures</h2>" if with_figures else "</h2>")]
     if not with_figures:
         parts.append(not_drawn_note(on_demand))
@@ -156,9 +193,17 @@ def pair_page_parts(name: str, stage_dirs: list[Path], rows: list[dict], out_dir
     return parts
 
 
-def write_pair_page(name: str, stage_dirs: list[str | Path], rows: list[dict], out_html: str | Path, plots: dict | None = None,
-                    with_figures: bool = True, overview_href: str | None = None, on_demand: str | None = None,
-                    max_mb: float | None = None) -> Path:
+def write_pair_page(
+    name: str,
+    stage_dirs: list[str | Path],
+    rows: list[dict],
+    out_html: str | Path,
+    plots: dict | None = None,
+    with_figures: bool = True,
+    overview_href: str | None = None,
+    on_demand: str | None = None,
+    max_mb: float | None = None,
+) -> Path:
     """Write one pair's page; returns its path.
 
     ``rows`` are the pair's summary rows; ``plots`` the config's ``plots`` section (which
@@ -168,6 +213,14 @@ def write_pair_page(name: str, stage_dirs: list[str | Path], rows: list[dict], o
     ``max_mb``: the page's size budget (default: the schema's ``report.max_mb``)."""
     out_html = Path(out_html)
     rows = sorted(rows, key=lambda r: float(r.get("level", 0)))
-    parts = pair_page_parts(name, [Path(d) for d in stage_dirs], rows, out_html.parent, plot_settings(plots),
-                            with_figures, overview_href, on_demand)
+    parts = pair_page_parts(
+        name,
+        [Path(d) for d in stage_dirs],
+        rows,
+        out_html.parent,
+        plot_settings(plots),
+        with_figures,
+        overview_href,
+        on_demand,
+    )
     return write_within_budget(parts, TIERS, f"lidarfield: pair {name}", out_html, budget_mb(None, max_mb))

@@ -10,8 +10,18 @@ from ..io.parquet_table import read_table
 from .page import esc, table
 
 FILE = "suggestions.parquet"
-HEADERS = ("rank", "hypothesis", "params", "energy reduction", "removed 1 / 2", "removed share",
-           "voxels emptied", "their energy", "max after (m)", "p95 after (m)")  # fmt: skip
+HEADERS = (
+    "rank",
+    "hypothesis",
+    "params",
+    "energy reduction",
+    "removed 1 / 2",
+    "removed share",
+    "voxels emptied",
+    "their energy",
+    "max after (m)",
+    "p95 after (m)",
+)
 PARAMS = HEADERS.index("params")  # a candidate's parameters, JSON: wrapped when the table is too wide
 EXPLAINER = (
     "Each candidate applied on its own to this stage's survivors. Energy reduction: 1 − energy after / "
@@ -60,9 +70,8 @@ def stage_suggestions(stage_dir: Path) -> str:
         return f'<p class="missing">what to try next: {esc(e)}</p>'
     if rows is None:
         return f'<p class="missing">what to try next: not computed ({FILE} missing)</p>'
-    return (
-        f'<p class="note"><b>What to try next.</b> {esc(EXPLAINER)}</p>'
-        + table(list(HEADERS), [_cells(r) for r in rows], text_columns=3, prose_columns=(PARAMS,))
+    return f'<p class="note"><b>What to try next.</b> {esc(EXPLAINER)}</p>' + table(
+        list(HEADERS), [_cells(r) for r in rows], text_columns=3, prose_columns=(PARAMS,)
     )
 
 

@@ -67,14 +67,23 @@ def spawn(results: str | Path, idle_timeout_s: float = IDLE_TIMEOUT_S, figure_jo
         env.pop(ENV, None)
         with open(results / "logs" / "worker.log", "a") as log_file:
             _running = subprocess.Popen(
-                [sys.executable, "-m", "lidarfield.runner.server", path, "--parent-pid", str(os.getpid()), "--idle-timeout", str(idle_timeout_s),
-                 *(["--warm-up"] if figure_jobs >= WARM_UP_MIN_FIGURE_JOBS else [])],
+                [
+                    sys.executable,
+                    "-m",
+                    "lidarfield.runner.server",
+                    path,
+                    "--parent-pid",
+                    str(os.getpid()),
+                    "--idle-timeout",
+                    str(idle_timeout_s),
+                    *(["--warm-up"] if figure_jobs >= WARM_UP_MIN_FIGURE_JOBS else []),
+                ],
                 stdin=subprocess.DEVNULL,
                 stdout=log_file,
                 stderr=subprocess.STDOUT,
                 env=env,
                 start_new_session=True,  # Ctrl-C reaches the jobs through their clients, not the worker
-            )  # fmt: skip
+            )
         atexit.register(stop)
     return _running
 

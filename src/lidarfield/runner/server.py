@@ -218,9 +218,13 @@ class Worker:
                 result = {"exit": os.waitstatus_to_exitcode(status)}
             log.info(
                 "job %d %s: %s, %.2f s wall, %.2f s CPU, %.0f MB peak",
-                pid, argv[1] if len(argv) > 1 else "?", result, time.monotonic() - started,
-                usage.ru_utime + usage.ru_stime, usage.ru_maxrss / 1024,
-            )  # fmt: skip
+                pid,
+                argv[1] if len(argv) > 1 else "?",
+                result,
+                time.monotonic() - started,
+                usage.ru_utime + usage.ru_stime,
+                usage.ru_maxrss / 1024,
+            )
             try:
                 self.selector.unregister(conn)
             except KeyError:
@@ -308,10 +312,14 @@ def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(prog="python -m lidarfield.runner.server", description=__doc__.split("\n")[0])
     parser.add_argument("socket", help="the Unix socket to listen on")
     parser.add_argument("--parent-pid", type=int, default=os.getppid(), help="stop when this process is gone")
-    parser.add_argument("--idle-timeout", type=float, default=IDLE_TIMEOUT_S, help="stop after this many seconds without a job")
+    parser.add_argument(
+        "--idle-timeout", type=float, default=IDLE_TIMEOUT_S, help="stop after this many seconds without a job"
+    )
     parser.add_argument("--warm-up", action="store_true", help="draw a few figures between jobs first (runner.warm_up)")
     args = parser.parse_args(argv)
-    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(levelname)s %(name)s: %(message)s", datefmt="%H:%M:%S")
+    logging.basicConfig(
+        level=logging.INFO, format="%(asctime)s %(levelname)s %(name)s: %(message)s", datefmt="%H:%M:%S"
+    )
     serve(args.socket, args.parent_pid, args.idle_timeout, args.warm_up)
 
 

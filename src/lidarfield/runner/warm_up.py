@@ -14,13 +14,13 @@ import tempfile
 from collections.abc import Iterator
 from pathlib import Path
 
+from ..pair import write_pair
 from ..plots import plot_stage
 from ..poses import pose_from_xyzrpy
 from ..registration import register_pair
+from ..sensors.models import sensor_model
 from ..simulation.raycast import simulate_scan
 from ..simulation.scene import load_scene
-from ..pair import write_pair
-from ..sensors.models import sensor_model
 from ..study.jobs import field_stage, mitigate_stage
 
 WARM_UP_FIGURES = ("field_top", "field_perspective")
@@ -40,7 +40,14 @@ def write_warm_up_stages(folder: Path) -> list[Path]:
     for level, step in enumerate(STACK):
         stage = folder / "stages" / f"{level:02d}-warm-up"
         mitigate_stage(points, step, stage.name, level, stage / "points.parquet", stage / "removed.parquet")
-        field_stage(stage / "points.parquet", stage / "removed.parquet", {}, "warm-up", stage / "field.parquet", stage / "stats.json")
+        field_stage(
+            stage / "points.parquet",
+            stage / "removed.parquet",
+            {},
+            "warm-up",
+            stage / "field.parquet",
+            stage / "stats.json",
+        )
         stages.append(stage)
         points = stage / "points.parquet"
     return stages

@@ -16,8 +16,8 @@ import trimesh
 
 from ..errors import ConfigError
 from ..scan import Scan
-from .scene import Scene
 from ..sensors.models import SensorModel
+from .scene import Scene
 from .trajectory import moved_pose
 
 _REFERENCE_CHUNK = 4096  # rays per block of the numpy kernel: bounds its memory
@@ -64,7 +64,9 @@ def _plane_distance(triangles: np.ndarray, origins: np.ndarray, directions: np.n
     return np.einsum("ij,ij->i", normal, triangles[:, 0] - origins) / np.einsum("ij,ij->i", normal, directions)
 
 
-def first_hits_reference(mesh: trimesh.Trimesh, origins: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def first_hits_reference(
+    mesh: trimesh.Trimesh, origins: np.ndarray, directions: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     """The plain numpy version of ``first_hits``: Moller-Trumbore against every triangle."""
     triangles = np.asarray(mesh.triangles, dtype=np.float64)
     v0, e1, e2 = triangles[:, 0], triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0]
@@ -148,12 +150,24 @@ def simulate_scan(
     ring = np.tile(np.arange(sensor.channels, dtype=np.int32), len(steps))
     time = np.repeat(firing_time, sensor.channels)
     xyz = local.reshape(-1, 3)[keep] * kept_distance[:, None]
-    source = _describe(scene, sensor, time_s, seed, range_noise_m, dropout, max_range_m, rolling_shutter,
-                       linear_velocity_mps, angular_velocity_rps)
+    source = _describe(
+        scene,
+        sensor,
+        time_s,
+        seed,
+        range_noise_m,
+        dropout,
+        max_range_m,
+        rolling_shutter,
+        linear_velocity_mps,
+        angular_velocity_rps,
+    )
     return Scan(xyz, {"ring": ring[keep], "time": time[keep]}, sensor, pose, source)
 
 
-def _scene_hits(scene: Scene, time_s: float, origins: np.ndarray, directions: np.ndarray, ray_time: np.ndarray) -> np.ndarray:
+def _scene_hits(
+    scene: Scene, time_s: float, origins: np.ndarray, directions: np.ndarray, ray_time: np.ndarray
+) -> np.ndarray:
     """Distance to the first hit over all objects. A moving object is cast once at its place
     at ``time_s``, with each ray's origin shifted by -velocity x (the ray's own time offset):
     the same as moving the object, per ray."""

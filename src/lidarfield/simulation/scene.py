@@ -119,9 +119,7 @@ def scene_from_dict(spec: dict, base_dir: Path = Path("."), name: str = "scene",
         extends = str(spec["extends"])
         is_file = extends.endswith((".yaml", ".yml"))
         base = load_scene(Path(base_dir) / extends if is_file else extends).objects
-    objects = tuple(
-        _build_object(o, i, Path(base_dir), where) for i, o in enumerate(spec.get("objects") or [])
-    )
+    objects = tuple(_build_object(o, i, Path(base_dir), where) for i, o in enumerate(spec.get("objects") or []))
     if not base + objects:
         raise ConfigError("the scene has no objects", where)
     return Scene(str(spec.get("name", name)), base + objects, source or name)
@@ -146,7 +144,10 @@ def _build_object(spec: dict, index: int, base_dir: Path, where: str) -> SceneOb
         raise ConfigError(f"{label} ({kind}): {e}", where) from None
     frame = spec.get("frame", "world")
     if frame not in FRAMES or (frame == "sensor" and np.any(velocity != 0)):
-        raise ConfigError(f"{label} ({kind}): frame must be one of {list(FRAMES)}, and an object the sensor carries has no velocity", where)
+        raise ConfigError(
+            f"{label} ({kind}): frame must be one of {list(FRAMES)}, and an object the sensor carries has no velocity",
+            where,
+        )
     return SceneObject(str(spec.get("name", f"{kind}-{index}")), mesh, velocity, frame)
 
 
@@ -182,7 +183,9 @@ def _placement(kind: str, spec: dict) -> np.ndarray:
     if "center" in spec and ("translation" in transform or kind == "mesh"):
         raise ValueError("give either center (primitives only) or transform.translation")
     translation = spec.get("center", transform.get("translation", (0.0, 0.0, 0.0)))
-    return pose_from_xyzrpy([*_vector(translation, 3, "translation"), *_vector(transform.get("rpy", (0, 0, 0)), 3, "rpy")])
+    return pose_from_xyzrpy(
+        [*_vector(translation, 3, "translation"), *_vector(transform.get("rpy", (0, 0, 0)), 3, "rpy")]
+    )
 
 
 def _vector(values, n: int, what: str) -> np.ndarray:

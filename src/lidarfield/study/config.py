@@ -18,9 +18,9 @@ import numpy as np
 
 from ..errors import ConfigError, LidarfieldError
 from ..field.grid import FieldSettings, field_settings_from_config
-from ..yaml_file import read_yaml
 from ..layout import RESULTS_FOLDERS
 from ..plots.settings import PlotSettings, plot_settings
+from ..yaml_file import read_yaml
 from .pairs import PairSpec, ScanSpec, study_pairs
 from .schema import check_config
 from .stage_ids import stage_ids
@@ -121,7 +121,9 @@ def plot_pairs(setting: str | list[str], names: list[str], source: str = "config
         return [names[i] for i in picks]
     unknown = [name for name in setting if name not in names]
     if unknown and names:
-        raise ConfigError(f"config key plots.pairs: unknown pair(s) {unknown}; the study's pairs are {names[:20]}", source)
+        raise ConfigError(
+            f"config key plots.pairs: unknown pair(s) {unknown}; the study's pairs are {names[:20]}", source
+        )
     return [name for name in names if name in setting]
 
 

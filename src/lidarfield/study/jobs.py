@@ -32,8 +32,8 @@ log = logging.getLogger(__name__)
 
 def simulated_scan(spec: dict) -> Scan:
     """Ray-cast one scan as a :class:`ScanSpec` of kind ``simulated`` describes it."""
-    from ..simulation.scene import load_scene
     from ..simulation.raycast import simulate_scan
+    from ..simulation.scene import load_scene
 
     return simulate_scan(
         load_scene(spec["scene"]),

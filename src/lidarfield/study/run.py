@@ -82,14 +82,28 @@ def run_pair(
 
     pair = register_pair(scans[0], scans[1], settings)
     reg = pair.registration
-    log.info("registered by %s: fitness %.3f, converged %s", reg.get("method"), reg.get("fitness", float("nan")), reg.get("converged"))
+    log.info(
+        "registered by %s: fitness %.3f, converged %s",
+        reg.get("method"),
+        reg.get("fitness", float("nan")),
+        reg.get("converged"),
+    )
     candidates = [study.candidates(level) for level in range(len(study.hypotheses) + 1)]
     stages, tables = [], []
     for stage in apply_stack(pair, study.hypotheses, study.base_dir, study.grid_section):
         log.info("stage %d (%s): removed %d + %d points", stage.level, stage.name, stage.removed1, stage.removed2)
         stages.append(stage)
         # Candidates run before any file is written too (a plugin candidate can fail).
-        tables.append(suggestions(stage.pair, study.grid, candidates[stage.level], study.base_dir, study.grid_section, study.suggest is None))
+        tables.append(
+            suggestions(
+                stage.pair,
+                study.grid,
+                candidates[stage.level],
+                study.base_dir,
+                study.grid_section,
+                study.suggest is None,
+            )
+        )
 
     # The same inputs as a config pair {scan1, scan2, sensor, register}: equal stage ids.
     scan_specs = [recorded_scan_spec(str(path), sensor=sensor, poses=poses) for path in (scan1, scan2)]
@@ -97,9 +111,13 @@ def run_pair(
     ids = stage_ids(inputs, study.hypotheses, study.base_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     run = {
-        "scan1": str(scan1), "scan2": str(scan2), "config": str(config_path), "register": settings, "sensor": sensor,
+        "scan1": str(scan1),
+        "scan2": str(scan2),
+        "config": str(config_path),
+        "register": settings,
+        "sensor": sensor,
         "poses": poses,
-    }  # fmt: skip
+    }
     write_text(out_dir / RUN_MARKER, json.dumps({**run, "stages": ids}, indent=1) + "\n")
     write_scan(scans[0], out_dir / "scan1.parquet")
     write_scan(scans[1], out_dir / "scan2.parquet")
@@ -110,9 +128,13 @@ def run_pair(
     for stage, stage_id, folder, table in zip(stages, ids, folders, tables):
         write_stage(stage, stage_id, folder / "points.parquet", folder / "removed.parquet")
         field_stage(
-            folder / "points.parquet", folder / "removed.parquet", study.grid_section, pair_name,
-            folder / "field.parquet", folder / "stats.json",
-        )  # fmt: skip
+            folder / "points.parquet",
+            folder / "removed.parquet",
+            study.grid_section,
+            pair_name,
+            folder / "field.parquet",
+            folder / "stats.json",
+        )
         write_suggestions(folder / "suggestions.parquet", table, stage_id, candidates[stage.level], study.grid_section)
         if study.rematch:
             from ..analysis.rematch import rematch_stage

@@ -15,8 +15,8 @@ import numpy as np
 
 from ..hypotheses import apply_step, validate_stack, validate_step
 from ..hypotheses.outliers import carry_neighbours
-from ..pair import RegisteredPair
 from ..hypotheses.steps import step_name
+from ..pair import RegisteredPair
 
 NO_MITIGATION = "none"  # the hypothesis name of stage 0
 

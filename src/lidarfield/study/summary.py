@@ -12,19 +12,35 @@ import numpy as np
 from ..analysis.tags import TAGS
 from ..errors import InputError
 from ..io.atomic import atomic_path, write_text
+from ..layout import level_of
 from ..pair import RegisteredPair
 from ..sensors.fit import fit_warning
-from ..layout import level_of
 
 if TYPE_CHECKING:
     import pandas as pd
 
 # The summary contract's columns, in order (the statistics of field_stats follow them).
 SUMMARY_COLUMNS = (
-    "pair", "stage", "level", "hypothesis", "n1", "n2", "removed1", "removed2", "voxels_valid",
-    "max_magnitude", "mean_magnitude", "rms_magnitude", "p95_magnitude", "paper_max_metric",
-    "voxels_significant", "p_direction", "p_coherence", "verdict", *(f"energy_share_{tag}" for tag in TAGS),
-)  # fmt: skip
+    "pair",
+    "stage",
+    "level",
+    "hypothesis",
+    "n1",
+    "n2",
+    "removed1",
+    "removed2",
+    "voxels_valid",
+    "max_magnitude",
+    "mean_magnitude",
+    "rms_magnitude",
+    "p95_magnitude",
+    "paper_max_metric",
+    "voxels_significant",
+    "p_direction",
+    "p_coherence",
+    "verdict",
+    *(f"energy_share_{tag}" for tag in TAGS),
+)
 
 
 def summary_row(pair_name: str, pair: RegisteredPair, meta: dict, removed_cloud: np.ndarray, statistics: dict) -> dict:

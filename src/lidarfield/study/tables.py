@@ -108,8 +108,11 @@ def study_voxels(fields: list[StageField]) -> dict[str, np.ndarray]:
         at_level = [f for f in fields if f.level == level]
         part = _level_voxels(at_level)
         names = sorted({f.hypothesis for f in at_level})
-        part = {"level": np.full(len(part["voxel"]), level, dtype=np.int64),
-                "hypothesis": np.full(len(part["voxel"]), "/".join(names), dtype=object), **part}
+        part = {
+            "level": np.full(len(part["voxel"]), level, dtype=np.int64),
+            "hypothesis": np.full(len(part["voxel"]), "/".join(names), dtype=object),
+            **part,
+        }
         parts.append(part)
         log.info("level %02d (%s): %d pairs, %d voxels", level, "/".join(names), len(at_level), len(part["voxel"]))
     return {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
@@ -130,8 +133,13 @@ def voxels_table(fields: list[StageField]) -> tuple[dict[str, np.ndarray], dict]
     grid = field_grid(fields[0].path)
     if grid:
         bins = grid_from_config(grid).bins(table["voxel"])
-        table = {"level": table["level"], "hypothesis": table["hypothesis"], "voxel": table["voxel"], **bins,
-                 **{k: v for k, v in table.items() if k not in ("level", "hypothesis", "voxel")}}
+        table = {
+            "level": table["level"],
+            "hypothesis": table["hypothesis"],
+            "voxel": table["voxel"],
+            **bins,
+            **{k: v for k, v in table.items() if k not in ("level", "hypothesis", "voxel")},
+        }
     table["hypothesis"] = table["hypothesis"].astype(str)
     return table, grid
 
@@ -154,7 +162,9 @@ def hypothesis_changes(summary):
 
     s = summary.sort_values(["pair", "level"])
     before = s.groupby("pair")[[*METRICS, "n1", "n2"]].shift(1)
-    out = pd.DataFrame({"pair": s["pair"], "level": s["level"].astype(int), "stage": s["stage"], "hypothesis": s["hypothesis"]})
+    out = pd.DataFrame(
+        {"pair": s["pair"], "level": s["level"].astype(int), "stage": s["stage"], "hypothesis": s["hypothesis"]}
+    )
     for metric in METRICS:
         out[f"{metric}_before"] = before[metric].astype(float)
         out[f"{metric}_after"] = s[metric].astype(float)
@@ -171,7 +181,9 @@ def rank_pairs(summary):
     first = s.groupby("pair").head(1).set_index("pair")
     last = s.groupby("pair").tail(1).set_index("pair")
     keep = ["stage", "level", "hypothesis", *METRICS, "voxels_valid"]
-    keep += [c for c in ("voxels_significant", "verdict", "registration_converged", "registration_warning") if c in last]
+    keep += [
+        c for c in ("voxels_significant", "verdict", "registration_converged", "registration_warning") if c in last
+    ]
     out = last[keep].copy()
     out["p95_magnitude_stage0"] = first["p95_magnitude"].astype(float)
     out = out.sort_values(["p95_magnitude", "max_magnitude"], ascending=False, na_position="last").reset_index()
@@ -205,7 +217,6 @@ def read_study_tables(summary_path: str | Path, study_dir: str | Path) -> StudyT
     """The tables the workflow wrote: ``summary.parquet`` and ``study/*.parquet``."""
     import pandas as pd
 
-
     study_dir = Path(study_dir)
     read = {}
     for name in ("voxels", "hypotheses", "pairs"):
@@ -217,7 +228,13 @@ def read_study_tables(summary_path: str | Path, study_dir: str | Path) -> StudyT
         except Exception as e:  # pyarrow raises many types for a bad file
             raise InputError(f"not a readable Parquet file ({e})", path) from None
     _, meta = read_table(study_dir / "voxels.parquet", columns=("voxel",))
-    return StudyTables(read_summary_frame(Path(summary_path)), read["voxels"], read["hypotheses"], read["pairs"], meta.get("grid") or {})
+    return StudyTables(
+        read_summary_frame(Path(summary_path)),
+        read["voxels"],
+        read["hypotheses"],
+        read["pairs"],
+        meta.get("grid") or {},
+    )
 
 
 def compute_study_tables(pairs: dict[str, list[Path]], summary_rows: list[dict]) -> StudyTables:
@@ -229,8 +246,12 @@ def compute_study_tables(pairs: dict[str, list[Path]], summary_rows: list[dict])
     if "level" not in summary:
         summary["level"] = [level_of(str(s)) or 0 for s in summary["stage"]]
     summary["level"] = summary["level"].astype(int)
-    fields = [StageField(name, level_of(d.name) or 0, stage_name(d.name), d / "field.parquet")
-              for name, dirs in pairs.items() for d in dirs if (d / "field.parquet").is_file()]
+    fields = [
+        StageField(name, level_of(d.name) or 0, stage_name(d.name), d / "field.parquet")
+        for name, dirs in pairs.items()
+        for d in dirs
+        if (d / "field.parquet").is_file()
+    ]
     voxels, grid = (None, {})
     if fields:
         table, grid = voxels_table(fields)

@@ -89,7 +89,10 @@ def detect_model(path: Path, sensor: SensorModel | None) -> tuple[str, str]:
     return_mode = "dual" if "dual" in modes else modes.pop()
     if sensor is not None:
         if sensor.name not in MODEL_OF_PRESET:
-            raise InputError(f"sensor {sensor.name!r} is not a Velodyne model velodyne-decoder knows ({', '.join(MODEL_OF_PRESET)})", path)
+            raise InputError(
+                f"sensor {sensor.name!r} is not a Velodyne model velodyne-decoder knows ({', '.join(MODEL_OF_PRESET)})",
+                path,
+            )
         return MODEL_OF_PRESET[sensor.name], return_mode
     products = {PRODUCTS[product] for _, product in factory if product in PRODUCTS}
     if len(products) == 1:
@@ -174,7 +177,9 @@ def read_velodyne(path: Path, index: int = 0, sensor: SensorModel | None = None)
     capture = capture_summary(path, sensor)
     found = next((r for k, r in enumerate(rotations(path, capture.model)) if k == index), None)
     if found is None:
-        raise InputError(f"rotation #{index} requested but the capture holds {capture.rotations} whole rotation(s)", path)
+        raise InputError(
+            f"rotation #{index} requested but the capture holds {capture.rotations} whole rotation(s)", path
+        )
     stamp, points = found
     first = float(points["time"].min())
     attributes = {

@@ -44,7 +44,9 @@ def cloud_dtype(fields: list[PointField], point_step: int, big_endian: bool) -> 
             raise CloudLayoutError(f"field {f.name!r} has unknown datatype {f.datatype}")
         size = np.dtype(DATATYPES[f.datatype]).itemsize * max(f.count, 1)
         if f.offset < 0 or f.offset + size > point_step:
-            raise CloudLayoutError(f"field {f.name!r} (offset {f.offset}, {size} bytes) lies outside the {point_step}-byte point")
+            raise CloudLayoutError(
+                f"field {f.name!r} (offset {f.offset}, {size} bytes) lies outside the {point_step}-byte point"
+            )
         if f.count != 1 or f.name in names:
             continue
         names.append(f.name)

@@ -51,7 +51,9 @@ def pose_from_bag(reader, path, source: dict, stamp_s: float, near_ns: int) -> n
             return pose
     if types[topic] == TF and frame not in tracks:
         children = sorted(k for k in tracks if k is not None)
-        raise InputError(f"no transform on {topic} has child frame {frame!r}; child frames: {', '.join(children) or 'none'}", path)
+        raise InputError(
+            f"no transform on {topic} has child frame {frame!r}; child frames: {', '.join(children) or 'none'}", path
+        )
     stamps = np.concatenate([t[1] for t in tracks.values() if len(t[1])] or [np.zeros(0)])
     span = f"{stamps.min():.6f} .. {stamps.max():.6f} s" if len(stamps) else "no messages"
     raise InputError(

@@ -17,11 +17,13 @@ import numpy as np
 from ...errors import InputError
 from ...scan import Scan
 from ...sensors.models import SensorModel
+from ..rows import scan_from_rows
 from .bag import _detail, bag_topics, message_times, nth_message, open_bag, stamp_seconds, topic_connections
 from .pointcloud2 import CloudLayoutError, PointField, decode_cloud
-from ..rows import scan_from_rows
 
 POINTCLOUD2 = "sensor_msgs/msg/PointCloud2"
+
+
 def cloud_topic(reader, path: Path, topic: str | None) -> str:
     """The PointCloud2 topic the scans come from: ``topic``, or the bag's only one."""
     topics = bag_topics(reader)
@@ -84,5 +86,3 @@ def read_rosbag(
     scan.source = f"{path}#{topic}#{index}"
     scan.stamp_s = stamp_s
     return scan
-
-

@@ -85,7 +85,11 @@ def write_bag(
     dtypes = {name: layout_dtype(name, big_endian) for name in LAYOUTS}
     # Each message is built only when it is written: a bag of gigabytes never sits in memory.
     messages = [
-        (c.stamp_s, c.topic or topic, lambda c=c: _cloud_message(store, c, dtypes[c.layout or layout], big_endian, frame_id))
+        (
+            c.stamp_s,
+            c.topic or topic,
+            lambda c=c: _cloud_message(store, c, dtypes[c.layout or layout], big_endian, frame_id),
+        )
         for c in clouds
     ]
     messages += [
@@ -168,7 +172,10 @@ def _pose_message(store, pose_type: str, stamp_s: float, pose: np.ndarray, frame
     with_covariance = T["geometry_msgs/msg/PoseWithCovariance"](pose=plain, covariance=covariance)
     if pose_type == "nav_msgs/msg/Odometry":
         twist = T["geometry_msgs/msg/TwistWithCovariance"](
-            twist=T["geometry_msgs/msg/Twist"](linear=T["geometry_msgs/msg/Vector3"](x=0, y=0, z=0), angular=T["geometry_msgs/msg/Vector3"](x=0, y=0, z=0)),
+            twist=T["geometry_msgs/msg/Twist"](
+                linear=T["geometry_msgs/msg/Vector3"](x=0, y=0, z=0),
+                angular=T["geometry_msgs/msg/Vector3"](x=0, y=0, z=0),
+            ),
             covariance=covariance,
         )
         return T[pose_type](header=header, child_frame_id=frame_id, pose=with_covariance, twist=twist)
@@ -178,6 +185,8 @@ def _pose_message(store, pose_type: str, stamp_s: float, pose: np.ndarray, frame
         return T[pose_type](header=header, pose=with_covariance)
     translation = T["geometry_msgs/msg/Vector3"](x=pose[0, 3], y=pose[1, 3], z=pose[2, 3])
     transform = T["geometry_msgs/msg/TransformStamped"](
-        header=header, child_frame_id=frame_id, transform=T["geometry_msgs/msg/Transform"](translation=translation, rotation=orientation)
+        header=header,
+        child_frame_id=frame_id,
+        transform=T["geometry_msgs/msg/Transform"](translation=translation, rotation=orientation),
     )
     return T["tf2_msgs/msg/TFMessage"](transforms=[transform])

@@ -22,7 +22,7 @@ from lidarfield.plots.common import (
 from lidarfield.plots.synthetic import write_synthetic_pair
 from lidarfield.plots.top_voxels import box_wireframe, spherical_voxel_wireframe, voxel_wireframe
 
-from layout import assert_fixed_layout
+from helpers.layout import assert_fixed_layout
 
 FAST = {"background_points": 3000, "dpi": 60}
 # figure size (inches) x dpi -> pixels

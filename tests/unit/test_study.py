@@ -20,7 +20,7 @@ from lidarfield.plots.study import _polar_cells, plot_study
 from lidarfield.plots.synthetic import write_field_study
 from lidarfield.analysis.study import group_medians, read_study_tables, write_study_tables, write_study_voxels
 
-from layout import assert_fixed_layout
+from helpers.layout import assert_fixed_layout
 
 
 @pytest.fixture(scope="module")

@@ -9,7 +9,8 @@ from lidarfield.io import read_scan
 from lidarfield.poses import apply_pose, pose_error, read_kitti_poses, read_pose, relative_pose
 from lidarfield.registration import read_xyz_rows, register_pair, translation_from_aligned_copy, translation_offsets
 
-ROOT = __import__("pathlib").Path(__file__).resolve().parents[1]
+from conftest import ROOT
+
 COMMITTED_T_1_10 = ROOT / "config" / "expd-T_1_10.txt"
 OUSTER_POSES = "OS-1-128_v2.3.0_1024x10_lb_n3_poses_kitti.txt"
 

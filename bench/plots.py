@@ -16,7 +16,7 @@ from lidarfield.plots.stage_data import load_stage
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))  # the tests' synthetic study
 from lidarfield.plots.png import compact_png
-from synthetic_study import SETTINGS, write_synthetic_pair  # noqa: E402
+from helpers.synthetic_study import SETTINGS, write_synthetic_pair  # noqa: E402
 from timing import best_time, machine  # bench/timing.py
 
 

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# A single-node SLURM cluster on this machine, for testing the SLURM profile (tests/test_slurm.py):
+# A single-node SLURM cluster on this machine, for testing the SLURM profile (tests/workflow/test_slurm.py):
 #
 #   scripts/slurm-cluster.sh start DIR   # install (apt, as root) if needed, then start in DIR
 #   export SLURM_CONF=DIR/etc/slurm.conf # sbatch, squeue, scancel ... now talk to it

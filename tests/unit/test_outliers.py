@@ -16,6 +16,8 @@ from lidarfield.hypotheses.outliers import (
 from lidarfield.pair import RegisteredPair
 from lidarfield.io import read_scan
 
+from helpers.clouds import synthetic_cloud
+
 o3d = pytest.importorskip("open3d")
 
 
@@ -49,22 +51,10 @@ def test_same_masks_as_open3d_on_real_scans(shared_data, path, settings):
     np.testing.assert_array_equal(statistical_inliers(xyz, 20, 2.0, workers=2), open3d_inliers(xyz, 20, 2.0))
 
 
-def _synthetic_cloud(rng) -> np.ndarray:
-    """A surface with exact duplicates (a point repeated 30 times: all its neighbours at 0),
-    doubled points, a tight cluster and isolated points far away."""
-    surface = np.column_stack([rng.uniform(-5, 5, (3000, 2)), rng.normal(scale=0.01, size=3000)])
-    repeated = np.repeat(surface[:1] + [0, 0, 1.0], 30, axis=0)
-    doubled = surface[rng.choice(3000, 200, replace=False)]
-    cluster = rng.normal(loc=[8.0, 8.0, 0.0], scale=1e-4, size=(25, 3))
-    isolated = rng.uniform(-50, 50, size=(10, 3))
-    xyz = np.vstack([surface, repeated, doubled, cluster, isolated])
-    return xyz[rng.permutation(len(xyz))]
-
-
 @pytest.mark.parametrize("seed", range(3))
 @pytest.mark.parametrize("nb_neighbors, std_ratio", [(20, 2.0), (4, 1.0), (30, 0.2)])
 def test_same_masks_as_open3d_on_duplicates_and_isolated_points(seed, nb_neighbors, std_ratio):
-    xyz = _synthetic_cloud(np.random.default_rng(seed))
+    xyz = synthetic_cloud(np.random.default_rng(seed))
     expected = open3d_inliers(xyz, nb_neighbors, std_ratio)
     keep = statistical_inliers(xyz, nb_neighbors, std_ratio, workers=1)
     np.testing.assert_array_equal(keep, expected)

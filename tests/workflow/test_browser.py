@@ -14,7 +14,7 @@ import pytest
 from PIL import Image
 
 from lidarfield.plots import plot_stage, write_plotly_js
-from synthetic_study import write_synthetic_study
+from helpers.synthetic_study import write_synthetic_study
 from lidarfield.report import compare_studies, discover, write_report
 
 pytestmark = pytest.mark.slow
@@ -48,7 +48,8 @@ def not_blank(png) -> float:
 
 
 @pytest.fixture(scope="module")
-def study(tmp_path_factory):
+def reported_study(tmp_path_factory):
+    """A one-pair synthetic study, plotted, with its report: (root, report, the pair's stage folders)."""
     if CHROMIUM is None:
         pytest.skip("chromium not on PATH (Debian: apt-get install chromium chromium-driver)")
     root = tmp_path_factory.mktemp("results")
@@ -66,8 +67,8 @@ def study(tmp_path_factory):
 
 
 @pytest.mark.parametrize("page", ["report.html", "pair-00/report.html"], ids=["overview", "pair-page"])
-def test_report_renders(study, tmp_path, page):
-    root, _, _ = study
+def test_report_renders(reported_study, tmp_path, page):
+    root, _, _ = reported_study
     shot = tmp_path / "report.png"
     log = chromium((root / page).as_uri(), shot, tmp_path / "profile")
     assert not_blank(shot) > 10.0
@@ -75,8 +76,8 @@ def test_report_renders(study, tmp_path, page):
 
 
 @pytest.mark.parametrize("stage", [0, -1], ids=["embedded-plotly", "shared-plotly"])
-def test_3d_view_renders_without_console_errors(study, tmp_path, stage):
-    _, _, dirs = study
+def test_3d_view_renders_without_console_errors(reported_study, tmp_path, stage):
+    _, _, dirs = reported_study
     view = dirs[stage] / "figures" / "field_3d.html"
     shot = tmp_path / "view.png"
     log = chromium(view.as_uri(), shot, tmp_path / "profile")

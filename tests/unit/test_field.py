@@ -11,20 +11,9 @@ from lidarfield.field.reference import discrepancy_field_reference, field_from_v
 from lidarfield.analysis.field_stats import field_statistics
 from lidarfield.field.grid import CartesianGrid, FieldSettings, SphericalGrid
 
+from helpers.clouds import voxel_centre_clouds
+
 GRID = SphericalGrid()  # the experimental grid: 36 x 10 deg, 5 x 8 deg from -20 to +20
-
-
-def voxel_centre_clouds(per_voxel: int = 40, seed: int = 0, spread_deg: float = 1.0) -> np.ndarray:
-    """Blobs of points around the centre of every voxel of GRID, at 8-12 m: at least 4 deg
-    from any voxel edge, so a motion of a few millimetres (or 2 deg of yaw) keeps every point
-    in its voxel."""
-    rng = np.random.default_rng(seed)
-    az_c, el_c = np.meshgrid(np.arange(5.0, 360.0, 10.0), np.arange(-16.0, 20.0, 8.0))
-    az = np.repeat(az_c.ravel(), per_voxel) + rng.uniform(-spread_deg, spread_deg, az_c.size * per_voxel)
-    el = np.repeat(el_c.ravel(), per_voxel) + rng.uniform(-spread_deg, spread_deg, az_c.size * per_voxel)
-    r = rng.uniform(8.0, 12.0, az.size)
-    az, el = np.radians(az), np.radians(el)
-    return np.column_stack([r * np.cos(el) * np.cos(az), r * np.cos(el) * np.sin(az), r * np.sin(el)])
 
 
 def test_small_translation_appears_in_every_voxel():

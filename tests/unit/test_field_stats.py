@@ -11,7 +11,9 @@ from lidarfield.field.kernel import discrepancy_field
 from lidarfield.analysis.field_stats import field_statistics, summary_json_safe, weighted_rigid_transform
 from lidarfield.field.grid import FieldSettings, SphericalGrid
 
-from test_field import GRID, voxel_centre_clouds
+from helpers.clouds import voxel_centre_clouds
+
+GRID = SphericalGrid()  # the grid voxel_centre_clouds fills: 36 x 10 deg, 5 x 8 deg from -20 to +20
 
 
 def yaw(deg: float) -> np.ndarray:

@@ -18,7 +18,7 @@ from lidarfield.pair import RegisteredPair, read_pair
 from lidarfield.study.jobs import write_stage
 from lidarfield.study.stack import initial_stage, next_stage
 
-from test_outliers import _synthetic_cloud
+from helpers.clouds import synthetic_cloud
 
 GRID = {"kind": "spherical", "azimuth_bins": 36, "elevation_bins": 5, "elevation_deg": [-15, 15], "min_points": 10}
 
@@ -53,7 +53,7 @@ def removals(xyz: np.ndarray, rng) -> dict[str, np.ndarray]:
 @pytest.mark.parametrize("k", [20, 4])
 def test_carried_distances_equal_a_new_search_on_synthetic_clouds(seed, k):
     rng = np.random.default_rng(seed)
-    xyz = _synthetic_cloud(rng)
+    xyz = synthetic_cloud(rng)
     before = neighbour_distances(xyz, k, workers=1)
     for label, keep in removals(xyz, rng).items():
         carried = after_removal(before, xyz, keep, workers=1)
@@ -143,7 +143,7 @@ def test_changes_stored_whole_where_a_stage_searched_anew_carry_on_exactly(tmp_p
     from lidarfield.analysis.neighbour_file import apply_change, kept, read_changes, write_changes
 
     rng = np.random.default_rng(5)
-    xyz = _synthetic_cloud(rng)
+    xyz = synthetic_cloud(rng)
     registered = neighbour_distances(xyz, 20, workers=1)
     keep1 = rng.random(len(xyz)) > 0.1
     stage1 = neighbour_distances(xyz[keep1], 20, workers=1)

@@ -17,14 +17,14 @@ from lidarfield.study.config import AUTO_PLOT_PAIRS, plot_pairs
 from lidarfield.errors import ConfigError, InputError
 from lidarfield.plots import plot_pair
 from lidarfield.plots.study import _polar_cells, plot_study
-from synthetic_study import write_field_study
+from helpers.synthetic_study import write_field_study
 from lidarfield.study.tables import group_medians, read_study_tables, write_study_tables, write_study_voxels
 
-from layout import assert_fixed_layout
+from helpers.layout import assert_fixed_layout
 
 
 @pytest.fixture(scope="module")
-def study(tmp_path_factory):
+def field_study(tmp_path_factory):
     """12 pairs x 3 stages of fields (a ring at the lowest elevations, shrinking stage by stage)
     and their study tables, as the workflow's jobs write them."""
     root = tmp_path_factory.mktemp("results")
@@ -55,8 +55,8 @@ def test_group_medians_match_numpy_per_group():
     assert medians == pytest.approx([np.median(values[keys == k]) for k in unique], abs=1e-12)
 
 
-def test_voxels_table_agrees_with_the_fields(study):
-    root, pairs = study
+def test_voxels_table_agrees_with_the_fields(field_study):
+    root, pairs = field_study
     got = pd.read_parquet(root / "study" / "voxels.parquet").set_index(["level", "voxel"]).sort_index()
     fields = all_fields(root)
     valid = fields[fields["valid"]].copy()
@@ -85,8 +85,8 @@ def test_voxels_table_agrees_with_the_fields(study):
     assert ring.loc[ring["el_bin"] > 0, "share_above_pair_median"].mean() < 0.5
 
 
-def test_hypotheses_and_pairs_tables_agree_with_the_summary(study):
-    root, pairs = study
+def test_hypotheses_and_pairs_tables_agree_with_the_summary(field_study):
+    root, pairs = field_study
     summary = pd.read_parquet(root / "summary.parquet")
     hypotheses = pd.read_parquet(root / "study" / "hypotheses.parquet")
     assert len(hypotheses) == len(pairs) * 2 and set(hypotheses["level"]) == {1, 2}
@@ -107,8 +107,8 @@ def test_hypotheses_and_pairs_tables_agree_with_the_summary(study):
     assert list(ranked["p95_magnitude_stage0"]) == list(first.loc[ranked["pair"]])
 
 
-def test_study_voxels_refuses_a_file_outside_the_layout(tmp_path, study):
-    root, _ = study
+def test_study_voxels_refuses_a_file_outside_the_layout(tmp_path, field_study):
+    root, _ = field_study
     stray = tmp_path / "field.parquet"
     stray.write_bytes(next(root.glob("*/stages/*/field.parquet")).read_bytes())
     with pytest.raises(InputError, match="not a field of the study layout"):
@@ -116,8 +116,8 @@ def test_study_voxels_refuses_a_file_outside_the_layout(tmp_path, study):
     assert not (tmp_path / "voxels.parquet").exists()
 
 
-def test_polar_cells_put_each_voxel_at_its_azimuth_and_elevation(study):
-    root, _ = study
+def test_polar_cells_put_each_voxel_at_its_azimuth_and_elevation(field_study):
+    root, _ = field_study
     tables = read_study_tables(root / "summary.parquet", root / "study")
     rows = tables.voxels[tables.voxels["level"] == 0]
     cells = _polar_cells(rows, tables.grid, "magnitude_median")
@@ -127,10 +127,10 @@ def test_polar_cells_put_each_voxel_at_its_azimuth_and_elevation(study):
         np.testing.assert_equal(cells[r.el_bin, r.az_bin], expected)
 
 
-def test_study_figures_are_written_one_per_stage_level_plus_three_and_keep_their_layout(study, tmp_path, monkeypatch):
+def test_study_figures_are_written_one_per_stage_level_plus_three_and_keep_their_layout(field_study, tmp_path, monkeypatch):
     import matplotlib.pyplot as plt
 
-    root, _ = study
+    root, _ = field_study
     t = read_study_tables(root / "summary.parquet", root / "study")
     figures = []
     monkeypatch.setattr(plt, "close", figures.append)  # keep each figure open after saving

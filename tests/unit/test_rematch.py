@@ -174,7 +174,7 @@ def _rows(level_values: dict[str, list[tuple[float, float]]]) -> list[dict]:
 
 def test_a_hypothesis_that_shrinks_the_field_but_worsens_matching_is_shown_as_such(monkeypatch):
     import matplotlib.pyplot as plt
-    from layout import assert_fixed_layout
+    from helpers.layout import assert_fixed_layout
 
     from lidarfield.plots.rematch import hypothesis_effects, study_rematch_figure
     from lidarfield.report.rematch import pair_rematch_table, study_rematch_parts
@@ -207,7 +207,7 @@ def test_a_hypothesis_that_shrinks_the_field_but_worsens_matching_is_shown_as_su
 
 
 def test_pose_error_figure_draws_every_stage_and_method(tmp_path, clean_pair):
-    from layout import assert_fixed_layout
+    from helpers.layout import assert_fixed_layout
 
     from lidarfield.plots.rematch import pose_error_figure
 

@@ -14,18 +14,20 @@ RECORDING = "OS-1-128_v2.3.0_1024x10_lb_n3"
 
 
 @pytest.fixture(scope="module")
-def ouster(shared_data):
+def ouster_folder(shared_data):
+    """The OS1-128 folder: its pcap and osf recordings and their decoded frames (.bin); skipped
+    without the ouster-sdk."""
     pytest.importorskip("ouster.sdk", reason="optional extra: pip install lidarfield[ouster]")
     return shared_data / "ouster-os1-128"
 
 
 @pytest.mark.parametrize("extension", ["pcap", "osf"])
-def test_frames_match_the_decoded_bins(ouster, extension):
-    path = ouster / f"{RECORDING}.{extension}"
+def test_frames_match_the_decoded_bins(ouster_folder, extension):
+    path = ouster_folder / f"{RECORDING}.{extension}"
     assert scan_count(path) == 3
     for k in range(3):
         scan = read_scan(f"{path}#{k}")
-        decoded = np.fromfile(ouster / f"lb_n3_scan{k}_xyz_refl_float32.bin", dtype="<f4").reshape(-1, 4)
+        decoded = np.fromfile(ouster_folder / f"lb_n3_scan{k}_xyz_refl_float32.bin", dtype="<f4").reshape(-1, 4)
         assert len(scan) == len(decoded)
         assert len(scan) + scan.dropped_invalid == 128 * 1024
         np.testing.assert_allclose(scan.xyz, decoded[:, :3], atol=2e-5)  # float32 rounding of the bins

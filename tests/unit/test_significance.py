@@ -21,22 +21,9 @@ from lidarfield.sensors.models import PRESETS
 from lidarfield.field.significance import SPREAD_FLOOR_M
 from lidarfield.analysis.tags import tag_column, voxel_tags
 
+from helpers.clouds import targets
+
 SETTINGS = FieldSettings(SphericalGrid())  # 36 x 10 deg, 5 x 8 deg from -20 to +20
-
-
-def targets(per_voxel: int, seed: int, noise_m: float = 0.02, half_deg: float = 1.5, range_m: float = 10.0) -> np.ndarray:
-    """Points on a square target facing the sensor at the centre of every voxel, 2 cm of noise
-    along the line of sight: two seeds are two independent samplings of the same surfaces."""
-    rng = np.random.default_rng(seed)
-    az, el = np.meshgrid(np.radians(np.arange(5.0, 360.0, 10.0)), np.radians(np.arange(-16.0, 20.0, 8.0)))
-    az, el = np.repeat(az.ravel(), per_voxel), np.repeat(el.ravel(), per_voxel)
-    sight = np.column_stack([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)])
-    across = np.column_stack([-np.sin(az), np.cos(az), np.zeros_like(az)])
-    up = np.cross(sight, across)
-    half = range_m * math.radians(half_deg)
-    a, b = rng.uniform(-half, half, (2, len(az)))
-    r = range_m + rng.normal(scale=noise_m, size=len(az))
-    return sight * r[:, None] + across * a[:, None] + up * b[:, None]
 
 
 def cylinder_and_ground(n: int, seed: int) -> np.ndarray:

@@ -3,8 +3,6 @@ can go wrong."""
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import pytest
 
@@ -13,7 +11,7 @@ from lidarfield.hypotheses import apply_step, validate_step
 from lidarfield.pair import RegisteredPair
 from lidarfield.study.stage_ids import stage_ids
 
-ROOT = Path(__file__).resolve().parents[1]
+from conftest import ROOT
 
 PLUGINS = {
     "good.py": "import numpy as np\ndef remove(pair, params):\n    return pair.xyz1[:, 0] < params['x_max'], np.ones(len(pair.xyz2), bool)\n",

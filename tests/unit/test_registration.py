@@ -15,13 +15,14 @@ from lidarfield.registration import (
     translation_offsets,
 )
 
-ROOT = __import__("pathlib").Path(__file__).resolve().parents[1]
+from conftest import ROOT
+
 COMMITTED_T_1_10 = ROOT / "config" / "expd-T_1_10.txt"
 OUSTER_POSES = "OS-1-128_v2.3.0_1024x10_lb_n3_poses_kitti.txt"
 
 
 @pytest.fixture(scope="module")
-def ouster(shared_data):
+def ouster_frames(shared_data):
     """The three frames with their reference world-from-sensor poses."""
     folder = shared_data / "ouster-os1-128"
     poses = read_kitti_poses(folder / OUSTER_POSES)
@@ -32,7 +33,8 @@ def ouster(shared_data):
 
 
 @pytest.fixture(scope="module")
-def expd_scans(expd):
+def expd_scan_pair(expd):
+    """ExpD's Cloud1 and Cloud10 as the text reader reads them (rows without a return dropped)."""
     return read_scan(expd / "Cloud1_ExpD.txt"), read_scan(expd / "Cloud10_ExpD.txt")
 
 
@@ -52,11 +54,11 @@ FAST = {"voxel_m": 0.3}
     "method, frames",
     [(m, f) for m in ("icp", "gicp", "ndt") for f in ((0, 1), (1, 2))] + [("icp_point_to_plane", (0, 1))],
 )
-def test_ouster_scan_matching_from_identity_recovers_reference_pose(ouster, method, frames):
+def test_ouster_scan_matching_from_identity_recovers_reference_pose(ouster_frames, method, frames):
     a, b = frames
-    pair = register_pair(ouster[a], ouster[b], {"method": method, **FAST})
+    pair = register_pair(ouster_frames[a], ouster_frames[b], {"method": method, **FAST})
     reg = pair.registration
-    reference = relative_pose(ouster[a].pose, ouster[b].pose)
+    reference = relative_pose(ouster_frames[a].pose, ouster_frames[b].pose)
     print(f"{method} frames {a}-{b}: {reg['translation_error_m'] * 100:.2f} cm, {reg['rotation_error_deg']:.3f} deg, "
           f"fitness {reg['fitness']:.3f}")
     assert (reg["translation_error_m"], reg["rotation_error_deg"]) == pytest.approx(pose_error(pair.T_1_2, reference))
@@ -66,25 +68,25 @@ def test_ouster_scan_matching_from_identity_recovers_reference_pose(ouster, meth
     assert np.linalg.norm(reference[:3, 3]) > 0.2
     assert reg["converged"] is True and "warning" not in reg
     assert reg["fitness"] > 0.9
-    np.testing.assert_allclose(pair.xyz2, apply_pose(pair.T_1_2, ouster[b].xyz))
+    np.testing.assert_allclose(pair.xyz2, apply_pose(pair.T_1_2, ouster_frames[b].xyz))
 
 
-def test_truth_gives_the_exact_relative_pose(ouster):
-    pair = register_pair(ouster[0], ouster[1], "truth")
-    expected = np.linalg.inv(ouster[0].pose) @ ouster[1].pose
+def test_truth_gives_the_exact_relative_pose(ouster_frames):
+    pair = register_pair(ouster_frames[0], ouster_frames[1], "truth")
+    expected = np.linalg.inv(ouster_frames[0].pose) @ ouster_frames[1].pose
     np.testing.assert_allclose(pair.T_1_2, expected, atol=1e-12)
     np.testing.assert_allclose(pair.origin2, expected[:3, 3], atol=1e-12)
     assert pair.registration["translation_error_m"] == pytest.approx(0, abs=1e-12)
     assert pair.registration["converged"] is True
-    np.testing.assert_array_equal(pair.xyz1, ouster[0].xyz)
-    np.testing.assert_allclose(pair.xyz2, ouster[1].xyz @ expected[:3, :3].T + expected[:3, 3])
-    assert set(pair.attributes2) == set(ouster[1].attributes)
+    np.testing.assert_array_equal(pair.xyz1, ouster_frames[0].xyz)
+    np.testing.assert_allclose(pair.xyz2, ouster_frames[1].xyz @ expected[:3, :3].T + expected[:3, 3])
+    assert set(pair.attributes2) == set(ouster_frames[1].attributes)
 
 
 @pytest.mark.parametrize("method", ["icp", "ndt"])
-def test_guess_30_m_off_reports_not_converged(ouster, method):
+def test_guess_30_m_off_reports_not_converged(ouster_frames, method):
     settings = {"method": method, "guess": [30, 0, 0, 0, 0, 0], "voxel_m": 0.5, "max_iterations": 20}
-    pair = register_pair(ouster[0], ouster[1], settings)
+    pair = register_pair(ouster_frames[0], ouster_frames[1], settings)
     reg = pair.registration
     print(f"{method} from 30 m off: fitness {reg['fitness']:.3f}, error {reg['translation_error_m']:.1f} m")
     assert reg["converged"] is False
@@ -93,18 +95,18 @@ def test_guess_30_m_off_reports_not_converged(ouster, method):
     assert reg["translation_error_m"] > 1.0
 
 
-def test_unrelated_clouds_report_not_converged(ouster, expd_scans):
-    pair = register_pair(expd_scans[0], ouster[0], {"method": "gicp", "voxel_m": 0.5, "max_iterations": 20})
+def test_unrelated_clouds_report_not_converged(ouster_frames, expd_scan_pair):
+    pair = register_pair(expd_scan_pair[0], ouster_frames[0], {"method": "gicp", "voxel_m": 0.5, "max_iterations": 20})
     assert pair.registration["converged"] is False
     assert pair.registration["fitness"] < 0.5
     assert "translation_error_m" not in pair.registration  # the ExpD scan has no pose
 
 
-def test_expd_ndt_agrees_with_the_authors_translation(expd_scans, authors_T_1_10):
+def test_expd_ndt_agrees_with_the_authors_translation(expd_scan_pair, authors_T_1_10):
     # The van drove about +3 m along y. Start 30 cm beyond that, so that an NDT that stops at
     # its guess could not pass.
     guess = [0, 3.3, 0, 0, 0, 0]
-    pair = register_pair(*expd_scans, {"method": "ndt", "guess": guess})
+    pair = register_pair(*expd_scan_pair, {"method": "ndt", "guess": guess})
     reg = pair.registration
     difference = pair.T_1_2[:3, 3] - authors_T_1_10[:3, 3]
     print(f"NDT T_1_10 translation {pair.T_1_2[:3, 3]}, authors {authors_T_1_10[:3, 3]}, "
@@ -115,21 +117,21 @@ def test_expd_ndt_agrees_with_the_authors_translation(expd_scans, authors_T_1_10
     # the direction of travel, which the parking lot constrains weakly: the issue's 5 cm is not
     # met (see the report). The estimate fits scan 1 at least as tightly as the authors' does.
     assert np.linalg.norm(difference) < 0.08
-    authors = register_pair(*expd_scans, {"transform": str(COMMITTED_T_1_10)}).registration
+    authors = register_pair(*expd_scan_pair, {"transform": str(COMMITTED_T_1_10)}).registration
     print(f"inlier RMSE: NDT {reg['inlier_rmse']:.4f} m, authors' translation {authors['inlier_rmse']:.4f} m")
     assert reg["inlier_rmse"] <= authors["inlier_rmse"]
 
 
-def test_expd_wrong_direction_guess_is_a_poor_fit_not_a_crash(expd_scans):
-    pair = register_pair(*expd_scans, {"method": "ndt", "guess": [0, -3, 0, 0, 0, 0]})
+def test_expd_wrong_direction_guess_is_a_poor_fit_not_a_crash(expd_scan_pair):
+    pair = register_pair(*expd_scan_pair, {"method": "ndt", "guess": [0, -3, 0, 0, 0, 0]})
     assert pair.registration["converged"] is False
     assert pair.registration["fitness"] < 0.3
 
 
-def test_ndt_that_never_leaves_its_guess_is_not_converged(expd_scans):
+def test_ndt_that_never_leaves_its_guess_is_not_converged(expd_scan_pair):
     # 12.5 cm cells (the authors' MATLAB grid step) hold too few VLP-16 points: Open3D's NDT
     # returns the guess as it was, which here fits well; it must still not pass as converged.
-    pair = register_pair(*expd_scans, {"method": "ndt", "ndt_resolution_m": 0.125, "guess": [0, 3, 0, 0, 0, 0]})
+    pair = register_pair(*expd_scan_pair, {"method": "ndt", "ndt_resolution_m": 0.125, "guess": [0, 3, 0, 0, 0, 0]})
     reg = pair.registration
     assert reg["fitness"] > reg["min_fitness"]
     assert reg["converged"] is False and "guess unchanged" in reg["warning"]
@@ -147,8 +149,8 @@ def test_committed_expd_transform_matches_the_data(expd, authors_T_1_10):
     assert committed[:3, 3] == pytest.approx([-0.00128, 2.99632, 0.0], abs=1e-4)
 
 
-def test_transform_file_registers_expd_like_the_aligned_copy(expd, expd_scans):
-    pair = register_pair(*expd_scans, {"transform": str(COMMITTED_T_1_10)})
+def test_transform_file_registers_expd_like_the_aligned_copy(expd, expd_scan_pair):
+    pair = register_pair(*expd_scan_pair, {"transform": str(COMMITTED_T_1_10)})
     aligned = read_scan(expd / "Cloud10Aligned_ExpD.txt")
     np.testing.assert_allclose(pair.xyz2, aligned.xyz, atol=1e-9)
     np.testing.assert_allclose(pair.origin2, read_pose(COMMITTED_T_1_10)[:3, 3])

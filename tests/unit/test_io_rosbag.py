@@ -30,7 +30,8 @@ def as_float32(xyz: np.ndarray) -> np.ndarray:
 
 
 @pytest.fixture(scope="module")
-def expd_scans(expd):
+def organised_expd_scans(expd):
+    """ExpD's Cloud1 and Cloud10 with their no-return rows kept (NaN) and the ring of each row."""
     return [organised_expd(expd / name) for name in ("Cloud1_ExpD.txt", "Cloud10_ExpD.txt")]
 
 
@@ -39,13 +40,13 @@ def bag_path(tmp_path, storage):
 
 
 @pytest.mark.parametrize("storage", ["ros1", "sqlite3", "mcap"])
-def test_velodyne_layout_round_trip_in_every_storage(tmp_path, expd_scans, storage):
-    clouds = [CloudMessage(scan, 1000.0 + 0.9 * k) for k, scan in enumerate(expd_scans)]
+def test_velodyne_layout_round_trip_in_every_storage(tmp_path, organised_expd_scans, storage):
+    clouds = [CloudMessage(scan, 1000.0 + 0.9 * k) for k, scan in enumerate(organised_expd_scans)]
     path = write_bag(bag_path(tmp_path, storage), clouds, storage=storage, layout="velodyne")
     references = [path] + ([path / f"{path.name}.mcap"] if storage == "mcap" else [])  # folder and bare .mcap
     for reference in references:
         assert scan_count(reference) == 2
-        for k, original in enumerate(expd_scans):
+        for k, original in enumerate(organised_expd_scans):
             scan = read_scan(f"{reference}#{k}")
             valid = np.isfinite(original.xyz).all(axis=1)
             np.testing.assert_array_equal(scan.xyz, as_float32(original.xyz[valid]))
@@ -67,16 +68,16 @@ def test_ouster_48_byte_layout_of_a_real_ouster_scan(tmp_path, shared_data):
     assert {"reflectivity", "ring", "ambient", "range"} <= set(back.attributes)
 
 
-def test_organised_cloud_keeps_row_order_and_drops_nan_rows(tmp_path, expd, expd_scans):
-    cloud = CloudMessage(expd_scans[0], 3.0, shape=(RINGS, 1810))
+def test_organised_cloud_keeps_row_order_and_drops_nan_rows(tmp_path, expd, organised_expd_scans):
+    cloud = CloudMessage(organised_expd_scans[0], 3.0, shape=(RINGS, 1810))
     back = read_scan(write_bag(tmp_path / "org.bag", [cloud]))
     plain = read_scan(expd / "Cloud1_ExpD.txt")  # the text reader: same rows, same order
     np.testing.assert_array_equal(back.xyz, as_float32(plain.xyz))
     assert back.dropped_invalid == plain.dropped_invalid == 16054
 
 
-def test_big_endian_cloud_reads_as_the_little_endian_one(tmp_path, expd_scans):
-    clouds = [CloudMessage(expd_scans[1], 2.0)]
+def test_big_endian_cloud_reads_as_the_little_endian_one(tmp_path, organised_expd_scans):
+    clouds = [CloudMessage(organised_expd_scans[1], 2.0)]
     little = read_scan(write_bag(tmp_path / "le.bag", clouds))
     big = read_scan(write_bag(tmp_path / "be.bag", clouds, big_endian=True))
     np.testing.assert_array_equal(big.xyz, little.xyz)
@@ -131,10 +132,10 @@ def drive(t):
         ("ros1", "tf2_msgs/msg/TFMessage"),
     ],
 )
-def test_poses_from_a_topic_at_another_rate_are_interpolated(tmp_path, expd_scans, storage, pose_type):
+def test_poses_from_a_topic_at_another_rate_are_interpolated(tmp_path, organised_expd_scans, storage, pose_type):
     # Scans at 10 Hz from t = 0.05 s, poses at 7 Hz: no scan stamp falls on a pose stamp.
     stamps = [0.05 + 0.1 * k for k in range(2)]
-    clouds = [CloudMessage(scan, 100.0 + t) for scan, t in zip(expd_scans, stamps)]
+    clouds = [CloudMessage(scan, 100.0 + t) for scan, t in zip(organised_expd_scans, stamps)]
     poses = [(100.0 + k / 7, drive(k / 7)) for k in range(4)]
     topic = "/tf" if pose_type.startswith("tf2") else "/odom"
     path = write_bag(bag_path(tmp_path, storage), clouds, storage=storage, poses=poses, pose_topic=topic, pose_type=pose_type)
@@ -145,31 +146,31 @@ def test_poses_from_a_topic_at_another_rate_are_interpolated(tmp_path, expd_scan
         np.testing.assert_allclose(pose, drive(t), atol=1e-9)
 
 
-def test_scan_outside_the_pose_messages_span_is_an_error(tmp_path, expd_scans):
+def test_scan_outside_the_pose_messages_span_is_an_error(tmp_path, organised_expd_scans):
     poses = [(10.0 + 0.1 * k, drive(0.1 * k)) for k in range(5)]
-    path = write_bag(tmp_path / "late.bag", [CloudMessage(expd_scans[0], 10.2), CloudMessage(expd_scans[1], 11.0)], poses=poses)
+    path = write_bag(tmp_path / "late.bag", [CloudMessage(organised_expd_scans[0], 10.2), CloudMessage(organised_expd_scans[1], 11.0)], poses=poses)
     assert read_scan(f"{path}#0", poses={"topic": "/odom"}).pose is not None
     with pytest.raises(InputError, match=r"late.bag: scan stamp 11.000000 s lies outside .* /odom \(10.000000 .. 10.400000 s\)"):
         read_scan(f"{path}#1", poses={"topic": "/odom"})
 
 
-def test_tf_needs_an_existing_child_frame(tmp_path, expd_scans):
+def test_tf_needs_an_existing_child_frame(tmp_path, organised_expd_scans):
     poses = [(0.1 * k, drive(0.1 * k)) for k in range(3)]
-    path = write_bag(tmp_path / "tf.bag", [CloudMessage(expd_scans[0], 0.1)], poses=poses, pose_topic="/tf", pose_type="tf2_msgs/msg/TFMessage")
+    path = write_bag(tmp_path / "tf.bag", [CloudMessage(organised_expd_scans[0], 0.1)], poses=poses, pose_topic="/tf", pose_type="tf2_msgs/msg/TFMessage")
     with pytest.raises(InputError, match="child frame"):
         read_scan(path, poses={"topic": "/tf"})
     with pytest.raises(InputError, match=r"no transform on /tf has child frame 'velodyne'; child frames: lidar"):
         read_scan(path, poses={"topic": "/tf", "frame": "velodyne"})
 
 
-def test_several_cloud_topics_need_the_topic(tmp_path, expd_scans):
-    clouds = [CloudMessage(expd_scans[0], 1.0, topic="/front"), CloudMessage(expd_scans[1], 1.05, topic="/rear")]
+def test_several_cloud_topics_need_the_topic(tmp_path, organised_expd_scans):
+    clouds = [CloudMessage(organised_expd_scans[0], 1.0, topic="/front"), CloudMessage(organised_expd_scans[1], 1.05, topic="/rear")]
     path = write_bag(tmp_path / "two.bag", clouds)
     with pytest.raises(InputError, match=r"two.bag: the bag holds 2 PointCloud2 topics: name one \(.*two.bag#/TOPIC#k, or topic: in a sequence\); topics: /front .*, /rear"):
         read_scan(f"{path}#0")
     assert scan_count(f"{path}#/rear") == 1
     np.testing.assert_array_equal(read_scan(f"{path}#/rear#0").xyz, read_scan(f"{path}#/rear").xyz)
-    assert len(read_scan(f"{path}#/rear")) == int(np.isfinite(expd_scans[1].xyz).all(axis=1).sum())
+    assert len(read_scan(f"{path}#/rear")) == int(np.isfinite(organised_expd_scans[1].xyz).all(axis=1).sum())
     with pytest.raises(InputError, match=r"topic /side is not in the bag; its topics: /front \(sensor_msgs/PointCloud2, 1\), /rear"):
         read_scan(f"{path}#/side#0")
 
@@ -181,8 +182,8 @@ def test_bag_without_pointcloud2(tmp_path):
 
 
 @pytest.mark.parametrize("storage", ["ros1", "mcap"])
-def test_truncated_bag_is_one_error_naming_it(tmp_path, expd_scans, storage):
-    path = write_bag(bag_path(tmp_path, storage), [CloudMessage(s, 1.0 + k) for k, s in enumerate(expd_scans)], storage=storage)
+def test_truncated_bag_is_one_error_naming_it(tmp_path, organised_expd_scans, storage):
+    path = write_bag(bag_path(tmp_path, storage), [CloudMessage(s, 1.0 + k) for k, s in enumerate(organised_expd_scans)], storage=storage)
     file = path if storage == "ros1" else path / f"{path.name}.mcap"
     data = file.read_bytes()
     file.write_bytes(data[: len(data) // 2])

@@ -25,7 +25,8 @@ from lidarfield.simulation.scene import load_scene
 from lidarfield.sensors.models import PRESETS
 from lidarfield.simulation.raycast import simulate_scan
 
-ROOT = Path(__file__).resolve().parents[1]
+from conftest import ROOT
+
 GRID = {"kind": "spherical", "azimuth_bins": 36, "elevation_deg": [-22.5, 15.0], "elevation_bins": 5, "min_points": 30}
 ROW_KEYS = {
     "pair", "stage", "level", "hypothesis", "n1", "n2", "removed1", "removed2", "voxels_valid", "max_magnitude",

@@ -14,7 +14,7 @@ from lidarfield.field.grid import FieldSettings, SphericalGrid
 from lidarfield.pair import RegisteredPair
 from lidarfield.analysis.suggest import SUGGESTION_COLUMNS, candidate_steps, suggestions
 
-from test_significance import targets
+from helpers.clouds import targets
 
 SETTINGS = FieldSettings(SphericalGrid())
 GRID = SETTINGS.to_config()

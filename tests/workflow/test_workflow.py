@@ -13,22 +13,16 @@ import re
 import shutil
 import signal
 import subprocess
-import sys
 import time
 from pathlib import Path
 
 import pandas as pd
 import pytest
-import yaml
 
 from conftest import ROOT
+from helpers.workflow import SNAKEMAKE, snakemake, tiny_study, write_study
 
 pytestmark = pytest.mark.slow
-
-SNAKEMAKE = [sys.executable, "-m", "snakemake", "--snakefile", str(ROOT / "Snakefile")]
-
-# A small sensor keeps the tiny study fast: 16 channels, 1 deg azimuth steps.
-TINY_SENSOR = {"name": "tiny-16", "elevation_deg": [-22 + 2 * i for i in range(16)], "azimuth_resolution_deg": 1.0}
 
 PLUGIN_SOURCE = '''"""Keeps points above a height: a plugin for the workflow tests."""
 import numpy as np
@@ -37,35 +31,6 @@ import numpy as np
 def remove(pair, params):
     return pair.xyz1[:, 2] > params["min_z_m"], pair.xyz2[:, 2] > params["min_z_m"]
 '''
-
-
-def tiny_study() -> dict:
-    simulate = {"scene": "paper-intersection", "sensor": TINY_SENSOR, "pose1": [0, 0, 3, 0, 0, 0]}
-    return {
-        "pairs": {
-            "shift": {"simulate": {**simulate, "pose2": [1, 1, 3, 0, 0, 0.05]}, "register": "truth"},
-            "turn": {"simulate": {**simulate, "pose2": [0, 0, 3, 0, 0, 0.2]}, "register": "truth"},
-        },
-        "grid": {"azimuth_bins": 18, "elevation_deg": [-25, 12.5], "elevation_bins": 5, "min_points": 5},
-        "hypotheses": [
-            {"ego_vehicle": {"radius_m": 8.0}},
-            {"field_of_view": {}},
-        ],
-        "plots": {"background_points": 2000, "interactive": False},
-        # Not the default candidates: three check the rule; outliers' neighbour searches only add time.
-        "suggest": [{"ego_vehicle": {}}, {"field_of_view": {}}, {"shadow": {}}],
-    }
-
-
-def snakemake(workdir: Path, *args: str, check: bool = True) -> subprocess.CompletedProcess:
-    proc = subprocess.run(
-        [*SNAKEMAKE, "--directory", str(workdir), "--configfile", str(workdir / "study.yaml"), *args],
-        capture_output=True,
-        text=True,
-    )
-    if check and proc.returncode != 0:
-        raise AssertionError(f"snakemake {' '.join(args)} failed:\n{proc.stdout}\n{proc.stderr}")
-    return proc
 
 
 def planned_jobs(workdir: Path) -> collections.Counter:
@@ -81,10 +46,6 @@ def planned_jobs(workdir: Path) -> collections.Counter:
         if match and match.group(1) not in ("total", "all"):  # all: the target rule, no work
             counts[match.group(1)] = int(match.group(2))
     return counts
-
-
-def write_study(workdir: Path, study: dict) -> None:
-    (workdir / "study.yaml").write_text(yaml.safe_dump(study, sort_keys=False))
 
 
 def planned_after(workdir: Path, edit) -> collections.Counter:

@@ -12,7 +12,7 @@ import pytest
 from lidarfield.cli import main
 from lidarfield.errors import InputError
 from lidarfield.plots import plot_pair, plot_stage
-from synthetic_study import write_summary, write_synthetic_study
+from helpers.synthetic_study import write_summary, write_synthetic_study
 from lidarfield.report import compare_studies, discover, write_pair_page, write_report
 from lidarfield.report.pair_page import STAGE_FIGURES
 
@@ -20,7 +20,7 @@ FAST = {"background_points": 2000, "dpi": 50}
 
 
 @pytest.fixture(scope="module")
-def study(tmp_path_factory):
+def plotted_study(tmp_path_factory):
     """Two pairs of two stages each, plotted (the 3-D view only for pair-00's last stage), with
     their pair figures."""
     root = tmp_path_factory.mktemp("results")
@@ -71,8 +71,8 @@ def pair_page(root, name: str) -> str:
     return (root / name / "report.html").read_text()
 
 
-def test_report_writes_an_overview_and_a_page_per_pair(study, tmp_path):
-    root, pairs = study
+def test_report_writes_an_overview_and_a_page_per_pair(plotted_study, tmp_path):
+    root, pairs = plotted_study
     found, rows = discover(root)
     assert {k: [d.name for d in v] for k, v in found.items()} == {k: [d.name for d in v] for k, v in pairs.items()}
     out = write_report({"grid": {"kind": "spherical"}, "note": "<script>alert(1)</script>"}, found, rows, tmp_path / "report.html")
@@ -100,8 +100,8 @@ def test_report_writes_an_overview_and_a_page_per_pair(study, tmp_path):
     assert len(link) == 1 and (tmp_path / "pair-00" / link[0]).is_file()
 
 
-def test_report_shows_what_to_try_next_per_stage_and_for_the_study(study, tmp_path):
-    root, pairs = study
+def test_report_shows_what_to_try_next_per_stage_and_for_the_study(plotted_study, tmp_path):
+    root, pairs = plotted_study
     found, rows = discover(root)
     html = write_report({}, found, rows, tmp_path / "report.html").read_text()
     study_part = html.split("<h2>What to try next</h2>", 1)[1].split("<h2>", 1)[0]
@@ -117,8 +117,8 @@ def test_report_shows_what_to_try_next_per_stage_and_for_the_study(study, tmp_pa
     assert f"{100 * table['energy_reduction'][0]:.1f}%" in pair_page(tmp_path, "pair-00")
 
 
-def test_pair_page_shows_only_the_figures_the_config_draws_and_flags_a_lost_one(study, tmp_path):
-    root, pairs = study
+def test_pair_page_shows_only_the_figures_the_config_draws_and_flags_a_lost_one(plotted_study, tmp_path):
+    root, pairs = plotted_study
     found, rows = discover(root)
     write_report({"plots": {"figures": ["field_top", "before_after"]}}, found, rows, tmp_path / "r.html")
     assert image_count(pair_page(tmp_path, "pair-01")) == N_PAIR_FIGURES + 1 + 2  # stage 0: field_top; stage 1: both
@@ -133,8 +133,8 @@ def test_pair_page_shows_only_the_figures_the_config_draws_and_flags_a_lost_one(
     assert 'class="missing"' not in pair_page(lost, "pair-00")
 
 
-def test_a_pair_without_figures_says_how_to_draw_them(study, tmp_path):
-    root, pairs = study
+def test_a_pair_without_figures_says_how_to_draw_them(plotted_study, tmp_path):
+    root, pairs = plotted_study
     found, rows = discover(root)
     rows = [r for r in rows if r["pair"] == "pair-01"]
     out = write_pair_page("pair-01", found["pair-01"], rows, tmp_path / "pair-01" / "report.html",
@@ -144,16 +144,16 @@ def test_a_pair_without_figures_says_how_to_draw_them(study, tmp_path):
     assert "snakemake --cores 2 results/pair-01/stages.html" in page and "plots.pairs" in page
 
 
-def test_report_links_3d_views_relative_to_itself(study):
-    root, _ = study
+def test_report_links_3d_views_relative_to_itself(plotted_study):
+    root, _ = plotted_study
     found, rows = discover(root)
     write_report({}, found, rows, root / "report.html")
     (link,) = re.findall(r'href="([^"#]+field_3d\.html)"', pair_page(root, "pair-00"))
     assert not link.startswith("/") and (root / "pair-00" / link).is_file()
 
 
-def test_report_flags_a_registration_that_did_not_converge(study, tmp_path):
-    root, _ = study
+def test_report_flags_a_registration_that_did_not_converge(plotted_study, tmp_path):
+    root, _ = plotted_study
     found, rows = discover(root)
     rows = [dict(r) for r in rows]
     last = [i for i, r in enumerate(rows) if r["pair"] == "pair-01"][-1]
@@ -165,8 +165,8 @@ def test_report_flags_a_registration_that_did_not_converge(study, tmp_path):
     assert pair_page(tmp_path, "pair-00").count('<tr class="flag">') == 1 and "fitness below 0.3" in pair_page(tmp_path, "pair-00")
 
 
-def test_pair_page_states_the_findings_and_flags_their_stages(study, tmp_path):
-    root, pairs = study
+def test_pair_page_states_the_findings_and_flags_their_stages(plotted_study, tmp_path):
+    root, pairs = plotted_study
     found, rows = discover(root)
     pair = rows[0]["pair"]
     rows = [dict(r) for r in rows if r["pair"] == pair]
@@ -182,8 +182,8 @@ def test_pair_page_states_the_findings_and_flags_their_stages(study, tmp_path):
     assert html.count('<tr class="flag">') == 1
 
 
-def test_discover_takes_the_stages_of_the_summary_only(study, tmp_path):
-    root, pairs = study
+def test_discover_takes_the_stages_of_the_summary_only(plotted_study, tmp_path):
+    root, pairs = plotted_study
     copy = tmp_path / "results"
     shutil.copytree(root / "pair-01", copy / "pair-01")
     stale = copy / "pair-01" / "stages" / "01-ego_vehicle-deadbeef"  # an older variant's stage
@@ -196,8 +196,8 @@ def test_discover_takes_the_stages_of_the_summary_only(study, tmp_path):
     assert len(found["pair-01"]) == 3 and len(rows) == 3
 
 
-def test_discover_reads_a_single_pair_folder_and_its_csv_summary(study, tmp_path):
-    root, pairs = study
+def test_discover_reads_a_single_pair_folder_and_its_csv_summary(plotted_study, tmp_path):
+    root, pairs = plotted_study
     pair_dir = tmp_path / "one"
     shutil.copytree(root / "pair-00", pair_dir)
     (pair_dir / "summary.parquet").unlink()
@@ -211,8 +211,8 @@ def test_discover_rejects_a_folder_without_pairs(tmp_path):
         discover(tmp_path)
 
 
-def test_compare_shows_both_studies_with_deltas(study, tmp_path):
-    root, pairs = study
+def test_compare_shows_both_studies_with_deltas(plotted_study, tmp_path):
+    root, pairs = plotted_study
     other = tmp_path / "variant"
     shutil.copytree(root / "pair-00", other / "pair-00")
     rows = [json.loads((d / "stats.json").read_text()) for d in pairs["pair-00"]]
@@ -225,8 +225,8 @@ def test_compare_shows_both_studies_with_deltas(study, tmp_path):
     assert image_count(html) == 2 + 2 * 2 + 2  # curves per pair; field_top A|B per stage of pair-00, A and missing B for pair-01
 
 
-def test_cli_report_compare_and_plot(study, tmp_path, capsys):
-    root, pairs = study
+def test_cli_report_compare_and_plot(plotted_study, tmp_path, capsys):
+    root, pairs = plotted_study
     assert main(["report", str(root), "--out", str(tmp_path / "r.html")]) == 0
     assert main(["compare", str(root), str(root), "--out", str(tmp_path / "c.html")]) == 0
     assert (tmp_path / "r.html").is_file() and (tmp_path / "c.html").is_file()
@@ -242,8 +242,8 @@ def write_page(found, rows, out, max_mb):
     return write_pair_page("pair-00", found["pair-00"], [r for r in rows if r["pair"] == "pair-00"], out, max_mb=max_mb)
 
 
-def test_a_large_budget_embeds_every_figure(study, tmp_path):
-    root, pairs = study
+def test_a_large_budget_embeds_every_figure(plotted_study, tmp_path):
+    root, pairs = plotted_study
     found, rows = discover(root)
     html = write_page(found, rows, tmp_path / "r.html", max_mb=100).read_text()
     stage_files = stage_figure_files({"pair-00": pairs["pair-00"]})
@@ -253,8 +253,8 @@ def test_a_large_budget_embeds_every_figure(study, tmp_path):
     assert figure_links(html) == [] and budget_counts(html) is None
 
 
-def test_a_small_budget_embeds_the_pair_figures_and_links_the_stage_figures(study, caplog):
-    root, pairs = study
+def test_a_small_budget_embeds_the_pair_figures_and_links_the_stage_figures(plotted_study, caplog):
+    root, pairs = plotted_study
     stage_files = stage_figure_files({"pair-00": pairs["pair-00"]})
     found, rows = discover(root)
     out_dir = root / "pair-00"
@@ -278,8 +278,8 @@ def test_a_small_budget_embeds_the_pair_figures_and_links_the_stage_figures(stud
     assert f"{report_bytes(out) / 1e6:.2f} MB" in caplog.text and f"{N_PAIR_FIGURES} figures embedded, {len(stage_files)} linked" in caplog.text
 
 
-def test_the_next_tier_is_embedded_in_every_stage_when_it_fits_too(study):
-    root, pairs = study
+def test_the_next_tier_is_embedded_in_every_stage_when_it_fits_too(plotted_study):
+    root, pairs = plotted_study
     found, rows = discover(root)
     out_dir = root / "pair-00"
     full = write_page(found, rows, out_dir / "full.html", max_mb=100).read_text()
@@ -294,8 +294,8 @@ def test_the_next_tier_is_embedded_in_every_stage_when_it_fits_too(study):
     assert linked == {f.resolve() for f in stage_figure_files({"pair-00": pairs["pair-00"]}) if f.name != "field_top.png"}
 
 
-def test_a_budget_too_small_for_any_figure_still_writes_the_page_with_every_figure_linked(study, caplog):
-    root, pairs = study
+def test_a_budget_too_small_for_any_figure_still_writes_the_page_with_every_figure_linked(plotted_study, caplog):
+    root, pairs = plotted_study
     found, rows = discover(root)
     out_dir = root / "pair-00"
     with caplog.at_level("WARNING", logger="lidarfield.report.budget"):
@@ -310,8 +310,8 @@ def test_a_budget_too_small_for_any_figure_still_writes_the_page_with_every_figu
     assert budget_counts(html) == (0, len(links), len(links))
 
 
-def test_a_pair_figure_without_a_file_says_it_is_left_out(study, tmp_path):
-    root, _ = study
+def test_a_pair_figure_without_a_file_says_it_is_left_out(plotted_study, tmp_path):
+    root, _ = plotted_study
     found, rows = discover(root)
     bare_pair = tmp_path / "pair-00"
     shutil.copytree(root / "pair-00" / "stages", bare_pair / "stages")  # no pair figures on disk
@@ -319,8 +319,8 @@ def test_a_pair_figure_without_a_file_says_it_is_left_out(study, tmp_path):
     assert html.count("not embedded (size budget) and not on disk to link") == 3  # the three pair figures
 
 
-def test_cli_report_takes_its_budget_from_max_mb_or_else_the_config(study, tmp_path, capsys):
-    root, _ = study
+def test_cli_report_takes_its_budget_from_max_mb_or_else_the_config(plotted_study, tmp_path, capsys):
+    root, _ = plotted_study
     config = tmp_path / "study.yaml"
     config.write_text("report: {max_mb: 0.001}\n")
     out = tmp_path / "r.html"
@@ -340,7 +340,7 @@ def test_the_report_knows_every_figure_a_stage_can_have():
     assert sorted(stem for stem, _ in STAGE_FIGURES) == sorted(DRAWN)
 
 
-def test_an_embedded_copy_is_the_figure_scaled_to_the_page_in_256_colours(study):
+def test_an_embedded_copy_is_the_figure_scaled_to_the_page_in_256_colours(plotted_study):
     """compact_png: a wide figure comes out EMBED_MAX_WIDTH wide, same aspect, a palette image
     whose colours stay those of the figure; an RGBA file of the same pixels gives the same copy."""
     import io
@@ -350,7 +350,7 @@ def test_an_embedded_copy_is_the_figure_scaled_to_the_page_in_256_colours(study)
 
     from lidarfield.plots.png import EMBED_MAX_WIDTH, compact_png
 
-    _, pairs = study
+    _, pairs = plotted_study
     wide = np.asarray(Image.open(pairs["pair-00"][1] / "figures" / "before_after.png").convert("RGB"))
     wide = np.tile(wide, (1, 3, 1))  # wider than a page at any test dpi
     as_png = {}

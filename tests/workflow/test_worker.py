@@ -292,7 +292,7 @@ def test_a_worker_stopped_while_importing_exits_at_once(tmp_path):
 def test_a_run_that_executes_nothing_stops_the_worker_it_started(tmp_path):
     """Snakemake starts the worker while it plans (lidarfield.runner.launch.spawn); a dry run never
     points a job at it, and stops it at exit: no worker process and no socket are left."""
-    from test_workflow import snakemake, tiny_study, write_study
+    from helpers.workflow import snakemake, tiny_study, write_study
 
     write_study(tmp_path, tiny_study())
     proc = snakemake(tmp_path, "--dry-run", "--cores", "1")
@@ -307,7 +307,7 @@ def test_a_run_that_executes_nothing_stops_the_worker_it_started(tmp_path):
 def test_no_worker_when_jobs_run_in_their_own_software_environments(tmp_path):
     """With --sdm conda each job must run in its rule's environment, not with the worker's
     imports: no worker is started (whether or not conda is installed to run the study)."""
-    from test_workflow import snakemake, tiny_study, write_study
+    from helpers.workflow import snakemake, tiny_study, write_study
 
     write_study(tmp_path, tiny_study())
     snakemake(tmp_path, "--dry-run", "--cores", "1", "--sdm", "conda", check=False)
@@ -332,7 +332,7 @@ def test_the_figure_warm_up_draws_every_figure_and_leaves_no_folder(tmp_path, mo
 def test_figures_drawn_after_the_warm_up_are_those_of_a_plain_process(tmp_path, warming_worker):
     """The warm-up leaves matplotlib's caches filled, not its settings changed: a stage's
     figures forked from the warmed-up worker are byte for byte those of a plain process."""
-    from synthetic_study import write_synthetic_pair
+    from helpers.synthetic_study import write_synthetic_pair
 
     _, sock = warming_worker
     wait_for(lambda: "figure warm-up done" in (tmp_path / "worker.log").read_text(), timeout=120)

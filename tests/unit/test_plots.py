@@ -12,10 +12,10 @@ from lidarfield.plots import plot_pair, plot_settings, plot_stage
 from lidarfield.plots.output import SVG_MAX_BYTES
 from lidarfield.plots.stage_data import read_vector_field, subsample
 from lidarfield.plots.style import FADED_ALPHA, magnitude_norm, nice_length, resolve_magnification, vector_colours, view_limits
-from synthetic_study import write_synthetic_pair
+from helpers.synthetic_study import write_synthetic_pair
 from lidarfield.plots.top_voxels import box_wireframe, spherical_voxel_wireframe, voxel_wireframe
 
-from layout import assert_fixed_layout
+from helpers.layout import assert_fixed_layout
 
 FAST = {"background_points": 3000, "dpi": 60}
 # figure size (inches) x dpi -> pixels
@@ -232,7 +232,7 @@ def test_auto_magnification(max_m, span_m, expected):
 
 def test_a_3d_view_can_share_one_plotly_js(tmp_path):
     from lidarfield.plots import plot_stage, write_plotly_js
-    from synthetic_study import write_synthetic_study
+    from helpers.synthetic_study import write_synthetic_study
 
     dirs = write_synthetic_study(tmp_path, n_pairs=1, levels=1, n=3000)["pair-00"]
     shared = write_plotly_js(tmp_path / "assets" / "plotly.min.js")

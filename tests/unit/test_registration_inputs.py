@@ -20,6 +20,8 @@ from lidarfield.registration import (
 )
 from lidarfield.scan import Scan
 
+from conftest import ROOT
+
 TRUE_T = pose_from_xyzrpy([0.3, -0.2, 0.05, 0.0, 0.0, np.radians(2.0)])
 
 
@@ -186,7 +188,7 @@ def test_cli_from_aligned_writes_the_committed_transform(expd, tmp_path, capsys)
                  "--out", str(out)])
     assert code == 0
     assert "spread" in capsys.readouterr().out
-    committed = read_pose(__import__("pathlib").Path(__file__).resolve().parents[1] / "config" / "expd-T_1_10.txt")
+    committed = read_pose(ROOT / "config" / "expd-T_1_10.txt")
     np.testing.assert_allclose(read_pose(out), committed, atol=1e-12)
 
 

@@ -54,7 +54,10 @@ bench: setup
 docs: setup
 	mkdocs build --strict --site-dir site
 
+# ruff (pyproject.toml) on the Python; Snakemake's linter and snakefmt on the workflow.
 lint: setup
+	ruff format --check src tests bench hypotheses docs
+	ruff check src tests bench hypotheses docs
 	snakemake --lint
 	snakefmt --check Snakefile workflow/rules
 

@@ -56,7 +56,8 @@ def main() -> None:
     args = parser.parse_args()
     print(machine())
     print(
-        f"bags of ~{args.gigabytes:g} GB: {OUSTER_TOPIC} (48-byte points) and {VELODYNE_TOPIC} at 10 Hz, /odom at 100 Hz"
+        f"bags of ~{args.gigabytes:g} GB: {OUSTER_TOPIC} (48-byte points) and {VELODYNE_TOPIC} at 10 Hz, /odom at 100 "
+        f"Hz"
     )
     for storage in ("ros1", "mcap", "sqlite3"):
         folder = Path(tempfile.mkdtemp(prefix="lidarfield-bench-", dir=args.dir))
@@ -68,7 +69,8 @@ def main() -> None:
             one, scan = best_time(lambda: (_open_reader.cache_clear(), read_scan(middle))[1], args.repeat)
             whole, total = best_time(lambda: (_open_reader.cache_clear(), read_everything(path))[1], args.repeat)
             print(
-                f"{storage:8s} {size / 1e9:.2f} GB, {frames} scans a topic: one scan (#{frames // 2}, {len(scan):,} points) "
+                f"{storage:8s} {size / 1e9:.2f} GB, {frames} scans a topic: one scan (#{frames // 2}, {len(scan):,} "
+                f"points) "
                 f"{one:.3f} s; every message ({total / 1e9:.2f} GB) {whole:.2f} s; ratio {one / whole:.3f}"
             )
         finally:

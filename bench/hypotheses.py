@@ -98,7 +98,8 @@ def main(n: int) -> None:
     t_naive = best_time(lambda: naive_field_of_view(pair, *vlp16))[0]
     same = all(np.array_equal(a, b) for a, b in zip(fov, naive_field_of_view(pair, *vlp16)))
     print(
-        f"field_of_view   {t_fov:7.3f} s   naive          {t_naive:7.3f} s   speed-up {t_naive / t_fov:6.1f}x   same masks: {same}"
+        f"field_of_view   {t_fov:7.3f} s   naive          {t_naive:7.3f} s   speed-up {t_naive / t_fov:6.1f}x   same "
+        f"masks: {same}"
     )
 
 

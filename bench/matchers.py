@@ -134,7 +134,8 @@ def main() -> int:
                 apart = np.median([pose_error(T, T0)[0] for T, T0 in zip(estimates, o3d_T)]) * 100
                 print(
                     f"{name:15s} {method:19s} {backend:10s} {prep:7.3f} {total:8.3f} {total / o3d_total:6.2f} "
-                    f"{np.median(errors[:, 0]) * 100:10.2f} {errors[:, 0].max() * 100:10.2f} {np.median(errors[:, 1]):8.3f} "
+                    f"{np.median(errors[:, 0]) * 100:10.2f} {errors[:, 0].max() * 100:10.2f} "
+                    f"{np.median(errors[:, 1]):8.3f} "
                     f"{fitness:8.3f} {apart:12.2f}"
                 )
     return 0

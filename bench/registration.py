@@ -37,7 +37,8 @@ def main() -> int:
         baseline = baseline or best
         reg = pair.registration
         print(
-            f"{method:20s} {best:7.3f} s  x{best / baseline:5.2f} of icp   error {reg['translation_error_m'] * 100:5.2f} cm "
+            f"{method:20s} {best:7.3f} s  x{best / baseline:5.2f} of icp   error "
+            f"{reg['translation_error_m'] * 100:5.2f} cm "
             f"{reg['rotation_error_deg']:.3f} deg  fitness {reg['fitness']:.3f}"
         )
     return 0

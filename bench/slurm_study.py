@@ -1,7 +1,7 @@
 """The smoke study (config/smoke.yaml) through the SLURM profile against the same study run
 locally: wall times and their ratio, measured in the same run.
 
-Starts a single-node cluster with scripts/slurm-cluster.sh (root; see tests/test_slurm.py),
+Starts a single-node cluster with scripts/slurm-cluster.sh (root; see tests/workflow/test_slurm.py),
 or uses a running one if SLURM_CONF is set. Each run starts from an empty folder.
 
     python bench/slurm_study.py

@@ -16,12 +16,12 @@ from pathlib import Path
 import pandas as pd
 
 from lidarfield.plots.study import plot_study
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))  # the tests' synthetic study
 from lidarfield.report import write_overview
 from lidarfield.study.tables import read_study_tables, write_study_tables, write_study_voxels
-from helpers.synthetic_study import write_field_study  # noqa: E402
 from timing import machine  # bench/timing.py
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))  # the tests' synthetic study
+from helpers.synthetic_study import write_field_study  # noqa: E402
 
 
 def pandas_voxels(fields: list[Path]) -> pd.DataFrame:

@@ -99,7 +99,8 @@ def cold_and_append(config: Path, pairs: int | None, worker: str, workdir: Path,
     since = time.time()
     rerun, rerun_cpu = snakemake(workdir, worker, extra)
     print(
-        f"worker {worker}: appending {APPENDED} reruns in {rerun:.1f} s wall ({rerun_cpu:.1f} s CPU), {rerun / cold:.1%} of cold"
+        f"worker {worker}: appending {APPENDED} reruns in {rerun:.1f} s wall ({rerun_cpu:.1f} s CPU), "
+        f"{rerun / cold:.1%} of cold"
     )
     print_rules("rerun", per_rule(workdir / "results", since))
 

@@ -6,8 +6,9 @@ the comparison); the baseline, in the same run, is the same candidate with both 
 recomputed from scratch by the pandas reference (``field_reference``), i.e. without binning
 once. For ``outliers`` the hypothesis is also timed with Open3D's ``remove_statistical_outlier``
 (its previous implementation, same keep-masks), Open3D imported beforehand, and the import of
-Open3D and of scipy's k-d tree are timed in fresh processes. The pair is the street scene of ``bench/hypotheses.py`` (VLP-16 limits, sensor 2 3 m
-away), the study grid 36 x 5 over -20..20 deg.
+Open3D and of scipy's k-d tree are timed in fresh processes. The pair is the street scene of
+``bench/hypotheses.py`` (VLP-16 limits, sensor 2 3 m away), the study grid 36 x 5 over
+-20..20 deg.
 
 Run: ``python bench/suggest.py [points_per_cloud]``. Pin to one core with ``taskset -c 0``.
 """
@@ -59,7 +60,8 @@ def main(n: int) -> None:
         hypothesis, masks = best_time(lambda: apply_step(pair, spec, ".", GRID))
         baseline = best_time(lambda: _baseline(pair, settings, spec), repeat=1)[0]
         print(
-            f"{name:15s} {total:7.3f}s {hypothesis:10.3f}s {total - hypothesis:7.3f}s | {baseline:8.3f}s {baseline / total:5.1f}x"
+            f"{name:15s} {total:7.3f}s {hypothesis:10.3f}s {total - hypothesis:7.3f}s | {baseline:8.3f}s "
+            f"{baseline / total:5.1f}x"
             f"   energy reduction {table['energy_reduction'][0]:+.3f}"
         )
         if name == "outliers":
@@ -68,7 +70,8 @@ def main(n: int) -> None:
             )
             assert all(np.array_equal(a, b) for a, b in zip(masks, previous_masks))
             print(
-                f"{'':15s} {'':8s} {previous:10.3f}s with Open3D (imported): {previous / hypothesis:.2f}x the k-d tree's time"
+                f"{'':15s} {'':8s} {previous:10.3f}s with Open3D (imported): {previous / hypothesis:.2f}x the k-d "
+                f"tree's time"
             )
     for module in ("open3d", "scipy.spatial"):
         code = f"import time; t = time.perf_counter(); import {module}; print(time.perf_counter() - t)"

@@ -69,9 +69,12 @@ def main() -> None:
         previous_s, carried = best_time(lambda: suggest(from_previous))
         assert all(np.array_equal(carried[c], searched[c]) for c in carried), "carried suggestions differ"
         print(
-            f"stage {stage.level} ({stage.name}, {len(pair.xyz1) - len(survivors[1])} + {len(pair.xyz2) - len(survivors[2])} "
-            f"removed so far): suggestions {searched_s * 1000:.0f} ms searching anew, {registered_s * 1000:.0f} ms carried "
-            f"from the registered pair ({registered_s / searched_s:.2f}x), {previous_s * 1000:.0f} ms from the stage before "
+            f"stage {stage.level} ({stage.name}, {len(pair.xyz1) - len(survivors[1])} + "
+            f"{len(pair.xyz2) - len(survivors[2])} "
+            f"removed so far): suggestions {searched_s * 1000:.0f} ms searching anew, {registered_s * 1000:.0f} ms "
+            f"carried "
+            f"from the registered pair ({registered_s / searched_s:.2f}x), {previous_s * 1000:.0f} ms from the stage "
+            f"before "
             f"({previous_s / searched_s:.2f}x)"
         )
         # the last timed run carried from the stage before: its distances start the next stage

@@ -11,7 +11,7 @@ A page holds a marker line where its generated part goes; nothing generated is c
   the module that defines it when the site is built (the flat names are imported lazily, so
   Griffe, which reads the source, cannot resolve ``lidarfield.<name>`` by itself).
 
-``tests/test_docs.py`` calls the generating functions directly.
+``tests/unit/test_docs.py`` calls the generating functions directly.
 """
 
 from __future__ import annotations

@@ -32,7 +32,9 @@ def synthetic_cloud(rng) -> np.ndarray:
     return xyz[rng.permutation(len(xyz))]
 
 
-def targets(per_voxel: int, seed: int, noise_m: float = 0.02, half_deg: float = 1.5, range_m: float = 10.0) -> np.ndarray:
+def targets(
+    per_voxel: int, seed: int, noise_m: float = 0.02, half_deg: float = 1.5, range_m: float = 10.0
+) -> np.ndarray:
     """Points on a square target facing the sensor at the centre of every voxel of the default
     SphericalGrid, 2 cm of noise along the line of sight: two seeds are two independent
     samplings of the same surfaces."""

@@ -25,7 +25,10 @@ from lidarfield.study.summary import write_summary_table
 SETTINGS = FieldSettings(SphericalGrid(36, 0.0, (-20.0, 20.0), 5), min_points=10)
 # The candidates of each stage's "what to try next" (the pair has no sensor models, so no
 # field_of_view; no outliers, the slowest to compute).
-SUGGEST = [{"ego_vehicle": {"radius_m": 3.0, "box_m": None}}, {"crop": {"min_range_m": 0.0, "max_range_m": 15.0, "box_m": None}}]
+SUGGEST = [
+    {"ego_vehicle": {"radius_m": 3.0, "box_m": None}},
+    {"crop": {"min_range_m": 0.0, "max_range_m": 15.0, "box_m": None}},
+]
 HYPOTHESES = ("none", "ego_vehicle", "field_of_view")
 
 
@@ -44,7 +47,10 @@ def _cloud(rng, origin, car_shift, n: int) -> np.ndarray:
     r = np.sqrt(rng.uniform(2.0**2, 22.0**2, n // 2))
     a = rng.uniform(0, 2 * np.pi, n // 2)
     ground = np.column_stack([r * np.cos(a), r * np.sin(a), np.full(n // 2, -1.8)])
-    buildings = [_box_surface(rng, (10, 6, -1.8), (5, 8, 10), n // 6), _box_surface(rng, (-8, -9, -1.8), (7, 5, 10), n // 6)]
+    buildings = [
+        _box_surface(rng, (10, 6, -1.8), (5, 8, 10), n // 6),
+        _box_surface(rng, (-8, -9, -1.8), (7, 5, 10), n // 6),
+    ]
     car = _box_surface(rng, (np.array([4.0, -5.0, -1.8]) + car_shift), (4.2, 1.8, 1.5), n // 12)
     ego = rng.normal(0, 0.6, (n // 12, 3)) * [1.5, 0.8, 0.3] + np.asarray(origin) + [0, 0, -0.8]
     return np.vstack([ground, *buildings, car, ego])
@@ -55,33 +61,56 @@ def synthetic_pair(seed: int = 0, n: int = 24000) -> RegisteredPair:
     T = np.eye(4)
     T[:3, 3] = [1.0, 0.5, 0.0]
     xyz1 = _cloud(rng, (0, 0, 0), np.zeros(3), n)
-    xyz2 = _cloud(rng, T[:3, 3], np.array([1.5, 0.3, 0.0]), n) + rng.normal(0, 0.02, (n // 2 + 2 * (n // 6) + 2 * (n // 12), 3))
+    xyz2 = _cloud(rng, T[:3, 3], np.array([1.5, 0.3, 0.0]), n) + rng.normal(
+        0, 0.02, (n // 2 + 2 * (n // 6) + 2 * (n // 12), 3)
+    )
     return RegisteredPair(xyz1, xyz2, T, registration={"method": "truth", "fitness": 1.0, "converged": True})
 
 
-def stats_row(pair_name: str, stage_id: str, level: int, hypothesis: str, pair: RegisteredPair, removed: tuple[int, int], field: dict) -> dict:
+def stats_row(
+    pair_name: str,
+    stage_id: str,
+    level: int,
+    hypothesis: str,
+    pair: RegisteredPair,
+    removed: tuple[int, int],
+    field: dict,
+) -> dict:
     return {
-        "pair": pair_name, "stage": stage_id, "level": level, "hypothesis": hypothesis,
-        "n1": len(pair.xyz1), "n2": len(pair.xyz2), "removed1": removed[0], "removed2": removed[1],
+        "pair": pair_name,
+        "stage": stage_id,
+        "level": level,
+        "hypothesis": hypothesis,
+        "n1": len(pair.xyz1),
+        "n2": len(pair.xyz2),
+        "removed1": removed[0],
+        "removed2": removed[1],
         **summary_json_safe(field_statistics(field, SETTINGS)),
-        "registration_method": pair.registration.get("method"), "registration_fitness": pair.registration.get("fitness"),
+        "registration_method": pair.registration.get("method"),
+        "registration_fitness": pair.registration.get("fitness"),
     }
 
 
 def _mitigate(pair: RegisteredPair, hypothesis: str) -> tuple[np.ndarray, np.ndarray]:
     """Keep-masks of both clouds for one of the toy hypotheses."""
     if hypothesis == "ego_vehicle":
-        return (np.linalg.norm(pair.xyz1 - pair.origin1, axis=1) >= 3.0,
-                np.linalg.norm(pair.xyz2 - pair.origin2, axis=1) >= 3.0)
+        return (
+            np.linalg.norm(pair.xyz1 - pair.origin1, axis=1) >= 3.0,
+            np.linalg.norm(pair.xyz2 - pair.origin2, axis=1) >= 3.0,
+        )
     if hypothesis == "field_of_view":
+
         def below(xyz, o):
             d = xyz - o
             return np.degrees(np.arctan2(d[:, 2], np.hypot(d[:, 0], d[:, 1]))) <= 10.0
+
         return below(pair.xyz1, pair.origin2), below(pair.xyz2, pair.origin1)
     return np.ones(len(pair.xyz1), bool), np.ones(len(pair.xyz2), bool)
 
 
-def write_synthetic_pair(pair_dir: str | Path, pair_name: str, seed: int = 0, levels: int = 3, n: int = 24000) -> list[Path]:
+def write_synthetic_pair(
+    pair_dir: str | Path, pair_name: str, seed: int = 0, levels: int = 3, n: int = 24000
+) -> list[Path]:
     """Write a pair folder (stages 0..levels-1 and the pair summary); returns the stage folders."""
     pair_dir = Path(pair_dir)
     pair = synthetic_pair(seed, n)
@@ -100,7 +129,9 @@ def write_synthetic_pair(pair_dir: str | Path, pair_name: str, seed: int = 0, le
         write_pair(stage_dir / "points.parquet", pair, meta)
         write_table(stage_dir / "removed.parquet", removed, {**pair.metadata(), **meta})
         field, statistics = analyse_field(pair, SETTINGS)
-        write_field(stage_dir / "field.parquet", field, field_meta(SETTINGS, summary_json_safe(statistics), stage=stage_id))
+        write_field(
+            stage_dir / "field.parquet", field, field_meta(SETTINGS, summary_json_safe(statistics), stage=stage_id)
+        )
         grid = SETTINGS.to_config()
         table = suggestions(pair, SETTINGS, SUGGEST, ".", grid)
         write_suggestions(stage_dir / "suggestions.parquet", table, stage_id, SUGGEST, grid)
@@ -117,10 +148,17 @@ def write_summary(folder: Path, rows: list[dict]) -> None:
     write_summary_table(rows, folder / "summary.parquet", folder / "summary.csv")
 
 
-def write_synthetic_study(results_dir: str | Path, n_pairs: int = 2, levels: int = 3, n: int = 24000) -> dict[str, list[Path]]:
+def write_synthetic_study(
+    results_dir: str | Path, n_pairs: int = 2, levels: int = 3, n: int = 24000
+) -> dict[str, list[Path]]:
     """A results folder of ``n_pairs`` pairs (named pair-00, pair-01, ...) and the study summary."""
     results_dir = Path(results_dir)
-    pairs = {f"pair-{i:02d}": write_synthetic_pair(results_dir / f"pair-{i:02d}", f"pair-{i:02d}", seed=i, levels=levels, n=n) for i in range(n_pairs)}
+    pairs = {
+        f"pair-{i:02d}": write_synthetic_pair(
+            results_dir / f"pair-{i:02d}", f"pair-{i:02d}", seed=i, levels=levels, n=n
+        )
+        for i in range(n_pairs)
+    }
     rows = [json.loads((d / "stats.json").read_text()) for dirs in pairs.values() for d in dirs]
     write_summary(results_dir, rows)
     return pairs
@@ -155,9 +193,13 @@ def write_field_study(results_dir: str | Path, n_pairs: int, levels: int = 3, n:
             stage_id = f"{level:02d}-{hypothesis}-{k:04x}{level:04x}"
             stage_dir = results_dir / name / "stages" / stage_id
             xyz1, xyz2 = _ring_clouds(rng, n, (k % 5 + 1) / 10 / 2**level)
-            pair = RegisteredPair(xyz1, xyz2, np.eye(4), registration={"method": "truth", "fitness": 1.0, "converged": True})
+            pair = RegisteredPair(
+                xyz1, xyz2, np.eye(4), registration={"method": "truth", "fitness": 1.0, "converged": True}
+            )
             field, statistics = analyse_field(pair, SETTINGS)
-            write_field(stage_dir / "field.parquet", field, field_meta(SETTINGS, summary_json_safe(statistics), stage=stage_id))
+            write_field(
+                stage_dir / "field.parquet", field, field_meta(SETTINGS, summary_json_safe(statistics), stage=stage_id)
+            )
             row = stats_row(name, stage_id, level, hypothesis, pair, (level * 10, level * 12), field)
             write_text(stage_dir / "stats.json", json.dumps(row))
             rows.append(row)

@@ -16,6 +16,7 @@ SNAKEMAKE = [sys.executable, "-m", "snakemake", "--snakefile", str(ROOT / "Snake
 # A small sensor keeps the tiny study fast: 16 channels, 1 deg azimuth steps.
 TINY_SENSOR = {"name": "tiny-16", "elevation_deg": [-22 + 2 * i for i in range(16)], "azimuth_resolution_deg": 1.0}
 
+
 def tiny_study() -> dict:
     simulate = {"scene": "paper-intersection", "sensor": TINY_SENSOR, "pose1": [0, 0, 3, 0, 0, 0]}
     return {

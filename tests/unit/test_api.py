@@ -25,9 +25,13 @@ def test_import_does_not_load_open3d():
 def test_validating_a_config_does_not_load_open3d():
     # Snakemake validates the config at every start, twice per job on a cluster (profiles/slurm).
     study = (
-        "{'pairs': {'p': {'simulate': {'scene': 'paper-intersection', 'sensor': 'vlp16', 'pose1': [0, 0, 3, 0, 0, 0], 'pose2': [1, 0, 3, 0, 0, 0]},"
-        " 'register': {'method': 'icp', 'guess': 'truth'}}}}"
+        "{'pairs': {'p': {'simulate': {'scene': 'paper-intersection', 'sensor': 'vlp16', "
+        "'pose1': [0, 0, 3, 0, 0, 0], 'pose2': [1, 0, 3, 0, 0, 0]}, "
+        "'register': {'method': 'icp', 'guess': 'truth'}}}}"
     )
-    code = f"import pathlib, lidarfield.study.config\nlidarfield.study.config.validate_config({study}, base_dir=pathlib.Path('.'))"
+    code = (
+        f"import pathlib, lidarfield.study.config\n"
+        f"lidarfield.study.config.validate_config({study}, base_dir=pathlib.Path('.'))"
+    )
     assert not loads_open3d(code)
     assert loads_open3d(f"{code}\nimport lidarfield.registration.matching")  # the probe sees it

@@ -5,12 +5,11 @@ from __future__ import annotations
 import pytest
 import yaml
 
+from conftest import ROOT
 from lidarfield.defaults import SCHEMA_PATH, schema
-from lidarfield.study.config import load_config, validate_config
 from lidarfield.errors import InputError, LidarfieldError
 from lidarfield.simulation.scene import builtin_scenes
-
-from conftest import ROOT
+from lidarfield.study.config import load_config, validate_config
 
 
 def test_the_package_schema_is_the_workflow_schema():
@@ -19,7 +18,9 @@ def test_the_package_schema_is_the_workflow_schema():
 
 def test_defaults_follow_the_kind_of_pair(expd):
     recorded = {"scan1": str(expd / "Cloud1_ExpD.txt"), "scan2": str(expd / "Cloud10_ExpD.txt")}
-    simulated = {"simulate": {"scene": "paper-intersection", "sensor": "vlp16", "pose1": [0] * 6, "pose2": [1, 0, 0, 0, 0, 0]}}
+    simulated = {
+        "simulate": {"scene": "paper-intersection", "sensor": "vlp16", "pose1": [0] * 6, "pose2": [1, 0, 0, 0, 0, 0]}
+    }
     study = validate_config({"pairs": {"real": recorded, "sim": simulated}})
     # Each pair gets its own kind's default, not the other branch's (the schema's oneOf).
     assert study.pairs["real"].register == "identity"
@@ -62,11 +63,28 @@ def test_a_simulated_drive_expands_along_its_arc():
         ({"pairs": {"a": {"scan1": "nowhere.pcd", "scan2": "nowhere.pcd"}}}, "pairs.a.scan1: file not found"),
         ({"pairs": {}}, "the study has no pairs"),
         ({"pairs": {}, "hypotheses": [{"astrology": {}}]}, "astrology"),
-        ({"pairs": {}, "report": {"max_mb": 0}}, r"config key report\.max_mb: 0 is less than or equal to the minimum of 0"),
-        ({"pairs": {}, "report": {"max_mb": "x"}}, r"config key report\.max_mb: 'x' is not of type 'number'"),
-        ({"pairs": {}, "report": {"max_kb": 5}}, r"config key report: Additional properties are not allowed \('max_kb' was unexpected\)"),
         (
-            {"pairs": {"logs": {"simulate": {"scene": "paper-intersection", "sensor": "vlp16", "pose1": [0] * 6, "pose2": [0] * 6}}}},
+            {"pairs": {}, "report": {"max_mb": 0}},
+            r"config key report\.max_mb: 0 is less than or equal to the minimum of 0",
+        ),
+        ({"pairs": {}, "report": {"max_mb": "x"}}, r"config key report\.max_mb: 'x' is not of type 'number'"),
+        (
+            {"pairs": {}, "report": {"max_kb": 5}},
+            r"config key report: Additional properties are not allowed \('max_kb' was unexpected\)",
+        ),
+        (
+            {
+                "pairs": {
+                    "logs": {
+                        "simulate": {
+                            "scene": "paper-intersection",
+                            "sensor": "vlp16",
+                            "pose1": [0] * 6,
+                            "pose2": [0] * 6,
+                        }
+                    }
+                }
+            },
             r"pair name\(s\) \['logs'\] are folders of the results folder",
         ),
     ],
@@ -82,14 +100,22 @@ def test_the_report_budget_is_read_or_defaults_to_20_mb():
 
 
 def _simulated(**changes) -> dict:
-    simulate = {"scene": "paper-intersection", "sensor": "vlp16", "pose1": [0, 0, 3, 0, 0, 0], "pose2": [1, 0, 3, 0, 0, 0]}
+    simulate = {
+        "scene": "paper-intersection",
+        "sensor": "vlp16",
+        "pose1": [0, 0, 3, 0, 0, 0],
+        "pose2": [1, 0, 3, 0, 0, 0],
+    }
     return {"pairs": {"a": {"simulate": {**simulate, **changes}}}}
 
 
 @pytest.mark.parametrize(
     "changes, message",
     [
-        ({"sensor": {"name": "mine"}}, "pairs.a.simulate.sensor: sensor model: needs at least 'name' and 'elevation_deg'"),
+        (
+            {"sensor": {"name": "mine"}},
+            "pairs.a.simulate.sensor: sensor model: needs at least 'name' and 'elevation_deg'",
+        ),
         ({"sensor": "vlp17"}, "pairs.a.simulate.sensor: unknown sensor 'vlp17'"),
         ({"sensor": "mine.yaml"}, "pairs.a.simulate.sensor: file not found: "),
         ({"scene": "mall"}, "config key pairs.a.simulate.scene: 'mall' is not one of"),
@@ -111,7 +137,8 @@ def test_a_sensor_yaml_error_names_the_config_and_the_sensor_file(tmp_path):
     with pytest.raises(LidarfieldError) as caught:
         validate_config(_simulated(sensor="mine.yaml"), base_dir=tmp_path, source="study.yaml")
     assert str(caught.value) == (
-        f"study.yaml: pairs.a.simulate.sensor: {tmp_path / 'mine.yaml'}: sensor model: needs at least 'name' and 'elevation_deg'"
+        f"study.yaml: pairs.a.simulate.sensor: {tmp_path / 'mine.yaml'}: sensor model: needs at least 'name' and "
+        f"'elevation_deg'"
     )
 
 

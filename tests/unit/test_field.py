@@ -5,13 +5,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from helpers.clouds import voxel_centre_clouds
+from lidarfield.analysis.field_stats import field_statistics
 from lidarfield.field.file import read_field, write_field
+from lidarfield.field.grid import CartesianGrid, FieldSettings, SphericalGrid
 from lidarfield.field.kernel import discrepancy_field, field_columns, field_from_voxel_ids
 from lidarfield.field.reference import discrepancy_field_reference, field_from_voxel_ids_reference
-from lidarfield.analysis.field_stats import field_statistics
-from lidarfield.field.grid import CartesianGrid, FieldSettings, SphericalGrid
-
-from helpers.clouds import voxel_centre_clouds
 
 GRID = SphericalGrid()  # the experimental grid: 36 x 10 deg, 5 x 8 deg from -20 to +20
 

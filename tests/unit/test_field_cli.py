@@ -17,9 +17,21 @@ from lidarfield.io import read_scan, write_scan
 
 def test_field_of_the_expd_pair(expd, tmp_path, capsys):
     grid_yaml = tmp_path / "grid.yaml"
-    grid_yaml.write_text("grid:\n  kind: spherical\n  azimuth_bins: 36\n  elevation_deg: [-20, 20]\n  elevation_bins: 5\n")
+    grid_yaml.write_text(
+        "grid:\n  kind: spherical\n  azimuth_bins: 36\n  elevation_deg: [-20, 20]\n  elevation_bins: 5\n"
+    )
     out = tmp_path / "out"
-    code = main(["field", str(expd / "Cloud1_ExpD.txt"), str(expd / "Cloud10Aligned_ExpD.txt"), "--out", str(out), "--grid", str(grid_yaml)])
+    code = main(
+        [
+            "field",
+            str(expd / "Cloud1_ExpD.txt"),
+            str(expd / "Cloud10Aligned_ExpD.txt"),
+            "--out",
+            str(out),
+            "--grid",
+            str(grid_yaml),
+        ]
+    )
     assert code == 0
     printed = capsys.readouterr().out
     assert "paper max metric" in printed and "mean resultant length" in printed
@@ -30,8 +42,16 @@ def test_field_of_the_expd_pair(expd, tmp_path, capsys):
     summary = json.loads((out / "summary.json").read_text())
     stats = summary["statistics"]
     assert stats["voxels_valid"] == int(columns["valid"].sum())
-    for key in ("max_magnitude", "mean_magnitude", "rms_magnitude", "p95_magnitude", "paper_max_metric",
-                "rigid_rotation_deg", "rigid_energy_share", "mean_resultant_length"):
+    for key in (
+        "max_magnitude",
+        "mean_magnitude",
+        "rms_magnitude",
+        "p95_magnitude",
+        "paper_max_metric",
+        "rigid_rotation_deg",
+        "rigid_energy_share",
+        "mean_resultant_length",
+    ):
         assert math.isfinite(stats[key]), key
     # VLP-16 beams span -15..+15 deg: scan 1 is all inside the +-20 deg grid.
     assert summary["out_of_grid1"] == 0 and summary["n1"] == int(columns["n1"].sum())
@@ -41,8 +61,29 @@ def test_field_of_the_expd_pair(expd, tmp_path, capsys):
 def test_flags_override_the_grid_and_pose2_moves_scan2(expd, tmp_path):
     scan = str(expd / "Cloud1_ExpD.txt")
     out = tmp_path / "out"
-    assert main(["field", scan, scan, "--out", str(out), "--azimuth-bins", "12", "--elevation-deg", "-16", "16",
-                 "--elevation-bins", "2", "--min-points", "5", "--pose2", "0.01,0,0,0,0,0"]) == 0
+    assert (
+        main(
+            [
+                "field",
+                scan,
+                scan,
+                "--out",
+                str(out),
+                "--azimuth-bins",
+                "12",
+                "--elevation-deg",
+                "-16",
+                "16",
+                "--elevation-bins",
+                "2",
+                "--min-points",
+                "5",
+                "--pose2",
+                "0.01,0,0,0,0,0",
+            ]
+        )
+        == 0
+    )
     columns, meta = read_field(out / "field.parquet")
     assert meta["grid"]["elevation_deg"] == [-16.0, 16.0] and meta["min_points"] == 5
     assert columns["az_bin"].max() == 11 and columns["el_bin"].max() == 1
@@ -105,8 +146,9 @@ def test_bad_input_is_one_line_from_the_command(option, name, expected, expd, tm
     scans = [str(expd / "Cloud1_ExpD.txt"), culprit if option == "scan2" else str(expd / "Cloud10Aligned_ExpD.txt")]
     extra = [] if option == "scan2" else [option, culprit]
     out = tmp_path / "out"
-    done = subprocess.run([sys.executable, "-m", "lidarfield", "field", *scans, "--out", str(out), *extra],
-                          capture_output=True, text=True)
+    done = subprocess.run(
+        [sys.executable, "-m", "lidarfield", "field", *scans, "--out", str(out), *extra], capture_output=True, text=True
+    )
     assert done.returncode == 2
     assert done.stderr.startswith(f"lidarfield field: error: {culprit}: "), done.stderr
     assert len(done.stderr.strip().splitlines()) == 1 and expected in done.stderr, done.stderr

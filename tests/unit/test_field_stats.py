@@ -7,11 +7,10 @@ import math
 
 import numpy as np
 
-from lidarfield.field.kernel import discrepancy_field
+from helpers.clouds import voxel_centre_clouds
 from lidarfield.analysis.field_stats import field_statistics, summary_json_safe, weighted_rigid_transform
 from lidarfield.field.grid import FieldSettings, SphericalGrid
-
-from helpers.clouds import voxel_centre_clouds
+from lidarfield.field.kernel import discrepancy_field
 
 GRID = SphericalGrid()  # the grid voxel_centre_clouds fills: 36 x 10 deg, 5 x 8 deg from -20 to +20
 

@@ -17,15 +17,22 @@ from lidarfield.hypotheses import (
 from lidarfield.pair import RegisteredPair
 from lidarfield.poses import pose_from_xyzrpy
 from lidarfield.registration import register_pair
-from lidarfield.simulation.scene import load_scene
 from lidarfield.sensors.models import PRESETS
 from lidarfield.simulation.raycast import simulate_scan
+from lidarfield.simulation.scene import load_scene
 
 STUDY_GRID = {
-    "kind": "spherical", "azimuth_bins": 36, "azimuth_offset_deg": 0.0, "elevation_deg": [-25.0, 12.5],
-    "elevation_bins": 5, "range_edges_m": None, "cell_m": 2.0, "origin": [0, 0, 0], "min_points": 30,
+    "kind": "spherical",
+    "azimuth_bins": 36,
+    "azimuth_offset_deg": 0.0,
+    "elevation_deg": [-25.0, 12.5],
+    "elevation_bins": 5,
+    "range_edges_m": None,
+    "cell_m": 2.0,
+    "origin": [0, 0, 0],
+    "min_points": 30,
     "max_component_m": None,
-}  # fmt: skip
+}
 
 
 def _unit_vectors(rng, n):
@@ -51,7 +58,12 @@ def test_defaults_filled_and_study_grid_injected_into_shadow():
             "jump_m": 1.0,
             "min_points": 30,
             "origins": [1],
-            "grid": {"azimuth_bins": 36, "azimuth_offset_deg": 0.0, "elevation_deg": [-25.0, 12.5], "elevation_bins": 5},
+            "grid": {
+                "azimuth_bins": 36,
+                "azimuth_offset_deg": 0.0,
+                "elevation_deg": [-25.0, 12.5],
+                "elevation_bins": 5,
+            },
         }
     }
     # Idempotent, and a grid of its own wins over the study's, key by key.
@@ -63,14 +75,25 @@ def test_defaults_filled_and_study_grid_injected_into_shadow():
 @pytest.mark.parametrize(
     "step, message",
     [
-        ({"ego_vehicel": {}}, "hypothesis 1 (ego_vehicel): unknown hypothesis; available: ego_vehicle, field_of_view, shadow, crop, outliers, plugin"),
-        ({"shadow": {"jump": 1}}, "unknown parameter(s) jump; expected: jump_m (number), min_points (integer), origins (list of integers), grid (mapping or null)"),
+        (
+            {"ego_vehicel": {}},
+            "hypothesis 1 (ego_vehicel): unknown hypothesis; available: ego_vehicle, field_of_view, shadow, crop, "
+            "outliers, plugin",
+        ),
+        (
+            {"shadow": {"jump": 1}},
+            "unknown parameter(s) jump; expected: jump_m (number), min_points (integer), origins (list of integers), "
+            "grid (mapping or null)",
+        ),
         ({"shadow": {"jump_m": "far"}}, "parameter 'jump_m': expected number, got 'far'"),
         ({"shadow": {"min_points": 2.5}}, "parameter 'min_points': expected integer, got 2.5"),
         ({"shadow": {"min_points": True}}, "parameter 'min_points': expected integer, got True"),
         ({"shadow": {"origins": [1, 3]}}, "origins must list sensor 1, sensor 2 or both"),
         ({"shadow": {"grid": {"range_edges_m": [0, 10]}}}, "grid takes the angular keys"),
-        ({"ego_vehicle": {"box_m": [0, 1, 0, 1]}}, "parameter 'box_m': expected list of 6 numbers or null, got [0, 1, 0, 1]"),
+        (
+            {"ego_vehicle": {"box_m": [0, 1, 0, 1]}},
+            "parameter 'box_m': expected list of 6 numbers or null, got [0, 1, 0, 1]",
+        ),
         ({"ego_vehicle": {"box_m": [1, 0, 0, 1, 0, 1]}}, "each min <= max"),
         ({"field_of_view": {"elevation_deg": [15, -15]}}, "lo < hi"),
         ({"outliers": {"std_ratio": 0}}, "std_ratio > 0"),

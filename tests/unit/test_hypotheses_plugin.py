@@ -6,18 +6,20 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from conftest import ROOT
 from lidarfield.errors import HypothesisError
 from lidarfield.hypotheses import apply_step, validate_step
 from lidarfield.pair import RegisteredPair
 from lidarfield.study.stage_ids import stage_ids
 
-from conftest import ROOT
-
 PLUGINS = {
-    "good.py": "import numpy as np\ndef remove(pair, params):\n    return pair.xyz1[:, 0] < params['x_max'], np.ones(len(pair.xyz2), bool)\n",
+    "good.py": "import numpy as np\ndef remove(pair, params):\n    return pair.xyz1[:, 0] < params['x_max'], "
+    "np.ones(len(pair.xyz2), bool)\n",
     "raises.py": "def remove(pair, params):\n    raise ValueError('no cars here')\n",
-    "short.py": "import numpy as np\ndef remove(pair, params):\n    return np.ones(len(pair.xyz1) - 1, bool), np.ones(len(pair.xyz2), bool)\n",
-    "ints.py": "import numpy as np\ndef remove(pair, params):\n    return np.ones(len(pair.xyz1), int), np.ones(len(pair.xyz2), bool)\n",
+    "short.py": "import numpy as np\ndef remove(pair, params):\n    return np.ones(len(pair.xyz1) - 1, bool), "
+    "np.ones(len(pair.xyz2), bool)\n",
+    "ints.py": "import numpy as np\ndef remove(pair, params):\n    return np.ones(len(pair.xyz1), int), "
+    "np.ones(len(pair.xyz2), bool)\n",
     "single.py": "import numpy as np\ndef remove(pair, params):\n    return np.ones(len(pair.xyz1), bool)\n",
     "broken.py": "def remove(pair, params)\n    return None\n",
     "mutates.py": "def remove(pair, params):\n    pair.xyz1[:] = 0\n",

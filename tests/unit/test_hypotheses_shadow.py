@@ -11,9 +11,9 @@ from lidarfield.hypotheses import parse_step
 from lidarfield.hypotheses.shadow import first_cluster_keep, first_cluster_keep_loop, shadow
 from lidarfield.poses import pose_from_xyzrpy
 from lidarfield.registration import register_pair
-from lidarfield.simulation.scene import scene_from_dict
 from lidarfield.sensors.models import PRESETS
 from lidarfield.simulation.raycast import first_hits, simulate_scan
+from lidarfield.simulation.scene import scene_from_dict
 
 
 @pytest.mark.parametrize("seed", range(12))

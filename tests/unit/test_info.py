@@ -25,17 +25,27 @@ def test_bag_topics_counts_span_and_fields(tmp_path, capsys):
     path = write_bag(tmp_path / "drive", clouds, storage="mcap", layout="ouster", poses=poses)
     lines = info(path, capsys)
     assert len(lines) <= 24
-    assert lines[0] == f"{path}: ROS 2 bag folder, 39 messages on 22 topics, 2001-09-09 01:46:40.000 UTC .. 2001-09-09 01:46:40.950 UTC (0.950 s)"
+    assert (
+        lines[0] == f"{path}: ROS 2 bag folder, 39 messages on 22 topics, 2001-09-09 01:46:40.000 UTC .. 2001-09-09 "
+        f"01:46:40.950 UTC (0.950 s)"
+    )
     assert any(line.split()[:4] == ["/odom", "nav_msgs/Odometry", "16", "poses"] for line in lines)
     assert "  ... and 7 more topics" in lines and "... and 17 more PointCloud2 topics" in lines
-    assert f"scans on /points: 3 ({path}#/points#k, k = 0..2), 1 x 50 points of 48 bytes, fields x y z intensity t reflectivity ring ambient range" in lines
+    assert (
+        f"scans on /points: 3 ({path}#/points#k, k = 0..2), 1 x 50 points of 48 bytes, fields x y z intensity t "
+        f"reflectivity ring ambient range" in lines
+    )
 
 
 def test_velodyne_capture_rotations_and_dropped_partial_one(shared_data, capsys):
     pytest.importorskip("velodyne_decoder")
     lines = info(shared_data / "velodyne-pcap" / "sample_velodyne_vlp16_gps.pcap", capsys)
     assert lines[0].endswith("sample_velodyne_vlp16_gps.pcap: Velodyne capture, VLP16, strongest return(s)")
-    assert lines[1] == "packets: 293 data, 57 other; 3 whole rotation(s) (#0..#2), 65 data packets after the last one (a partial rotation) not used"
+    assert (
+        lines[1]
+        == "packets: 293 data, 57 other; 3 whole rotation(s) (#0..#2), 65 data packets after the last one (a partial "
+        "rotation) not used"
+    )
     assert lines[2].startswith("scan #0: 18,790 points (0 invalid rows dropped)")
 
 

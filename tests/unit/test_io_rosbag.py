@@ -9,8 +9,8 @@ import pytest
 
 from lidarfield.errors import InputError
 from lidarfield.io import read_scan, scan_count
-from lidarfield.io.rosbag.writer import CloudMessage, write_bag
 from lidarfield.io.rosbag.pointcloud2 import PointField, decode_cloud
+from lidarfield.io.rosbag.writer import CloudMessage, write_bag
 from lidarfield.poses import pose_from_xyzrpy
 from lidarfield.scan import Scan
 
@@ -57,7 +57,9 @@ def test_velodyne_layout_round_trip_in_every_storage(tmp_path, organised_expd_sc
 
 
 def test_ouster_48_byte_layout_of_a_real_ouster_scan(tmp_path, shared_data):
-    decoded = np.fromfile(shared_data / "ouster-os1-128" / "lb_n3_scan0_xyz_refl_float32.bin", dtype="<f4").reshape(-1, 4)
+    decoded = np.fromfile(shared_data / "ouster-os1-128" / "lb_n3_scan0_xyz_refl_float32.bin", dtype="<f4").reshape(
+        -1, 4
+    )
     time = np.linspace(0.0, 0.099, len(decoded))  # seconds since the scan began
     scan = Scan(decoded[:, :3], {"intensity": decoded[:, 3], "time": time})
     path = write_bag(tmp_path / "os.bag", [CloudMessage(scan, 5.0)], layout="ouster")
@@ -94,7 +96,13 @@ def reference_decode(fields, height, width, point_step, row_step, big_endian, da
     for r in range(height):
         for c in range(width):
             start = r * row_step + c * point_step
-            rows.append({f.name: struct.unpack_from(order + codes[f.datatype], data, start + f.offset)[0] for f in fields if f.count == 1})
+            rows.append(
+                {
+                    f.name: struct.unpack_from(order + codes[f.datatype], data, start + f.offset)[0]
+                    for f in fields
+                    if f.count == 1
+                }
+            )
     return rows
 
 
@@ -102,10 +110,18 @@ def reference_decode(fields, height, width, point_step, row_step, big_endian, da
 def test_decoder_matches_a_struct_reference_for_every_datatype(big_endian):
     rng = np.random.default_rng(3)
     fields = [
-        PointField("x", 0, 7), PointField("y", 4, 7), PointField("z", 8, 8), PointField("i8", 16, 1),
-        PointField("u8", 17, 2), PointField("i16", 18, 3), PointField("u16", 20, 4), PointField("i32", 24, 5),
-        PointField("rgb3", 28, 2, 3), PointField("u32", 32, 6), PointField("f64", 40, 8),
-    ]  # fmt: skip
+        PointField("x", 0, 7),
+        PointField("y", 4, 7),
+        PointField("z", 8, 8),
+        PointField("i8", 16, 1),
+        PointField("u8", 17, 2),
+        PointField("i16", 18, 3),
+        PointField("u16", 20, 4),
+        PointField("i32", 24, 5),
+        PointField("rgb3", 28, 2, 3),
+        PointField("u32", 32, 6),
+        PointField("f64", 40, 8),
+    ]
     height, width, point_step = 3, 5, 52  # 4 bytes of padding after each point
     row_step = width * point_step + 7  # and 7 at the end of each row
     data = rng.integers(0, 256, height * row_step, dtype=np.uint8).tobytes()
@@ -138,7 +154,9 @@ def test_poses_from_a_topic_at_another_rate_are_interpolated(tmp_path, organised
     clouds = [CloudMessage(scan, 100.0 + t) for scan, t in zip(organised_expd_scans, stamps)]
     poses = [(100.0 + k / 7, drive(k / 7)) for k in range(4)]
     topic = "/tf" if pose_type.startswith("tf2") else "/odom"
-    path = write_bag(bag_path(tmp_path, storage), clouds, storage=storage, poses=poses, pose_topic=topic, pose_type=pose_type)
+    path = write_bag(
+        bag_path(tmp_path, storage), clouds, storage=storage, poses=poses, pose_topic=topic, pose_type=pose_type
+    )
     source = {"topic": topic, **({"frame": "lidar"} if topic == "/tf" else {})}
     for k, t in enumerate(stamps):
         pose = read_scan(f"{path}#{k}", poses=source).pose
@@ -148,15 +166,27 @@ def test_poses_from_a_topic_at_another_rate_are_interpolated(tmp_path, organised
 
 def test_scan_outside_the_pose_messages_span_is_an_error(tmp_path, organised_expd_scans):
     poses = [(10.0 + 0.1 * k, drive(0.1 * k)) for k in range(5)]
-    path = write_bag(tmp_path / "late.bag", [CloudMessage(organised_expd_scans[0], 10.2), CloudMessage(organised_expd_scans[1], 11.0)], poses=poses)
+    path = write_bag(
+        tmp_path / "late.bag",
+        [CloudMessage(organised_expd_scans[0], 10.2), CloudMessage(organised_expd_scans[1], 11.0)],
+        poses=poses,
+    )
     assert read_scan(f"{path}#0", poses={"topic": "/odom"}).pose is not None
-    with pytest.raises(InputError, match=r"late.bag: scan stamp 11.000000 s lies outside .* /odom \(10.000000 .. 10.400000 s\)"):
+    with pytest.raises(
+        InputError, match=r"late.bag: scan stamp 11.000000 s lies outside .* /odom \(10.000000 .. 10.400000 s\)"
+    ):
         read_scan(f"{path}#1", poses={"topic": "/odom"})
 
 
 def test_tf_needs_an_existing_child_frame(tmp_path, organised_expd_scans):
     poses = [(0.1 * k, drive(0.1 * k)) for k in range(3)]
-    path = write_bag(tmp_path / "tf.bag", [CloudMessage(organised_expd_scans[0], 0.1)], poses=poses, pose_topic="/tf", pose_type="tf2_msgs/msg/TFMessage")
+    path = write_bag(
+        tmp_path / "tf.bag",
+        [CloudMessage(organised_expd_scans[0], 0.1)],
+        poses=poses,
+        pose_topic="/tf",
+        pose_type="tf2_msgs/msg/TFMessage",
+    )
     with pytest.raises(InputError, match="child frame"):
         read_scan(path, poses={"topic": "/tf"})
     with pytest.raises(InputError, match=r"no transform on /tf has child frame 'velodyne'; child frames: lidar"):
@@ -164,26 +194,42 @@ def test_tf_needs_an_existing_child_frame(tmp_path, organised_expd_scans):
 
 
 def test_several_cloud_topics_need_the_topic(tmp_path, organised_expd_scans):
-    clouds = [CloudMessage(organised_expd_scans[0], 1.0, topic="/front"), CloudMessage(organised_expd_scans[1], 1.05, topic="/rear")]
+    clouds = [
+        CloudMessage(organised_expd_scans[0], 1.0, topic="/front"),
+        CloudMessage(organised_expd_scans[1], 1.05, topic="/rear"),
+    ]
     path = write_bag(tmp_path / "two.bag", clouds)
-    with pytest.raises(InputError, match=r"two.bag: the bag holds 2 PointCloud2 topics: name one \(.*two.bag#/TOPIC#k, or topic: in a sequence\); topics: /front .*, /rear"):
+    with pytest.raises(
+        InputError,
+        match=r"two.bag: the bag holds 2 PointCloud2 topics: name one \(.*two.bag#/TOPIC#k, or topic: in a "
+        r"sequence\); topics: /front .*, /rear",
+    ):
         read_scan(f"{path}#0")
     assert scan_count(f"{path}#/rear") == 1
     np.testing.assert_array_equal(read_scan(f"{path}#/rear#0").xyz, read_scan(f"{path}#/rear").xyz)
     assert len(read_scan(f"{path}#/rear")) == int(np.isfinite(organised_expd_scans[1].xyz).all(axis=1).sum())
-    with pytest.raises(InputError, match=r"topic /side is not in the bag; its topics: /front \(sensor_msgs/PointCloud2, 1\), /rear"):
+    with pytest.raises(
+        InputError, match=r"topic /side is not in the bag; its topics: /front \(sensor_msgs/PointCloud2, 1\), /rear"
+    ):
         read_scan(f"{path}#/side#0")
 
 
 def test_bag_without_pointcloud2(tmp_path):
     path = write_bag(tmp_path / "odom.bag", [], poses=[(1.0, np.eye(4))])
-    with pytest.raises(InputError, match=r"odom.bag: the bag holds no sensor_msgs/PointCloud2 topic; its topics: /odom \(nav_msgs/Odometry, 1\)"):
+    with pytest.raises(
+        InputError,
+        match=r"odom.bag: the bag holds no sensor_msgs/PointCloud2 topic; its topics: /odom \(nav_msgs/Odometry, 1\)",
+    ):
         scan_count(path)
 
 
 @pytest.mark.parametrize("storage", ["ros1", "mcap"])
 def test_truncated_bag_is_one_error_naming_it(tmp_path, organised_expd_scans, storage):
-    path = write_bag(bag_path(tmp_path, storage), [CloudMessage(s, 1.0 + k) for k, s in enumerate(organised_expd_scans)], storage=storage)
+    path = write_bag(
+        bag_path(tmp_path, storage),
+        [CloudMessage(s, 1.0 + k) for k, s in enumerate(organised_expd_scans)],
+        storage=storage,
+    )
     file = path if storage == "ros1" else path / f"{path.name}.mcap"
     data = file.read_bytes()
     file.write_bytes(data[: len(data) // 2])

@@ -64,8 +64,13 @@ def vlp16_reference(payload: bytes) -> np.ndarray:
             r = distance * 0.002
             if r < 0.1:
                 continue
-            omega, alpha = np.radians(VLP16_ELEVATION[laser]), np.radians(azimuth / 100.0 + laser * 2.304 / 55.296 * 0.2)
-            rows.append((laser, r * np.cos(omega) * np.cos(alpha), -r * np.cos(omega) * np.sin(alpha), r * np.sin(omega)))
+            omega, alpha = (
+                np.radians(VLP16_ELEVATION[laser]),
+                np.radians(azimuth / 100.0 + laser * 2.304 / 55.296 * 0.2),
+            )
+            rows.append(
+                (laser, r * np.cos(omega) * np.cos(alpha), -r * np.cos(omega) * np.sin(alpha), r * np.sin(omega))
+            )
     return np.array(rows)
 
 
@@ -112,7 +117,9 @@ def test_model_from_the_sensor_when_the_packets_do_not_say(captures, tmp_path):
     assert capture_summary(old).model == "HDL32E"
     np.testing.assert_array_equal(read_scan(f"{old}#1").xyz, read_scan(f"{captures / HDL32}#1").xyz)
     assert capture_summary(old, read_scan(f"{old}#0", sensor="hdl32").sensor).model == "HDL32E"
-    with pytest.raises(InputError, match=r"sample_velodyne_hdl32.pcap: the packets do not decode as a VLP16: Expected model ID"):
+    with pytest.raises(
+        InputError, match=r"sample_velodyne_hdl32.pcap: the packets do not decode as a VLP16: Expected model ID"
+    ):
         read_scan(f"{captures / HDL32}#0", sensor="vlp16")
 
 

@@ -9,6 +9,7 @@ import json
 import numpy as np
 import pytest
 
+from helpers.clouds import synthetic_cloud
 from lidarfield.analysis.suggest import candidate_steps
 from lidarfield.hypotheses import outliers as outliers_module
 from lidarfield.hypotheses.outliers import after_removal, neighbour_distances
@@ -17,8 +18,6 @@ from lidarfield.io.parquet_table import read_table
 from lidarfield.pair import RegisteredPair, read_pair
 from lidarfield.study.jobs import write_stage
 from lidarfield.study.stack import initial_stage, next_stage
-
-from helpers.clouds import synthetic_cloud
 
 GRID = {"kind": "spherical", "azimuth_bins": 36, "elevation_bins": 5, "elevation_deg": [-15, 15], "min_points": 10}
 
@@ -68,7 +67,11 @@ def test_carried_distances_on_a_real_scan_search_only_near_what_was_removed(expd
     before = neighbour_distances(xyz, 20, workers=1)
     searched = []
     search = outliers_module._search
-    monkeypatch.setattr(outliers_module, "_search", lambda cloud, points, k, workers: searched.append(len(points)) or search(cloud, points, k, workers))
+    monkeypatch.setattr(
+        outliers_module,
+        "_search",
+        lambda cloud, points, k, workers: searched.append(len(points)) or search(cloud, points, k, workers),
+    )
     azimuth = np.degrees(np.arctan2(xyz[:, 1], xyz[:, 0]))
     for keep in (~((azimuth > 100) & (azimuth < 160)), np.linalg.norm(xyz, axis=1) < 20):
         searched.clear()
@@ -94,23 +97,55 @@ def test_the_suggest_jobs_carry_the_pairs_distances_to_every_stage(tmp_path, exp
     dirs = [tmp_path / f"s{stage.level}" for stage in stages]
     for stage, folder in zip(stages, dirs):
         folder.mkdir()
-        write_stage(stage, f"0{stage.level}-x-0000000{stage.level}", folder / "points.parquet", folder / "removed.parquet")
-    argv = ["job", "neighbours", "--points", str(tmp_path / "registered.parquet"), "--k", "20", "5", "--out", str(tmp_path / "neighbours.parquet")]
+        write_stage(
+            stage, f"0{stage.level}-x-0000000{stage.level}", folder / "points.parquet", folder / "removed.parquet"
+        )
+    argv = [
+        "job",
+        "neighbours",
+        "--points",
+        str(tmp_path / "registered.parquet"),
+        "--k",
+        "20",
+        "5",
+        "--out",
+        str(tmp_path / "neighbours.parquet"),
+    ]
     assert run_in_process(argv) == 0
 
     def suggest(level, *extra):
         candidates = candidate_steps([{"outliers": {}}, {"outliers": {"nb_neighbors": 5}}, {"ego_vehicle": {}}], [])
         out = dirs[level] / f"suggestions{len(extra)}.parquet"
-        argv = ["job", "suggest", "--points", str(dirs[level] / "points.parquet"), "--candidates", json.dumps(candidates),
-                "--grid", json.dumps(GRID), "--out", str(out), *extra]  # fmt: skip
+        argv = [
+            "job",
+            "suggest",
+            "--points",
+            str(dirs[level] / "points.parquet"),
+            "--candidates",
+            json.dumps(candidates),
+            "--grid",
+            json.dumps(GRID),
+            "--out",
+            str(out),
+            *extra,
+        ]
         assert run_in_process(argv) == 0
         return read_table(out)[0]
 
     changes = [folder / "neighbour_changes.parquet" for folder in dirs]
     for level in range(3):
         removed = [str(folder / "removed.parquet") for folder in dirs[1 : level + 1]]
-        carried = suggest(level, "--neighbours", str(tmp_path / "neighbours.parquet"), "--removed", *removed,
-                          "--changes", *map(str, changes[1:level]), "--changes-out", str(changes[level]))  # fmt: skip
+        carried = suggest(
+            level,
+            "--neighbours",
+            str(tmp_path / "neighbours.parquet"),
+            "--removed",
+            *removed,
+            "--changes",
+            *map(str, changes[1:level]),
+            "--changes-out",
+            str(changes[level]),
+        )
         searched = suggest(level)
         assert list(carried["hypothesis"]) and set(carried["params"]) == set(searched["params"])
         for name in searched:
@@ -125,7 +160,9 @@ def test_the_suggest_jobs_carry_the_pairs_distances_to_every_stage(tmp_path, exp
     from lidarfield.analysis.neighbour_file import carry_to_stage
 
     last, _ = read_pair(dirs[2] / "points.parquet")
-    carry_to_stage(last, tmp_path / "neighbours.parquet", [dirs[1] / "removed.parquet", dirs[2] / "removed.parquet"], [changes[1]])
+    carry_to_stage(
+        last, tmp_path / "neighbours.parquet", [dirs[1] / "removed.parquet", dirs[2] / "removed.parquet"], [changes[1]]
+    )
     assert set(last.neighbours) == {(1, 20), (2, 20), (1, 5), (2, 5)}
     for (cloud, k), carried in last.neighbours.items():
         assert_same(carried, neighbour_distances(last.xyz1 if cloud == 1 else last.xyz2, k))
@@ -148,14 +185,22 @@ def test_changes_stored_whole_where_a_stage_searched_anew_carry_on_exactly(tmp_p
     keep1 = rng.random(len(xyz)) > 0.1
     stage1 = neighbour_distances(xyz[keep1], 20, workers=1)
     write_changes(tmp_path / "whole.parquet", {(1, 20): (None, stage1)})
-    write_changes(tmp_path / "partial.parquet", {(1, 20): (kept(registered, keep1), after_removal(registered, xyz, keep1, workers=1))})
+    write_changes(
+        tmp_path / "partial.parquet",
+        {(1, 20): (kept(registered, keep1), after_removal(registered, xyz, keep1, workers=1))},
+    )
     for name in ("whole", "partial"):
         change = read_changes(tmp_path / f"{name}.parquet")[(1, 20)]
         assert_same(apply_change(kept(registered, keep1), change, name), stage1)
     tiny = np.zeros(len(xyz), dtype=bool)
     tiny[:7] = True  # fewer points than k: k itself changes, so the rows are stored whole
-    write_changes(tmp_path / "tiny.parquet", {(1, 20): (kept(registered, tiny), after_removal(registered, xyz, tiny, workers=1))})
-    assert_same(apply_change(kept(registered, tiny), read_changes(tmp_path / "tiny.parquet")[(1, 20)], "tiny"), neighbour_distances(xyz[tiny], 20, workers=1))
+    write_changes(
+        tmp_path / "tiny.parquet", {(1, 20): (kept(registered, tiny), after_removal(registered, xyz, tiny, workers=1))}
+    )
+    assert_same(
+        apply_change(kept(registered, tiny), read_changes(tmp_path / "tiny.parquet")[(1, 20)], "tiny"),
+        neighbour_distances(xyz[tiny], 20, workers=1),
+    )
 
 
 def test_apply_stack_carries_what_the_previous_stage_searched(expd):
@@ -170,4 +215,7 @@ def test_apply_stack_carries_what_the_previous_stage_searched(expd):
             assert set(stage.pair.neighbours) == {(1, 20), (2, 20)}
             for (cloud, k), carried in stage.pair.neighbours.items():
                 assert_same(carried, neighbour_distances(stage.pair.xyz1 if cloud == 1 else stage.pair.xyz2, k))
-        cloud_neighbour_distances(stage.pair, 1, 20), cloud_neighbour_distances(stage.pair, 2, 20)  # as a candidate would
+        (
+            cloud_neighbour_distances(stage.pair, 1, 20),
+            cloud_neighbour_distances(stage.pair, 2, 20),
+        )  # as a candidate would

@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from helpers.clouds import synthetic_cloud
 from lidarfield.hypotheses import apply_step
 from lidarfield.hypotheses.outliers import (
     neighbour_distances,
@@ -13,10 +14,8 @@ from lidarfield.hypotheses.outliers import (
     open3d_threshold,
     statistical_inliers,
 )
-from lidarfield.pair import RegisteredPair
 from lidarfield.io import read_scan
-
-from helpers.clouds import synthetic_cloud
+from lidarfield.pair import RegisteredPair
 
 o3d = pytest.importorskip("open3d")
 

@@ -10,7 +10,13 @@ from lidarfield.pair import RegisteredPair, read_pair, write_pair
 
 def test_a_pair_round_trips_through_its_points_file(tmp_path):
     rng = np.random.default_rng(0)
-    pair = RegisteredPair(rng.normal(size=(50, 3)), rng.normal(size=(70, 3)), np.eye(4), attributes1={"ring": np.arange(50)}, attributes2={"ring": np.arange(70) + 100})
+    pair = RegisteredPair(
+        rng.normal(size=(50, 3)),
+        rng.normal(size=(70, 3)),
+        np.eye(4),
+        attributes1={"ring": np.arange(50)},
+        attributes2={"ring": np.arange(70) + 100},
+    )
     write_pair(tmp_path / "points.parquet", pair)
     back, _ = read_pair(tmp_path / "points.parquet")
     np.testing.assert_array_equal(back.xyz1, pair.xyz1)
@@ -22,7 +28,13 @@ def test_a_pair_round_trips_through_its_points_file(tmp_path):
 def test_rows_of_both_clouds_interleaved_are_split_by_the_cloud_column(tmp_path):
     """A file written by another tool need not hold cloud 1 first: the cloud column decides."""
     rng = np.random.default_rng(1)
-    pair = RegisteredPair(rng.normal(size=(40, 3)), rng.normal(size=(30, 3)), np.eye(4), attributes1={"t": np.arange(40.0)}, attributes2={"t": -np.arange(30.0)})
+    pair = RegisteredPair(
+        rng.normal(size=(40, 3)),
+        rng.normal(size=(30, 3)),
+        np.eye(4),
+        attributes1={"t": np.arange(40.0)},
+        attributes2={"t": -np.arange(30.0)},
+    )
     columns = pair.to_columns()
     order = rng.permutation(70)
     write_table(tmp_path / "shuffled.parquet", {k: v[order] for k, v in columns.items()}, pair.metadata())

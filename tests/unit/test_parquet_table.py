@@ -17,7 +17,7 @@ COLUMNS = {
     "float64": RNG.normal(size=1001),
     "float64_nan": np.where(RNG.random(1001) < 0.3, np.nan, RNG.normal(size=1001)),
     "float32": RNG.normal(size=1001).astype(np.float32),
-    "int64": RNG.integers(-10**12, 10**12, 1001),
+    "int64": RNG.integers(-(10**12), 10**12, 1001),
     "int32": RNG.integers(-1000, 1000, 1001).astype(np.int32),
     "uint8": RNG.integers(1, 3, 1001).astype(np.uint8),
     "bool": RNG.random(1001) < 0.5,
@@ -28,7 +28,11 @@ COLUMNS = {
 
 
 def same(a: np.ndarray, b: np.ndarray) -> bool:
-    return a.dtype == b.dtype and a.shape == b.shape and all(x == y or (x != x and y != y) for x, y in zip(a.tolist(), b.tolist()))
+    return (
+        a.dtype == b.dtype
+        and a.shape == b.shape
+        and all(x == y or (x != x and y != y) for x, y in zip(a.tolist(), b.tolist()))
+    )
 
 
 @pytest.mark.parametrize("name", COLUMNS)
@@ -59,7 +63,8 @@ def test_a_column_with_nulls_takes_pyarrows_path():
 def test_writing_and_reading_a_table_imports_no_pandas(tmp_path):
     code = (
         "import sys, numpy as np; from lidarfield.io.parquet_table import read_table, write_table; "
-        f"write_table({str(tmp_path / 't.parquet')!r}, {{'x': np.arange(3.0), 'h': np.array(['a', 'b', 'c']), 'v': np.ones(3, bool)}}, {{'k': 1}}); "
+        f"write_table({str(tmp_path / 't.parquet')!r}, "
+        f"{{'x': np.arange(3.0), 'h': np.array(['a', 'b', 'c']), 'v': np.ones(3, bool)}}, {{'k': 1}}); "
         f"columns, meta = read_table({str(tmp_path / 't.parquet')!r}); "
         "print(columns['x'].tolist(), columns['h'].tolist(), columns['v'].tolist(), meta, 'pandas' in sys.modules)"
     )

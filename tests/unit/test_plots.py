@@ -6,22 +6,32 @@ import numpy as np
 import pytest
 from PIL import Image
 
+from helpers.layout import assert_fixed_layout
+from helpers.synthetic_study import write_synthetic_pair
 from lidarfield.errors import ConfigError, InputError
 from lidarfield.field.grid import CartesianGrid, SphericalGrid
 from lidarfield.plots import plot_pair, plot_settings, plot_stage
 from lidarfield.plots.output import SVG_MAX_BYTES
 from lidarfield.plots.stage_data import read_vector_field, subsample
-from lidarfield.plots.style import FADED_ALPHA, magnitude_norm, nice_length, resolve_magnification, vector_colours, view_limits
-from helpers.synthetic_study import write_synthetic_pair
+from lidarfield.plots.style import (
+    FADED_ALPHA,
+    magnitude_norm,
+    nice_length,
+    resolve_magnification,
+    vector_colours,
+    view_limits,
+)
 from lidarfield.plots.top_voxels import box_wireframe, spherical_voxel_wireframe, voxel_wireframe
-
-from helpers.layout import assert_fixed_layout
 
 FAST = {"background_points": 3000, "dpi": 60}
 # figure size (inches) x dpi -> pixels
 EXPECTED_SIZE_IN = {
-    "field_top": (9.0, 7.5), "field_perspective": (9.0, 7.5), "removed_top": (9.0, 7.5),
-    "removed_perspective": (9.0, 7.5), "top_voxels": (14.0, 6.2), "before_after": (16.0, 7.5),
+    "field_top": (9.0, 7.5),
+    "field_perspective": (9.0, 7.5),
+    "removed_top": (9.0, 7.5),
+    "removed_perspective": (9.0, 7.5),
+    "top_voxels": (14.0, 6.2),
+    "before_after": (16.0, 7.5),
 }
 
 
@@ -62,7 +72,9 @@ def test_every_stage_figure_is_a_real_image_of_its_size(plotted):
 
 
 def test_only_the_selected_figures_are_drawn(stages, tmp_path):
-    written = plot_stage(stages[2], stages[1], tmp_path, {**FAST, "figures": ["field_top", "before_after"], "interactive": False})
+    written = plot_stage(
+        stages[2], stages[1], tmp_path, {**FAST, "figures": ["field_top", "before_after"], "interactive": False}
+    )
     assert sorted(p.name for p in written) == ["before_after.png", "field_top.png"]
     assert sorted(p.name for p in tmp_path.iterdir() if p.is_file()) == ["before_after.png", "field_top.png"]
     assert sorted(p.name for p in (tmp_path / "page").iterdir()) == ["before_after.png", "field_top.png"]
@@ -218,12 +230,15 @@ def test_nice_length(x, expected):
     assert nice_length(x) == pytest.approx(expected)
 
 
-@pytest.mark.parametrize("max_m, span_m, expected", [
-    (0.162, 26.0, 10.0),  # 26/16/0.162 = 10.03: a 16 cm field on a 26 m scene is drawn x10
-    (0.665, 26.0, 2.0),  # 2.44 rounds down to 2
-    (44.0, 110.0, 1.0),  # a large field is never shrunk
-    (0.0, 26.0, 1.0),  # no vectors
-])
+@pytest.mark.parametrize(
+    "max_m, span_m, expected",
+    [
+        (0.162, 26.0, 10.0),  # 26/16/0.162 = 10.03: a 16 cm field on a 26 m scene is drawn x10
+        (0.665, 26.0, 2.0),  # 2.44 rounds down to 2
+        (44.0, 110.0, 1.0),  # a large field is never shrunk
+        (0.0, 26.0, 1.0),  # no vectors
+    ],
+)
 def test_auto_magnification(max_m, span_m, expected):
     assert resolve_magnification("auto", max_m, span_m) == expected
     assert max_m * expected <= span_m / 16 or expected == 1.0  # the largest arrow stays within 1/16
@@ -231,8 +246,8 @@ def test_auto_magnification(max_m, span_m, expected):
 
 
 def test_a_3d_view_can_share_one_plotly_js(tmp_path):
-    from lidarfield.plots import plot_stage, write_plotly_js
     from helpers.synthetic_study import write_synthetic_study
+    from lidarfield.plots import plot_stage, write_plotly_js
 
     dirs = write_synthetic_study(tmp_path, n_pairs=1, levels=1, n=3000)["pair-00"]
     shared = write_plotly_js(tmp_path / "assets" / "plotly.min.js")
@@ -252,8 +267,20 @@ def test_fixed_layout_keeps_axes_legends_and_titles_apart(stages, tmp_path, monk
     figures = []
     monkeypatch.setattr(plt, "close", figures.append)  # keep each figure open after saving
     plot_stage(stages[1], stages[0], tmp_path, {**FAST, "interactive": False})
-    plot_pair([{"pair": "pair-a", "stage": "s", "level": lv, "hypothesis": h, "max_magnitude": 1.0 / (lv + 1),
-                "rigid_translation_m": [0.1, 0.0, 0.0]} for lv, h in enumerate(["none", "ego_vehicle"])], tmp_path)
+    plot_pair(
+        [
+            {
+                "pair": "pair-a",
+                "stage": "s",
+                "level": lv,
+                "hypothesis": h,
+                "max_magnitude": 1.0 / (lv + 1),
+                "rigid_translation_m": [0.1, 0.0, 0.0],
+            }
+            for lv, h in enumerate(["none", "ego_vehicle"])
+        ],
+        tmp_path,
+    )
     assert len(figures) == 9
     for fig in figures:
         assert_fixed_layout(fig)
@@ -270,5 +297,7 @@ def test_top_voxels_whose_edges_all_lie_outside_the_view_are_still_drawn(stages,
 
     stage = load_stage(stages[1])
     far_away = np.array([[1000.0, 1001.0], [1000.0, 1001.0], [1000.0, 1001.0]])
-    (written,) = plot_top_voxels(stage, far_away, tmp_path, plot_settings({**FAST, "formats": ["png"], "magnification": 2.0}))
+    (written,) = plot_top_voxels(
+        stage, far_away, tmp_path, plot_settings({**FAST, "formats": ["png"], "magnification": 2.0})
+    )
     assert_real_image(written, EXPECTED_SIZE_IN["top_voxels"], FAST["dpi"])

@@ -7,8 +7,17 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from lidarfield.errors import InputError
-from lidarfield.poses import apply_pose, invert_pose, parse_pose_arg, pose_error, pose_from_xyzrpy, relative_pose, rotation_angle, xyzrpy_from_pose
 from lidarfield.io.pose_files import read_kitti_poses, read_pose, write_kitti_poses
+from lidarfield.poses import (
+    apply_pose,
+    invert_pose,
+    parse_pose_arg,
+    pose_error,
+    pose_from_xyzrpy,
+    relative_pose,
+    rotation_angle,
+    xyzrpy_from_pose,
+)
 
 OUSTER_POSES = "ouster-os1-128/OS-1-128_v2.3.0_1024x10_lb_n3_poses_kitti.txt"
 
@@ -166,7 +175,9 @@ def test_interpolate_pose_linear_translation_slerp_rotation():
     from lidarfield.poses import interpolate_pose, rotation_angle
 
     stamps = np.array([10.0, 10.4, 11.0])
-    poses = np.stack([pose_from_xyzrpy(p) for p in ([0, 0, 0, 0, 0, 0], [4, -2, 1, 0.2, 0, 0.8], [4, -2, 1, 0.2, 0, 0.8])])
+    poses = np.stack(
+        [pose_from_xyzrpy(p) for p in ([0, 0, 0, 0, 0, 0], [4, -2, 1, 0.2, 0, 0.8], [4, -2, 1, 0.2, 0, 0.8])]
+    )
     quarter = interpolate_pose(stamps, poses, 10.1)
     np.testing.assert_allclose(quarter[:3, 3], [1.0, -0.5, 0.25])
     # Slerp: a quarter of the way turns a quarter of the angle, about the same axis.

@@ -5,17 +5,16 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from conftest import ROOT
 from lidarfield.io import read_scan
-from lidarfield.poses import apply_pose, pose_error, relative_pose
 from lidarfield.io.pose_files import read_kitti_poses, read_pose
+from lidarfield.poses import apply_pose, pose_error, relative_pose
 from lidarfield.registration import (
     read_xyz_rows,
     register_pair,
     translation_from_aligned_copy,
     translation_offsets,
 )
-
-from conftest import ROOT
 
 COMMITTED_T_1_10 = ROOT / "config" / "expd-T_1_10.txt"
 OUSTER_POSES = "OS-1-128_v2.3.0_1024x10_lb_n3_poses_kitti.txt"
@@ -59,8 +58,10 @@ def test_ouster_scan_matching_from_identity_recovers_reference_pose(ouster_frame
     pair = register_pair(ouster_frames[a], ouster_frames[b], {"method": method, **FAST})
     reg = pair.registration
     reference = relative_pose(ouster_frames[a].pose, ouster_frames[b].pose)
-    print(f"{method} frames {a}-{b}: {reg['translation_error_m'] * 100:.2f} cm, {reg['rotation_error_deg']:.3f} deg, "
-          f"fitness {reg['fitness']:.3f}")
+    print(
+        f"{method} frames {a}-{b}: {reg['translation_error_m'] * 100:.2f} cm, {reg['rotation_error_deg']:.3f} deg, "
+        f"fitness {reg['fitness']:.3f}"
+    )
     assert (reg["translation_error_m"], reg["rotation_error_deg"]) == pytest.approx(pose_error(pair.T_1_2, reference))
     assert reg["translation_error_m"] < 0.05
     assert reg["rotation_error_deg"] < 0.2
@@ -109,8 +110,10 @@ def test_expd_ndt_agrees_with_the_authors_translation(expd_scan_pair, authors_T_
     pair = register_pair(*expd_scan_pair, {"method": "ndt", "guess": guess})
     reg = pair.registration
     difference = pair.T_1_2[:3, 3] - authors_T_1_10[:3, 3]
-    print(f"NDT T_1_10 translation {pair.T_1_2[:3, 3]}, authors {authors_T_1_10[:3, 3]}, "
-          f"difference {difference} = {np.linalg.norm(difference) * 100:.2f} cm; fitness {reg['fitness']:.3f}")
+    print(
+        f"NDT T_1_10 translation {pair.T_1_2[:3, 3]}, authors {authors_T_1_10[:3, 3]}, "
+        f"difference {difference} = {np.linalg.norm(difference) * 100:.2f} cm; fitness {reg['fitness']:.3f}"
+    )
     assert reg["converged"] is True
     assert np.linalg.norm(pair.T_1_2[:3, 3] - guess[:3]) > 0.2
     # Open3D's NDT, ICP and GICP land 2.7 to 7 cm from the authors' translation, mostly along

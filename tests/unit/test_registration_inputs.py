@@ -6,11 +6,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from conftest import ROOT
 from lidarfield.cli import main
 from lidarfield.errors import ConfigError, InputError, RegistrationError
+from lidarfield.io.pose_files import read_pose
 from lidarfield.pair import read_pair
 from lidarfield.poses import pose_error, pose_from_xyzrpy
-from lidarfield.io.pose_files import read_pose
 from lidarfield.registration import (
     METHODS,
     parse_settings,
@@ -19,8 +20,6 @@ from lidarfield.registration import (
     write_transform,
 )
 from lidarfield.scan import Scan
-
-from conftest import ROOT
 
 TRUE_T = pose_from_xyzrpy([0.3, -0.2, 0.05, 0.0, 0.0, np.radians(2.0)])
 
@@ -184,8 +183,16 @@ def test_aligned_copy_that_is_not_a_translation_is_refused(change, message):
 # --- the command ---------------------------------------------------------------------------------
 def test_cli_from_aligned_writes_the_committed_transform(expd, tmp_path, capsys):
     out = tmp_path / "T.txt"
-    code = main(["register", "--from-aligned", str(expd / "Cloud10_ExpD.txt"), str(expd / "Cloud10Aligned_ExpD.txt"),
-                 "--out", str(out)])
+    code = main(
+        [
+            "register",
+            "--from-aligned",
+            str(expd / "Cloud10_ExpD.txt"),
+            str(expd / "Cloud10Aligned_ExpD.txt"),
+            "--out",
+            str(out),
+        ]
+    )
     assert code == 0
     assert "spread" in capsys.readouterr().out
     committed = read_pose(ROOT / "config" / "expd-T_1_10.txt")
@@ -196,8 +203,19 @@ def test_cli_registers_with_reference_poses(shared_data, tmp_path, capsys):
     folder = shared_data / "ouster-os1-128"
     poses = folder / "OS-1-128_v2.3.0_1024x10_lb_n3_poses_kitti.txt"
     out = tmp_path / "registered.parquet"
-    args = ["register", str(folder / "lb_n3_scan0_xyz_refl_float32.bin"), str(folder / "lb_n3_scan1_xyz_refl_float32.bin"),
-            "--out", str(out), "--method", "truth", "--pose1", f"{poses}#0", "--pose2", f"{poses}#1"]
+    args = [
+        "register",
+        str(folder / "lb_n3_scan0_xyz_refl_float32.bin"),
+        str(folder / "lb_n3_scan1_xyz_refl_float32.bin"),
+        "--out",
+        str(out),
+        "--method",
+        "truth",
+        "--pose1",
+        f"{poses}#0",
+        "--pose2",
+        f"{poses}#1",
+    ]
     assert main(args) == 0
     printed = capsys.readouterr().out
     assert "method truth: converged True" in printed and "against the reference poses: 0.0000 m" in printed

@@ -7,18 +7,18 @@ import pandas as pd
 import pytest
 import yaml
 
+from lidarfield.analysis.rematch import perturbed, read_rematch, rematch, start_offsets, summary_columns
 from lidarfield.cli import main
-from lidarfield.study.config import validate_config
 from lidarfield.errors import ConfigError
 from lidarfield.io import write_scan
 from lidarfield.pair import RegisteredPair
-from lidarfield.study.summary import read_stats
 from lidarfield.poses import apply_pose, invert_pose, pose_error, pose_from_xyzrpy, relative_pose
-from lidarfield.analysis.rematch import perturbed, read_rematch, rematch, start_offsets, summary_columns
-from lidarfield.simulation.scene import load_scene
 from lidarfield.sensors.models import sensor_model
 from lidarfield.simulation.raycast import simulate_scan
+from lidarfield.simulation.scene import load_scene
+from lidarfield.study.config import validate_config
 from lidarfield.study.stack import apply_stack
+from lidarfield.study.summary import read_stats
 
 # 32 channels over the paper sensor's span, 0.4 deg steps: 29k rays a scan, fast to match.
 SENSOR = {"name": "test-32", "elevation_deg": np.linspace(-22, 9.6, 32).tolist(), "azimuth_resolution_deg": 0.4}
@@ -50,8 +50,14 @@ def truck_pair():
 
 
 def test_defaults_are_filled_and_bad_parameters_named():
-    assert settings() == {"methods": ["icp_point_to_plane", "gicp", "ndt"], "trials": 8, "max_translation_m": 0.5,
-                          "max_rotation_deg": 2.0, "seed": 0, "parameters": {}}  # fmt: skip
+    assert settings() == {
+        "methods": ["icp_point_to_plane", "gicp", "ndt"],
+        "trials": 8,
+        "max_translation_m": 0.5,
+        "max_rotation_deg": 2.0,
+        "seed": 0,
+        "parameters": {},
+    }
     with pytest.raises(ConfigError, match=r"rematch.parameters: .*voxl_m"):
         settings(parameters={"voxl_m": 0.1})
     with pytest.raises(ConfigError, match=r"rematch.parameters: voxel_m"):
@@ -71,7 +77,10 @@ def test_offsets_are_seeded_within_bounds_and_exact_start_errors():
     assert abs(np.median(t) - 0.397) < 0.03
     T_ref = pose_from_xyzrpy([1, 2, 3, 0.1, -0.2, 0.3])
     for offset in a[:5]:
-        assert np.allclose(pose_error(perturbed(T_ref, offset), T_ref), (np.linalg.norm(offset[:3]), np.degrees(np.linalg.norm(offset[3:]))))
+        assert np.allclose(
+            pose_error(perturbed(T_ref, offset), T_ref),
+            (np.linalg.norm(offset[:3]), np.degrees(np.linalg.norm(offset[3:]))),
+        )
 
 
 def test_clean_surfaces_with_truth_give_sub_centimetre_errors(clean_pair):
@@ -106,10 +115,14 @@ def test_methods_that_fail_or_diverge_give_rows_not_errors(clean_pair):
     assert np.isnan(few["translation_error_m"]).all()
     assert all("too few to match" in text for text in few["failure"])
     # NDT cells too small for the data: Open3D refuses or returns the guess untouched.
-    tiny_cells = rematch(scan1.xyz, scan2.xyz, truth, settings(methods=["ndt"], trials=2, parameters={"ndt_resolution_m": 0.01}))
+    tiny_cells = rematch(
+        scan1.xyz, scan2.xyz, truth, settings(methods=["ndt"], trials=2, parameters={"ndt_resolution_m": 0.01})
+    )
     assert not tiny_cells["converged"].any() and all(tiny_cells["failure"])
     # Started 30 m off with a 1 m correspondence distance: nothing to pair, ICP never moves.
-    far = rematch(scan1.xyz, scan2.xyz, truth @ pose_from_xyzrpy([30, 0, 0, 0, 0, 0]), settings(methods=["icp"], trials=2))
+    far = rematch(
+        scan1.xyz, scan2.xyz, truth @ pose_from_xyzrpy([30, 0, 0, 0, 0, 0]), settings(methods=["icp"], trials=2)
+    )
     assert not far["converged"].any() and np.isnan(far["translation_error_m"]).all()
     assert all("poor fitness" in text and "guess unchanged" in text for text in far["failure"])
     columns = summary_columns(few)
@@ -140,11 +153,15 @@ def test_run_writes_rematch_tables_and_summary_columns(tmp_path, clean_pair):
     for scan, path in zip((scan1, scan2), paths):
         write_scan(scan, path)
     config = tmp_path / "study.yaml"
-    config.write_text(yaml.safe_dump({
-        "grid": {"elevation_deg": [-22.5, 15.0], "min_points": 5},
-        "hypotheses": [{"ego_vehicle": {"radius_m": 8.0}}],
-        "rematch": {"methods": ["gicp", "icp"], "trials": 2},
-    }))  # fmt: skip
+    config.write_text(
+        yaml.safe_dump(
+            {
+                "grid": {"elevation_deg": [-22.5, 15.0], "min_points": 5},
+                "hypotheses": [{"ego_vehicle": {"radius_m": 8.0}}],
+                "rematch": {"methods": ["gicp", "icp"], "trials": 2},
+            }
+        )
+    )
     out = tmp_path / "out"
     assert main(["run", *map(str, paths), "--config", str(config), "--out", str(out), "--register", "truth"]) == 0
     summary = pd.read_parquet(out / "summary.parquet")
@@ -165,17 +182,27 @@ def _rows(level_values: dict[str, list[tuple[float, float]]]) -> list[dict]:
     """Summary rows: per pair, per level, (field p95 m, icp median translation error m)."""
     names = ["none", "ego_vehicle", "shadow"]
     return [
-        {"pair": pair, "stage": f"{level:02d}-{names[level]}-0000000{level}", "level": level, "hypothesis": names[level],
-         "p95_magnitude": p95, "rematch_icp_translation_median_m": error, "rematch_icp_translation_p90_m": 2 * error,
-         "rematch_icp_rotation_median_deg": 0.1, "rematch_icp_rotation_p90_deg": 0.2, "rematch_icp_converged_share": 1.0}
-        for pair, values in level_values.items() for level, (p95, error) in enumerate(values)
-    ]  # fmt: skip
+        {
+            "pair": pair,
+            "stage": f"{level:02d}-{names[level]}-0000000{level}",
+            "level": level,
+            "hypothesis": names[level],
+            "p95_magnitude": p95,
+            "rematch_icp_translation_median_m": error,
+            "rematch_icp_translation_p90_m": 2 * error,
+            "rematch_icp_rotation_median_deg": 0.1,
+            "rematch_icp_rotation_p90_deg": 0.2,
+            "rematch_icp_converged_share": 1.0,
+        }
+        for pair, values in level_values.items()
+        for level, (p95, error) in enumerate(values)
+    ]
 
 
 def test_a_hypothesis_that_shrinks_the_field_but_worsens_matching_is_shown_as_such(monkeypatch):
     import matplotlib.pyplot as plt
-    from helpers.layout import assert_fixed_layout
 
+    from helpers.layout import assert_fixed_layout
     from lidarfield.plots.rematch import hypothesis_effects, study_rematch_figure
     from lidarfield.report.rematch import pair_rematch_table, study_rematch_parts
 
@@ -184,7 +211,9 @@ def test_a_hypothesis_that_shrinks_the_field_but_worsens_matching_is_shown_as_su
     ego, shadow = hypothesis_effects(rows, ["icp"])
     assert ego["field_p95_change_m"] == pytest.approx(-0.75) and ego["translation_change_m"] == pytest.approx(-0.12)
     assert not ego["worse_matching"]
-    assert shadow["field_p95_change_m"] == pytest.approx(-0.1) and shadow["translation_change_m"] == pytest.approx(0.025)
+    assert shadow["field_p95_change_m"] == pytest.approx(-0.1) and shadow["translation_change_m"] == pytest.approx(
+        0.025
+    )
     assert shadow["translation_relative_change"] == pytest.approx(1.0)  # +150% and +50%
     assert shadow["worse_matching"] and shadow["pairs"] == 2 and ego["verdict"] == "better"
     # a change within 10% of the error is no change: not flagged
@@ -208,7 +237,6 @@ def test_a_hypothesis_that_shrinks_the_field_but_worsens_matching_is_shown_as_su
 
 def test_pose_error_figure_draws_every_stage_and_method(tmp_path, clean_pair):
     from helpers.layout import assert_fixed_layout
-
     from lidarfield.plots.rematch import pose_error_figure
 
     (scan1, scan2), truth = clean_pair
@@ -222,7 +250,10 @@ def test_pose_error_figure_draws_every_stage_and_method(tmp_path, clean_pair):
     # stage 1 has no estimate: one x per method at the top of each panel
     assert sum(len(line.get_xdata()) for line in fig.axes[0].get_lines() if line.get_marker() == "x") == 2
     # a diverged trial (1e11 m off) is a triangle at 10 m: the axes keep the estimates' scale
-    diverged = {**table, "translation_error_m": np.where(np.arange(len(table["trial"])) == 0, 1e11, table["translation_error_m"])}
+    diverged = {
+        **table,
+        "translation_error_m": np.where(np.arange(len(table["trial"])) == 0, 1e11, table["translation_error_m"]),
+    }
     fig = pose_error_figure([(0, "none", diverged)], "sim", dpi=60, reference="truth")
     triangles = [line for line in fig.axes[0].get_lines() if line.get_marker() == "^"]
     assert [list(line.get_ydata()) for line in triangles] == [[10.0]]

@@ -9,10 +9,10 @@ import shutil
 import pandas as pd
 import pytest
 
+from helpers.synthetic_study import write_summary, write_synthetic_study
 from lidarfield.cli import main
 from lidarfield.errors import InputError
 from lidarfield.plots import plot_pair, plot_stage
-from helpers.synthetic_study import write_summary, write_synthetic_study
 from lidarfield.report import compare_studies, discover, write_pair_page, write_report
 from lidarfield.report.pair_page import STAGE_FIGURES
 
@@ -44,7 +44,10 @@ def figure_links(html: str) -> list[str]:
 
 def budget_counts(html: str) -> tuple[int, int, int] | None:
     """(embedded, all, linked) figures as the page's size-budget note says them; None without a note."""
-    m = re.search(r'<p class="budget">.*?(\d+) of its (\d+) pair and stage figures are embedded .*? the other (\d+) are linked', html)
+    m = re.search(
+        r'<p class="budget">.*?(\d+) of its (\d+) pair and stage figures are embedded .*? the other (\d+) are linked',
+        html,
+    )
     return tuple(int(g) for g in m.groups()) if m else None
 
 
@@ -75,7 +78,9 @@ def test_report_writes_an_overview_and_a_page_per_pair(plotted_study, tmp_path):
     root, pairs = plotted_study
     found, rows = discover(root)
     assert {k: [d.name for d in v] for k, v in found.items()} == {k: [d.name for d in v] for k, v in pairs.items()}
-    out = write_report({"grid": {"kind": "spherical"}, "note": "<script>alert(1)</script>"}, found, rows, tmp_path / "report.html")
+    out = write_report(
+        {"grid": {"kind": "spherical"}, "note": "<script>alert(1)</script>"}, found, rows, tmp_path / "report.html"
+    )
     html = out.read_text()
     assert image_count(html) == N_STUDY_FIGURES  # the study level only: each pair's figures are on its page
     assert html.index("The study level") < html.index("Pairs ranked") < html.index("<details><summary>the config")
@@ -137,8 +142,14 @@ def test_a_pair_without_figures_says_how_to_draw_them(plotted_study, tmp_path):
     root, pairs = plotted_study
     found, rows = discover(root)
     rows = [r for r in rows if r["pair"] == "pair-01"]
-    out = write_pair_page("pair-01", found["pair-01"], rows, tmp_path / "pair-01" / "report.html",
-                          with_figures=False, on_demand="results/pair-01/stages.html")
+    out = write_pair_page(
+        "pair-01",
+        found["pair-01"],
+        rows,
+        tmp_path / "pair-01" / "report.html",
+        with_figures=False,
+        on_demand="results/pair-01/stages.html",
+    )
     page = out.read_text()
     assert image_count(page) == 0 and 'class="missing"' not in page
     assert "snakemake --cores 2 results/pair-01/stages.html" in page and "plots.pairs" in page
@@ -162,7 +173,9 @@ def test_report_flags_a_registration_that_did_not_converge(plotted_study, tmp_pa
     html = write_report({}, found, rows, tmp_path / "r.html").read_text()
     assert html.count('<tr class="flag">') == 1 and "registration did not converge" in html  # the ranking: last stages
     assert pair_page(tmp_path, "pair-01").count('<tr class="flag">') == 1
-    assert pair_page(tmp_path, "pair-00").count('<tr class="flag">') == 1 and "fitness below 0.3" in pair_page(tmp_path, "pair-00")
+    assert pair_page(tmp_path, "pair-00").count('<tr class="flag">') == 1 and "fitness below 0.3" in pair_page(
+        tmp_path, "pair-00"
+    )
 
 
 def test_pair_page_states_the_findings_and_flags_their_stages(plotted_study, tmp_path):
@@ -203,7 +216,9 @@ def test_discover_reads_a_single_pair_folder_and_its_csv_summary(plotted_study, 
     (pair_dir / "summary.parquet").unlink()
     found, rows = discover(pair_dir)
     assert list(found) == ["one"] and len(found["one"]) == 2
-    assert rows[0]["rigid_translation_m"] == pytest.approx(json.loads((pairs["pair-00"][0] / "stats.json").read_text())["rigid_translation_m"])
+    assert rows[0]["rigid_translation_m"] == pytest.approx(
+        json.loads((pairs["pair-00"][0] / "stats.json").read_text())["rigid_translation_m"]
+    )
 
 
 def test_discover_rejects_a_folder_without_pairs(tmp_path):
@@ -222,7 +237,9 @@ def test_compare_shows_both_studies_with_deltas(plotted_study, tmp_path):
     assert str(root) in html and str(other) in html
     assert "pair pair-00" in html and "pair pair-01" in html and "(only in A)" in html
     assert re.search(r'<td class="better">-0\.5</td>', html)
-    assert image_count(html) == 2 + 2 * 2 + 2  # curves per pair; field_top A|B per stage of pair-00, A and missing B for pair-01
+    assert (
+        image_count(html) == 2 + 2 * 2 + 2
+    )  # curves per pair; field_top A|B per stage of pair-00, A and missing B for pair-01
 
 
 def test_cli_report_compare_and_plot(plotted_study, tmp_path, capsys):
@@ -272,10 +289,19 @@ def test_a_small_budget_embeds_the_pair_figures_and_links_the_stage_figures(plot
     assert image_count(html) == N_PAIR_FIGURES
     links = figure_links(html)
     assert not any(link.startswith("/") for link in links)
-    assert len(links) == len(stage_files) and {(out_dir / link).resolve() for link in links} == {f.resolve() for f in stage_files}
+    assert len(links) == len(stage_files) and {(out_dir / link).resolve() for link in links} == {
+        f.resolve() for f in stage_files
+    }
     assert budget_counts(html) == (N_PAIR_FIGURES, N_PAIR_FIGURES + len(stage_files), len(stage_files))
-    assert f"size budget of {budget / 1e6:g} MB" in html and "report.max_mb" in html and "inside its results folder" in html
-    assert f"{report_bytes(out) / 1e6:.2f} MB" in caplog.text and f"{N_PAIR_FIGURES} figures embedded, {len(stage_files)} linked" in caplog.text
+    assert (
+        f"size budget of {budget / 1e6:g} MB" in html
+        and "report.max_mb" in html
+        and "inside its results folder" in html
+    )
+    assert (
+        f"{report_bytes(out) / 1e6:.2f} MB" in caplog.text
+        and f"{N_PAIR_FIGURES} figures embedded, {len(stage_files)} linked" in caplog.text
+    )
 
 
 def test_the_next_tier_is_embedded_in_every_stage_when_it_fits_too(plotted_study):
@@ -291,7 +317,9 @@ def test_the_next_tier_is_embedded_in_every_stage_when_it_fits_too(plotted_study
     assert image_count(html) == N_PAIR_FIGURES + len(field_top)
     assert embedded_elements(html, ": field from above") == field_top
     linked = {(out_dir / link).resolve() for link in figure_links(html)}
-    assert linked == {f.resolve() for f in stage_figure_files({"pair-00": pairs["pair-00"]}) if f.name != "field_top.png"}
+    assert linked == {
+        f.resolve() for f in stage_figure_files({"pair-00": pairs["pair-00"]}) if f.name != "field_top.png"
+    }
 
 
 def test_a_budget_too_small_for_any_figure_still_writes_the_page_with_every_figure_linked(plotted_study, caplog):
@@ -315,7 +343,13 @@ def test_a_pair_figure_without_a_file_says_it_is_left_out(plotted_study, tmp_pat
     found, rows = discover(root)
     bare_pair = tmp_path / "pair-00"
     shutil.copytree(root / "pair-00" / "stages", bare_pair / "stages")  # no pair figures on disk
-    html = write_pair_page("pair-00", [bare_pair / "stages" / d.name for d in found["pair-00"]], [r for r in rows if r["pair"] == "pair-00"], tmp_path / "r.html", max_mb=0.001).read_text()
+    html = write_pair_page(
+        "pair-00",
+        [bare_pair / "stages" / d.name for d in found["pair-00"]],
+        [r for r in rows if r["pair"] == "pair-00"],
+        tmp_path / "r.html",
+        max_mb=0.001,
+    ).read_text()
     assert html.count("not embedded (size budget) and not on disk to link") == 3  # the three pair figures
 
 

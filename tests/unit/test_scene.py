@@ -8,8 +8,8 @@ import trimesh
 import yaml
 
 from lidarfield.errors import ConfigError, InputError
-from lidarfield.simulation.scene import builtin_scenes, load_scene, scene_from_dict
 from lidarfield.poses import pose_from_xyzrpy as pose_from_values
+from lidarfield.simulation.scene import builtin_scenes, load_scene, scene_from_dict
 from lidarfield.simulation.trajectory import arc_trajectory, moved_pose, paper_turn_trajectory
 
 
@@ -55,8 +55,13 @@ def test_yaml_scene_with_primitives_meshes_and_transforms(tmp_path, ext):
             {"kind": "box", "size": [1, 2, 3], "center": [5, 0, 1.5]},
             {"kind": "box", "size": [1, 2, 3], "transform": {"translation": [0, 5, 1.5], "rpy": [0, 0, np.pi / 2]}},
             {"kind": "cylinder", "radius": 0.5, "height": 4, "center": [-5, 0, 2], "sections": 16},
-            {"kind": "mesh", "file": f"part.{ext}", "scale": 0.5, "transform": {"translation": [0, -5, 1.5]},
-             "velocity_mps": [1, 0, 0]},
+            {
+                "kind": "mesh",
+                "file": f"part.{ext}",
+                "scale": 0.5,
+                "transform": {"translation": [0, -5, 1.5]},
+                "velocity_mps": [1, 0, 0],
+            },
         ],
     }
     scene = load_scene(_write_yaml(tmp_path / "lab.yaml", spec))
@@ -99,7 +104,10 @@ def test_mesh_file_that_does_not_load_names_the_file(tmp_path):
         ({"kind": "box", "size": [1, 1, 1], "colour": "red"}, "unknown key"),
         ({"kind": "box", "size": [1, -1, 1]}, "must be positive"),
         ({"kind": "box", "size": [1, 1]}, "size needs 3"),
-        ({"kind": "box", "size": [1, 1, 1], "center": [0, 0, 0], "transform": {"translation": [1, 0, 0]}}, "either center"),
+        (
+            {"kind": "box", "size": [1, 1, 1], "center": [0, 0, 0], "transform": {"translation": [1, 0, 0]}},
+            "either center",
+        ),
         ({"kind": "box", "size": [1, 1, 1], "frame": "vehicle"}, "frame must be one of"),
         ({"kind": "box", "size": [1, 1, 1], "frame": "sensor", "velocity_mps": [1, 0, 0]}, "carries has no velocity"),
     ],
@@ -140,7 +148,9 @@ def test_paper_turn_stays_in_the_streets():
     scene = load_scene("paper-intersection")
     buildings = trimesh.util.concatenate([o.mesh for o in scene.objects if o.name != "ground"])
     caster = o3d.t.geometry.RaycastingScene()
-    caster.add_triangles(o3d.core.Tensor(buildings.vertices.astype(np.float32)), o3d.core.Tensor(buildings.faces.astype(np.uint32)))
+    caster.add_triangles(
+        o3d.core.Tensor(buildings.vertices.astype(np.float32)), o3d.core.Tensor(buildings.faces.astype(np.uint32))
+    )
     frames = paper_turn_trajectory()
     assert len(frames) >= 9
     positions = np.array([f.pose[:3, 3] for f in frames])

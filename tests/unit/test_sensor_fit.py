@@ -12,13 +12,13 @@ import pytest
 import yaml
 
 from lidarfield.io import read_scan, write_scan
-from lidarfield.study.run import run_pair
 from lidarfield.poses import pose_from_xyzrpy
 from lidarfield.scan import Scan
-from lidarfield.simulation.scene import load_scene
 from lidarfield.sensors.fit import ELEVATION_TOLERANCE_DEG, fit_warning, sensor_fit
 from lidarfield.sensors.models import PRESETS, SensorModel
 from lidarfield.simulation.raycast import simulate_scan
+from lidarfield.simulation.scene import load_scene
+from lidarfield.study.run import run_pair
 
 VLP16 = PRESETS["vlp16"]  # -15..15 deg, 0.5..100 m
 
@@ -82,7 +82,18 @@ def test_the_wrong_sensor_model_is_said_at_ingest_in_the_summary_and_by_run(wide
     config = tmp_path / "study.yaml"
     config.write_text(yaml.safe_dump({"hypotheses": [{"field_of_view": {}}]}))
     with caplog.at_level(logging.WARNING):
-        main(["run", *map(str, wide_scans), "--config", str(config), "--sensor", "os1-128", "--out", str(tmp_path / "out")])
+        main(
+            [
+                "run",
+                *map(str, wide_scans),
+                "--config",
+                str(config),
+                "--sensor",
+                "os1-128",
+                "--out",
+                str(tmp_path / "out"),
+            ]
+        )
     warnings = [r.getMessage() for r in caplog.records if r.levelno == logging.WARNING]
     assert len(warnings) == 2 and all("do not fit sensor model 'os1-128'" in w for w in warnings)
     summary = pd.read_parquet(tmp_path / "out" / "summary.parquet")
@@ -116,4 +127,6 @@ def test_a_pair_without_overlap_says_so_and_is_not_converged(tmp_path, capsys):
     # The clouds 100 m apart share no voxel holding min_points of both.
     config.write_text(yaml.safe_dump({"grid": {"min_points": 2}, "suggest": []}))
     (row,) = run_pair(tmp_path / "far.txt", tmp_path / "one.txt", config, tmp_path / "out2")
-    assert row["field_warning"].startswith("no valid voxel: no voxel of the grid holds min_points of both clouds (3 and 1")
+    assert row["field_warning"].startswith(
+        "no valid voxel: no voxel of the grid holds min_points of both clouds (3 and 1"
+    )

@@ -12,16 +12,15 @@ import math
 import numpy as np
 import pytest
 
-from lidarfield.field.kernel import discrepancy_field
-from lidarfield.analysis.field_stats import field_statistics
-from lidarfield.field.grid import CartesianGrid, FieldSettings, SphericalGrid
-from lidarfield.pair import RegisteredPair
-from lidarfield.analysis.randomness import LEVEL, neighbour_pairs, randomness_tests, unit_vectors
-from lidarfield.sensors.models import PRESETS
-from lidarfield.field.significance import SPREAD_FLOOR_M
-from lidarfield.analysis.tags import tag_column, voxel_tags
-
 from helpers.clouds import targets
+from lidarfield.analysis.field_stats import field_statistics
+from lidarfield.analysis.randomness import LEVEL, neighbour_pairs, randomness_tests, unit_vectors
+from lidarfield.analysis.tags import tag_column, voxel_tags
+from lidarfield.field.grid import CartesianGrid, FieldSettings, SphericalGrid
+from lidarfield.field.kernel import discrepancy_field
+from lidarfield.field.significance import SPREAD_FLOOR_M
+from lidarfield.pair import RegisteredPair
+from lidarfield.sensors.models import PRESETS
 
 SETTINGS = FieldSettings(SphericalGrid())  # 36 x 10 deg, 5 x 8 deg from -20 to +20
 
@@ -173,7 +172,10 @@ def test_point_tags_mark_the_voxels_built_to_carry_them():
     xyz2 = np.vstack([targets(60, 2), near, blob(5.0, 0.0, 10.0, 200, 5)])  # plus 200 more on one target
     field, _ = analysed(xyz1, xyz2)
     row = {az: int(np.searchsorted(field["voxel"], az // 10 + 36 * 2)) for az in (5, 15, 25)}  # band 2: -4..4 deg
-    tagged = {tag: set(np.flatnonzero(field[tag_column(tag)])) for tag in ("near_sensor", "depth_edge", "count_imbalance", "fov_edge")}
+    tagged = {
+        tag: set(np.flatnonzero(field[tag_column(tag)]))
+        for tag in ("near_sensor", "depth_edge", "count_imbalance", "fov_edge")
+    }
     assert tagged["near_sensor"] == {row[15]}
     # Two surfaces in range: the wall behind the target, and the target behind the near part.
     assert tagged["depth_edge"] == {row[15], row[25]}

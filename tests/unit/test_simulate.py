@@ -9,10 +9,10 @@ import trimesh
 
 from lidarfield.errors import ConfigError
 from lidarfield.io import write_scan
-from lidarfield.simulation.scene import load_scene, scene_from_dict
+from lidarfield.poses import pose_from_xyzrpy as pose_from_values
 from lidarfield.sensors.models import PRESETS, SensorModel
 from lidarfield.simulation.raycast import azimuth_steps, first_hits, first_hits_reference, simulate_scan
-from lidarfield.poses import pose_from_xyzrpy as pose_from_values
+from lidarfield.simulation.scene import load_scene, scene_from_dict
 
 SENSOR = PRESETS["paper-sim-80"]
 POSE1 = pose_from_values([0, 0, 3, 0, 0, 0])
@@ -37,7 +37,9 @@ def _world(scan, pose=None):
 
 def _surface_distance(mesh: trimesh.Trimesh, points: np.ndarray) -> np.ndarray:
     caster = o3d.t.geometry.RaycastingScene()
-    caster.add_triangles(o3d.core.Tensor(mesh.vertices.astype(np.float32)), o3d.core.Tensor(mesh.faces.astype(np.uint32)))
+    caster.add_triangles(
+        o3d.core.Tensor(mesh.vertices.astype(np.float32)), o3d.core.Tensor(mesh.faces.astype(np.uint32))
+    )
     return caster.compute_distance(o3d.core.Tensor(points.astype(np.float32))).numpy()
 
 
@@ -146,8 +148,13 @@ def test_rolling_shutter_without_motion_is_the_instantaneous_scan(paper, scan1):
 @pytest.fixture(scope="module")
 def wall():
     """A wall facing the sensor at x = 10 m (a plane turned about y)."""
-    return scene_from_dict({"objects": [{"kind": "plane", "size": [40, 40],
-                                         "transform": {"translation": [10, 0, 0], "rpy": [0, np.pi / 2, 0]}}]})
+    return scene_from_dict(
+        {
+            "objects": [
+                {"kind": "plane", "size": [40, 40], "transform": {"translation": [10, 0, 0], "rpy": [0, np.pi / 2, 0]}}
+            ]
+        }
+    )
 
 
 def test_rolling_shutter_seam_gap_is_velocity_times_period(wall):
@@ -240,7 +247,9 @@ def test_a_carried_body_is_at_the_same_place_in_every_scan_and_hides_what_is_beh
         on_body.append(scan.xyz[inside])
         # every ray the body does not stop sees the scene as it is without the body
         open_scene = simulate_scan(paper, sensor, pose)
-        seen = {(r, t): p for r, t, p in zip(open_scene.attributes["ring"], open_scene.attributes["time"], open_scene.xyz)}
+        seen = {
+            (r, t): p for r, t, p in zip(open_scene.attributes["ring"], open_scene.attributes["time"], open_scene.xyz)
+        }
         rays = zip(scan.attributes["ring"][~inside], scan.attributes["time"][~inside], scan.xyz[~inside])
         assert all(np.array_equal(seen[(r, t)], p) for r, t, p in rays)
     assert len(on_body[0]) > 0.3 * 16 * 360  # the sensor's rear view, behind a 0.3 m gap

@@ -8,16 +8,31 @@ import yaml
 
 from lidarfield.cli import main
 from lidarfield.io import read_scan
-from lidarfield.sensors.models import PRESETS
 from lidarfield.poses import pose_from_xyzrpy as pose_from_values
+from lidarfield.sensors.models import PRESETS
 
 BASE = ["simulate", "--scene", "paper-intersection", "--sensor", "vlp16"]
 
 
 def test_simulate_writes_a_scan_with_sensor_and_pose(tmp_path, capsys):
     out = tmp_path / "scan.parquet"
-    code = main([*BASE, "--pose=-1,0.5,3,0,0,0.05", "--out", str(out), "--range-noise", "0.01", "--seed", "2",
-                 "--rolling-shutter", "--velocity", "1,0,0", "--angular-velocity", "0,0,0.1"])
+    code = main(
+        [
+            *BASE,
+            "--pose=-1,0.5,3,0,0,0.05",
+            "--out",
+            str(out),
+            "--range-noise",
+            "0.01",
+            "--seed",
+            "2",
+            "--rolling-shutter",
+            "--velocity",
+            "1,0,0",
+            "--angular-velocity",
+            "0,0,0.1",
+        ]
+    )
     assert code == 0
     scan = read_scan(out)
     assert f"{len(scan)} points" in capsys.readouterr().out
@@ -38,13 +53,24 @@ def _fails(args, tmp_path, capsys, *expected):
 
 
 def test_unknown_scene_lists_the_builtins(tmp_path, capsys):
-    _fails(["simulate", "--scene", "mall", "--sensor", "vlp16", "--pose", "0,0,3,0,0,0"], tmp_path, capsys,
-           "unknown scene 'mall'", "paper-intersection", "paper-intersection-moving-car")
+    _fails(
+        ["simulate", "--scene", "mall", "--sensor", "vlp16", "--pose", "0,0,3,0,0,0"],
+        tmp_path,
+        capsys,
+        "unknown scene 'mall'",
+        "paper-intersection",
+        "paper-intersection-moving-car",
+    )
 
 
 def test_unknown_sensor_lists_the_presets(tmp_path, capsys):
-    _fails(["simulate", "--scene", "paper-intersection", "--sensor", "vlp17", "--pose", "0,0,3,0,0,0"], tmp_path,
-           capsys, "unknown sensor 'vlp17'", *PRESETS)
+    _fails(
+        ["simulate", "--scene", "paper-intersection", "--sensor", "vlp17", "--pose", "0,0,3,0,0,0"],
+        tmp_path,
+        capsys,
+        "unknown sensor 'vlp17'",
+        *PRESETS,
+    )
 
 
 @pytest.mark.parametrize("pose", ["0,0,3,0,0", "0,0,3,0,0,0,1", "0,0,three,0,0,0"])
@@ -55,10 +81,16 @@ def test_pose_with_the_wrong_values(tmp_path, capsys, pose):
 def test_mesh_that_does_not_load(tmp_path, capsys):
     (tmp_path / "statue.ply").write_text("ply\nthis is no mesh\n")
     scene = tmp_path / "square.yaml"
-    scene.write_text(yaml.safe_dump({"objects": [{"kind": "plane", "size": [10, 10]},
-                                                 {"kind": "mesh", "file": "statue.ply"}]}))
-    _fails(["simulate", "--scene", str(scene), "--sensor", "vlp16", "--pose", "0,0,3,0,0,0"], tmp_path, capsys,
-           "statue.ply", "cannot load mesh")
+    scene.write_text(
+        yaml.safe_dump({"objects": [{"kind": "plane", "size": [10, 10]}, {"kind": "mesh", "file": "statue.ply"}]})
+    )
+    _fails(
+        ["simulate", "--scene", str(scene), "--sensor", "vlp16", "--pose", "0,0,3,0,0,0"],
+        tmp_path,
+        capsys,
+        "statue.ply",
+        "cannot load mesh",
+    )
 
 
 def test_velocity_without_rolling_shutter_is_refused(tmp_path, capsys):
@@ -76,5 +108,10 @@ def test_velocity_without_rolling_shutter_is_refused(tmp_path, capsys):
 def test_a_bad_sensor_yaml_is_named(tmp_path, capsys, content, expected):
     sensor = tmp_path / "mine.yaml"
     sensor.write_text(content)
-    _fails(["simulate", "--scene", "paper-intersection", "--sensor", str(sensor), "--pose", "0,0,3,0,0,0"],
-           tmp_path, capsys, f"{sensor}: ", expected)
+    _fails(
+        ["simulate", "--scene", "paper-intersection", "--sensor", str(sensor), "--pose", "0,0,3,0,0,0"],
+        tmp_path,
+        capsys,
+        f"{sensor}: ",
+        expected,
+    )

@@ -6,16 +6,16 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from lidarfield.errors import HypothesisError
-from lidarfield.field.kernel import discrepancy_field
 from lidarfield.analysis.field_stats import field_statistics
+from lidarfield.errors import HypothesisError
 from lidarfield.field.grid import field_settings_from_config
+from lidarfield.field.kernel import discrepancy_field
 from lidarfield.pair import RegisteredPair
 from lidarfield.poses import pose_from_xyzrpy
 from lidarfield.registration import register_pair
-from lidarfield.simulation.scene import load_scene
 from lidarfield.sensors.models import PRESETS
 from lidarfield.simulation.raycast import simulate_scan
+from lidarfield.simulation.scene import load_scene
 from lidarfield.study.stack import apply_stack
 
 
@@ -26,8 +26,14 @@ def _rows(xyz: np.ndarray) -> set[tuple[float, ...]]:
 def test_each_stage_removes_from_the_previous_survivors_and_records_it():
     rng = np.random.default_rng(0)
     xyz1, xyz2 = rng.normal(scale=8, size=(3000, 3)), rng.normal(scale=8, size=(2500, 3))
-    pair = RegisteredPair(xyz1, xyz2, pose_from_xyzrpy([1, 0, 0, 0, 0, 0.1]), attributes1={"intensity": np.arange(3000.0)})
-    stack = [{"ego_vehicle": {"radius_m": 4}}, {"crop": {"max_range_m": 15}}, {"field_of_view": {"elevation_deg": [-30, 30]}}]
+    pair = RegisteredPair(
+        xyz1, xyz2, pose_from_xyzrpy([1, 0, 0, 0, 0, 0.1]), attributes1={"intensity": np.arange(3000.0)}
+    )
+    stack = [
+        {"ego_vehicle": {"radius_m": 4}},
+        {"crop": {"max_range_m": 15}},
+        {"field_of_view": {"elevation_deg": [-30, 30]}},
+    ]
     stages = list(apply_stack(pair, stack))
     assert [(s.level, s.name) for s in stages] == [(0, "none"), (1, "ego_vehicle"), (2, "crop"), (3, "field_of_view")]
     assert stages[0].pair is pair and stages[0].removed1 == stages[0].removed2 == 0 and stages[0].spec is None

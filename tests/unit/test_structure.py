@@ -122,7 +122,9 @@ def test_every_code_default_is_the_schema_default(cls, schema_section):
 
 def test_the_grid_and_plot_settings_cover_every_key_of_their_schema_sections():
     grid_keys = set(section("grid")["properties"]) - {"kind"}
-    covered = {f.name for cls in (SphericalGrid, CartesianGrid, FieldSettings) for f in dataclasses.fields(cls)} - {"grid"}
+    covered = {f.name for cls in (SphericalGrid, CartesianGrid, FieldSettings) for f in dataclasses.fields(cls)} - {
+        "grid"
+    }
     assert grid_keys == covered
     plot_keys = set(section("plots")["properties"]) - {"pairs"}  # pairs: the workflow's choice, not a figure's
     assert plot_keys == {f.name for f in dataclasses.fields(PlotSettings)}

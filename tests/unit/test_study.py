@@ -12,15 +12,14 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from helpers.layout import assert_fixed_layout
+from helpers.synthetic_study import write_field_study
 from lidarfield.cli import main
-from lidarfield.study.config import AUTO_PLOT_PAIRS, plot_pairs
 from lidarfield.errors import ConfigError, InputError
 from lidarfield.plots import plot_pair
 from lidarfield.plots.study import _polar_cells, plot_study
-from helpers.synthetic_study import write_field_study
+from lidarfield.study.config import AUTO_PLOT_PAIRS, plot_pairs
 from lidarfield.study.tables import group_medians, read_study_tables, write_study_tables, write_study_voxels
-
-from helpers.layout import assert_fixed_layout
 
 
 @pytest.fixture(scope="module")
@@ -31,7 +30,9 @@ def field_study(tmp_path_factory):
     pairs = write_field_study(root, n_pairs=12, levels=3, n=4000)
     fields = sorted(root.glob("*/stages/*/field.parquet"))
     write_study_voxels(fields, root / "study" / "voxels.parquet")
-    write_study_tables(root / "summary.parquet", root / "study" / "hypotheses.parquet", root / "study" / "pairs.parquet")
+    write_study_tables(
+        root / "summary.parquet", root / "study" / "hypotheses.parquet", root / "study" / "pairs.parquet"
+    )
     return root, pairs
 
 
@@ -64,12 +65,16 @@ def test_voxels_table_agrees_with_the_fields(field_study):
     valid = valid.join(pair_median, on=["level", "pair"])
     valid["above"] = valid["magnitude"] > valid["pair_median"]
     by_voxel = valid.groupby(["level", "voxel"])
-    expected = pd.DataFrame({
-        "pairs_valid": by_voxel.size(),
-        "u_median": by_voxel["u"].median(), "v_median": by_voxel["v"].median(), "w_median": by_voxel["w"].median(),
-        "magnitude_median": by_voxel["magnitude"].median(),
-        "share_above_pair_median": by_voxel["above"].mean(),
-    })
+    expected = pd.DataFrame(
+        {
+            "pairs_valid": by_voxel.size(),
+            "u_median": by_voxel["u"].median(),
+            "v_median": by_voxel["v"].median(),
+            "w_median": by_voxel["w"].median(),
+            "magnitude_median": by_voxel["magnitude"].median(),
+            "share_above_pair_median": by_voxel["above"].mean(),
+        }
+    )
     present = fields.groupby(["level", "voxel"])["pair"].nunique()
     assert list(got.index) == list(present.index)  # every voxel holding points in any pair
     assert (got["pairs_with_points"] == present).all() and (got["pairs"] == len(pairs)).all()
@@ -127,7 +132,9 @@ def test_polar_cells_put_each_voxel_at_its_azimuth_and_elevation(field_study):
         np.testing.assert_equal(cells[r.el_bin, r.az_bin], expected)
 
 
-def test_study_figures_are_written_one_per_stage_level_plus_three_and_keep_their_layout(field_study, tmp_path, monkeypatch):
+def test_study_figures_are_written_one_per_stage_level_plus_three_and_keep_their_layout(
+    field_study, tmp_path, monkeypatch
+):
     import matplotlib.pyplot as plt
 
     root, _ = field_study
@@ -135,7 +142,14 @@ def test_study_figures_are_written_one_per_stage_level_plus_three_and_keep_their
     figures = []
     monkeypatch.setattr(plt, "close", figures.append)  # keep each figure open after saving
     written = plot_study(t.summary, t.voxels, t.hypotheses, t.pairs, t.grid, tmp_path / "figures")
-    assert sorted(p.name for p in written) == ["all_pairs.png", "heatmap.png", "hypotheses.png", "voxels_00.png", "voxels_01.png", "voxels_02.png"]
+    assert sorted(p.name for p in written) == [
+        "all_pairs.png",
+        "heatmap.png",
+        "hypotheses.png",
+        "voxels_00.png",
+        "voxels_01.png",
+        "voxels_02.png",
+    ]
     for fig in figures:
         assert_fixed_layout(fig)
     monkeypatch.undo()
@@ -162,7 +176,11 @@ def test_report_of_300_pairs_is_under_10_mb_and_links_a_page_for_every_pair(tmp_
     pairs = write_field_study(root, n_pairs=300, levels=3, n=3000)
     # pair-000's stage-by-stage figures, drawn once, stand in for every pair's (as plot_pair
     # writes them in a study): the report would otherwise draw 600 figures
-    first = plot_pair([json.loads((d / "stats.json").read_text()) for d in pairs["pair-000"]], root / "pair-000" / "figures", {"dpi": 60})
+    first = plot_pair(
+        [json.loads((d / "stats.json").read_text()) for d in pairs["pair-000"]],
+        root / "pair-000" / "figures",
+        {"dpi": 60},
+    )
     for name in pairs:
         for png in first:
             (root / name / "figures").mkdir(exist_ok=True)

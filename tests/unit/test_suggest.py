@@ -8,13 +8,12 @@ import math
 import numpy as np
 import pytest
 
-from lidarfield.study.config import load_config
+from helpers.clouds import targets
+from lidarfield.analysis.suggest import SUGGESTION_COLUMNS, candidate_steps, suggestions
 from lidarfield.errors import HypothesisError
 from lidarfield.field.grid import FieldSettings, SphericalGrid
 from lidarfield.pair import RegisteredPair
-from lidarfield.analysis.suggest import SUGGESTION_COLUMNS, candidate_steps, suggestions
-
-from helpers.clouds import targets
+from lidarfield.study.config import load_config
 
 SETTINGS = FieldSettings(SphericalGrid())
 GRID = SETTINGS.to_config()
@@ -73,10 +72,18 @@ def test_default_candidates_are_the_builtins_not_yet_applied():
 
 def test_study_candidates_per_stage(tmp_path):
     study = load_config("config/config.yaml")  # stack: field_of_view, shadow
-    assert [next(iter(s)) for s in study.candidates(0)] == ["ego_vehicle", "field_of_view", "shadow", "crop", "outliers"]
+    assert [next(iter(s)) for s in study.candidates(0)] == [
+        "ego_vehicle",
+        "field_of_view",
+        "shadow",
+        "crop",
+        "outliers",
+    ]
     assert [next(iter(s)) for s in study.candidates(2)] == ["ego_vehicle", "crop", "outliers"]
     config = tmp_path / "study.yaml"
-    config.write_text("hypotheses: [{ego_vehicle: {}}]\nsuggest: [{ego_vehicle: {radius_m: 5}}, {shadow: {origins: [1]}}]\n")
+    config.write_text(
+        "hypotheses: [{ego_vehicle: {}}]\nsuggest: [{ego_vehicle: {radius_m: 5}}, {shadow: {origins: [1]}}]\n"
+    )
     study = load_config(config, require_pairs=False)
     assert study.candidates(1) == study.candidates(0)  # an explicit list is used as given
     assert study.candidates(0)[0] == {"ego_vehicle": {"radius_m": 5.0, "box_m": None}}
@@ -115,8 +122,18 @@ def test_the_suggest_job_skips_default_candidates_that_cannot_apply(tmp_path, ca
     vehicle, _ = with_vehicle()
     write_pair(tmp_path / "points.parquet", RegisteredPair(targets(60, 1), np.vstack([targets(60, 2), vehicle])))
     candidates = candidate_steps(None, [], ".", GRID)
-    argv = ["job", "suggest", "--points", str(tmp_path / "points.parquet"), "--candidates", json.dumps(candidates),
-            "--grid", json.dumps(GRID), "--out", str(tmp_path / "suggestions.parquet")]  # fmt: skip
+    argv = [
+        "job",
+        "suggest",
+        "--points",
+        str(tmp_path / "points.parquet"),
+        "--candidates",
+        json.dumps(candidates),
+        "--grid",
+        json.dumps(GRID),
+        "--out",
+        str(tmp_path / "suggestions.parquet"),
+    ]
     assert run_in_process([*argv, "--default-candidates"]) == 0
     table, _ = read_table(tmp_path / "suggestions.parquet")
     assert set(table["hypothesis"]) == {"ego_vehicle", "shadow", "crop", "outliers"}
@@ -130,8 +147,8 @@ def test_the_suggest_job_skips_default_candidates_that_cannot_apply(tmp_path, ca
 def test_a_candidate_that_removes_nothing_gets_the_row_of_a_recomputed_field():
     """The job reuses the field before for such a candidate: the row must be what recomputing
     the field from the same points gives, to the bit."""
-    from lidarfield.field.kernel import field_from_voxel_ids
     from lidarfield.analysis.suggest import compare_fields
+    from lidarfield.field.kernel import field_from_voxel_ids
 
     vehicle, _ = with_vehicle()
     pair = RegisteredPair(targets(60, 1), np.vstack([targets(60, 2), vehicle]))

@@ -15,11 +15,11 @@ import pytest
 import yaml
 
 from lidarfield.cli import main
-from lidarfield.study.config import load_config, validate_config
 from lidarfield.io import read_scan
-from lidarfield.io.rosbag.writer import CloudMessage, write_bag
-from lidarfield.study.jobs import scan_job
 from lidarfield.io.pose_files import read_kitti_poses
+from lidarfield.io.rosbag.writer import CloudMessage, write_bag
+from lidarfield.study.config import load_config, validate_config
+from lidarfield.study.jobs import scan_job
 
 pytest.importorskip("rosbags")
 
@@ -39,7 +39,12 @@ def recording(shared_data, tmp_path_factory):
     kitti = folder / "OS-1-128_v2.3.0_1024x10_lb_n3_poses_kitti.txt"
     poses = read_kitti_poses(kitti)
     # Odometry at 20 Hz around the scans: samples at the scan stamps hold the KITTI poses.
-    odometry = [(STAMPS[0] - 0.05, poses[0]), (STAMPS[0], poses[0]), (STAMPS[1], poses[1]), (STAMPS[1] + 0.05, poses[1])]
+    odometry = [
+        (STAMPS[0] - 0.05, poses[0]),
+        (STAMPS[0], poses[0]),
+        (STAMPS[1], poses[1]),
+        (STAMPS[1] + 0.05, poses[1]),
+    ]
     clouds = [CloudMessage(read_scan(f), stamp) for f, stamp in zip(files, STAMPS)]
     bag = write_bag(tmp_path_factory.mktemp("bag") / "drive.bag", clouds, poses=odometry)
     return bag, files, kitti
@@ -73,7 +78,18 @@ def study_config(tmp_path: Path, recording) -> Path:
 
 def run(tmp_path: Path, config: Path, name: str, scans, *options) -> Path:
     out = tmp_path / name
-    argv = ["run", *map(str, scans), "--config", str(config), "--out", str(out), "--register", "truth", "--sensor", "os1-128"]
+    argv = [
+        "run",
+        *map(str, scans),
+        "--config",
+        str(config),
+        "--out",
+        str(out),
+        "--register",
+        "truth",
+        "--sensor",
+        "os1-128",
+    ]
     assert main([*argv, *options]) == 0
     return out
 
@@ -110,12 +126,27 @@ def test_workflow_sequence_from_a_bag_equals_files_with_kitti_poses(tmp_path, re
 
     config = study_config(tmp_path, recording)
     study, results = load_config(config, base_dir=tmp_path), tmp_path / "results"
-    targets = [f"results/{pair}/stages/{stage}/field.parquet" for pair in study.pairs for stage in study.stage_ids(pair)]
+    targets = [
+        f"results/{pair}/stages/{stage}/field.parquet" for pair in study.pairs for stage in study.stage_ids(pair)
+    ]
     proc = subprocess.run(
-        [sys.executable, "-m", "snakemake", "--snakefile", str(ROOT / "Snakefile"), "--directory", str(tmp_path),
-         "--configfile", str(config), "--cores", "2", *targets],
-        capture_output=True, text=True,
-    )  # fmt: skip
+        [
+            sys.executable,
+            "-m",
+            "snakemake",
+            "--snakefile",
+            str(ROOT / "Snakefile"),
+            "--directory",
+            str(tmp_path),
+            "--configfile",
+            str(config),
+            "--cores",
+            "2",
+            *targets,
+        ],
+        capture_output=True,
+        text=True,
+    )
     assert proc.returncode == 0, proc.stderr[-3000:]
     from_bag = fields(results / "bag-000", study.stage_ids("bag-000"))
     assert_same_fields(from_bag, fields(results / "files-000", study.stage_ids("files-000")))
@@ -126,7 +157,11 @@ def test_workflow_sequence_from_a_bag_equals_files_with_kitti_poses(tmp_path, re
 @pytest.mark.parametrize(
     "reference, options, message",
     [
-        ("{bag}#/velodyne_points#0", [], r"drive.bag: topic /velodyne_points is not in the bag; its topics: /odom \(nav_msgs/Odometry, 4\), /points"),
+        (
+            "{bag}#/velodyne_points#0",
+            [],
+            r"drive.bag: topic /velodyne_points is not in the bag; its topics: /odom \(nav_msgs/Odometry, 4\), /points",
+        ),
         ("{bag}#0", ["--poses", "/gps"], r"drive.bag: pose topic /gps is not in the bag; its topics: /odom, /points"),
         ("{bag}#5", [], r"drive.bag: scan #5 requested but the file holds 2 scan\(s\)"),
     ],
@@ -135,7 +170,17 @@ def test_bad_bag_input_is_one_line_exit_2_and_no_output(tmp_path, recording, cap
     bag = recording[0]
     config = study_config(tmp_path, recording)
     out = tmp_path / "out"
-    argv = ["run", reference.format(bag=bag), f"{bag}#1", "--config", str(config), "--out", str(out), "--register", "truth"]
+    argv = [
+        "run",
+        reference.format(bag=bag),
+        f"{bag}#1",
+        "--config",
+        str(config),
+        "--out",
+        str(out),
+        "--register",
+        "truth",
+    ]
     assert main([*argv, *options]) == 2
     error = capsys.readouterr().err.strip()
     assert len(error.splitlines()) == 1
@@ -149,7 +194,9 @@ def test_sequences_from_a_bag_topic_and_a_capture(tmp_path, expd, shared_data):
     from lidarfield.scan import Scan
 
     scan = Scan(read_scan(expd / "Cloud1_ExpD.txt").xyz[:500])
-    clouds = [CloudMessage(scan, 1.0 + 0.1 * k, topic="/rear") for k in range(5)] + [CloudMessage(scan, 1.0, topic="/front")]
+    clouds = [CloudMessage(scan, 1.0 + 0.1 * k, topic="/rear") for k in range(5)] + [
+        CloudMessage(scan, 1.0, topic="/front")
+    ]
     bag = write_bag(tmp_path / "two_lidars", clouds, storage="mcap")
     capture = shared_data / "velodyne-pcap" / "sample_velodyne_vlp16_gps.pcap"
     config = {
@@ -162,7 +209,13 @@ def test_sequences_from_a_bag_topic_and_a_capture(tmp_path, expd, shared_data):
     assert [(p.scan1.spec["path"], p.scan2.spec["path"]) for n, p in study.pairs.items() if n.startswith("rear")] == [
         (f"{bag}#/rear#1", f"{bag}#/rear#3"),
     ]
-    assert [p.scan2.spec["path"] for n, p in study.pairs.items() if n.startswith("spin")] == [f"{capture}#1", f"{capture}#2"]
+    assert [p.scan2.spec["path"] for n, p in study.pairs.items() if n.startswith("spin")] == [
+        f"{capture}#1",
+        f"{capture}#2",
+    ]
     del config["sequences"]["rear"]["topic"]
-    with pytest.raises(InputError, match=r"two_lidars: the bag holds 2 PointCloud2 topics: .*or topic: in a sequence\); topics: /front .*, /rear"):
+    with pytest.raises(
+        InputError,
+        match=r"two_lidars: the bag holds 2 PointCloud2 topics: .*or topic: in a sequence\); topics: /front .*, /rear",
+    ):
         validate_config(config, tmp_path)

@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from lidarfield.plots import plot_stage, write_plotly_js
 from helpers.synthetic_study import write_synthetic_study
+from lidarfield.plots import plot_stage, write_plotly_js
 from lidarfield.report import compare_studies, discover, write_report
 
 pytestmark = pytest.mark.slow
@@ -28,10 +28,23 @@ CONSOLE_ERROR = re.compile(r"Uncaught|[A-Za-z]*Error\b|Failed to load|is not def
 def chromium(url: str, screenshot, profile, window=(1280, 1000)) -> str:
     """Open ``url`` headless, write a screenshot, return the browser's log (stderr)."""
     cmd = [
-        CHROMIUM, "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
-        "--disable-background-networking", "--disable-component-update", "--disable-sync",
-        "--enable-unsafe-swiftshader", "--enable-logging=stderr", "--v=0", "--virtual-time-budget=8000",
-        f"--user-data-dir={profile}", f"--screenshot={screenshot}", f"--window-size={window[0]},{window[1]}", url,
+        CHROMIUM,
+        "--headless",
+        "--no-sandbox",
+        "--disable-gpu",
+        "--disable-quic",
+        "--no-first-run",
+        "--disable-background-networking",
+        "--disable-component-update",
+        "--disable-sync",
+        "--enable-unsafe-swiftshader",
+        "--enable-logging=stderr",
+        "--v=0",
+        "--virtual-time-budget=8000",
+        f"--user-data-dir={profile}",
+        f"--screenshot={screenshot}",
+        f"--window-size={window[0]},{window[1]}",
+        url,
     ]
     done = subprocess.run(cmd, capture_output=True, text=True, timeout=180)
     assert screenshot.is_file(), f"no screenshot; chromium said:\n{done.stderr[-2000:]}"
@@ -39,7 +52,9 @@ def chromium(url: str, screenshot, profile, window=(1280, 1000)) -> str:
 
 
 def console_errors(log: str) -> list[str]:
-    return [ln for ln in log.splitlines() if ":CONSOLE" in ln and CONSOLE_ERROR.search(ln) and "GL Driver Message" not in ln]
+    return [
+        ln for ln in log.splitlines() if ":CONSOLE" in ln and CONSOLE_ERROR.search(ln) and "GL Driver Message" not in ln
+    ]
 
 
 def not_blank(png) -> float:
@@ -103,7 +118,10 @@ addEventListener("load", () => {
   const body = document.body, style = getComputedStyle(body);
   const content = body.clientWidth - parseFloat(style.paddingLeft) - parseFloat(style.paddingRight);
   const scrolls = el => /auto|scroll/.test(getComputedStyle(el).overflowX);
-  const clipped = el => { for (let a = el.parentElement; a && a !== body; a = a.parentElement) if (scrolls(a)) return true; return false; };
+  const clipped = el => {
+    for (let a = el.parentElement; a && a !== body; a = a.parentElement) if (scrolls(a)) return true;
+    return false;
+  };
   let widest = 0, widestTag = "";
   for (const el of body.querySelectorAll("*")) {
     const right = el.getBoundingClientRect().right;
@@ -129,9 +147,19 @@ def layout(page, tmp_path, window=(WIDTH, 1000)) -> dict:
     probed = tmp_path / "probed.html"
     probed.write_text(page.read_text().replace("</body>", LAYOUT_PROBE + "</body>"))
     cmd = [
-        CHROMIUM, "--headless", "--no-sandbox", "--disable-gpu", "--no-first-run", "--disable-background-networking",
-        "--disable-component-update", "--disable-sync", "--virtual-time-budget=8000", f"--user-data-dir={tmp_path / 'profile'}",
-        f"--window-size={window[0]},{window[1]}", "--dump-dom", probed.as_uri(),
+        CHROMIUM,
+        "--headless",
+        "--no-sandbox",
+        "--disable-gpu",
+        "--no-first-run",
+        "--disable-background-networking",
+        "--disable-component-update",
+        "--disable-sync",
+        "--virtual-time-budget=8000",
+        f"--user-data-dir={tmp_path / 'profile'}",
+        f"--window-size={window[0]},{window[1]}",
+        "--dump-dom",
+        probed.as_uri(),
     ]
     done = subprocess.run(cmd, capture_output=True, text=True, timeout=180)
     found = re.search(r'<html[^>]* data-layout="([^"]*)"', done.stdout)
@@ -140,18 +168,20 @@ def layout(page, tmp_path, window=(WIDTH, 1000)) -> dict:
 
 
 @pytest.fixture(scope="module")
-def compare_page(study, tmp_path_factory):
-    root, _, _ = study
+def compare_page(reported_study, tmp_path_factory):
+    root, _, _ = reported_study
     return compare_studies(root, root, tmp_path_factory.mktemp("compare") / "compare.html")
 
 
-@pytest.mark.parametrize("page", ["report.html", "pair-00/report.html", "compare"], ids=["overview", "pair-page", "compare"])
-def test_nothing_runs_off_a_1400_px_page_and_figures_are_readable(study, compare_page, tmp_path, page):
+@pytest.mark.parametrize(
+    "page", ["report.html", "pair-00/report.html", "compare"], ids=["overview", "pair-page", "compare"]
+)
+def test_nothing_runs_off_a_1400_px_page_and_figures_are_readable(reported_study, compare_page, tmp_path, page):
     """Every table fits the page or scrolls inside its own box; no element reaches past the
     window's right edge; every embedded figure of the overview and a pair page takes at least
     FIGURE_SHARE of the content width (the compare page shows A and B side by side), shown at
     no more than MAX_UPSCALE times its pixel width."""
-    root, _, _ = study
+    root, _, _ = reported_study
     m = layout(compare_page if page == "compare" else root / page, tmp_path)
     assert m["viewport"] == WIDTH and m["tables"]
     assert m["scrollWidth"] <= m["viewport"], m

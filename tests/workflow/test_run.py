@@ -11,31 +11,57 @@ import pandas as pd
 import pytest
 import yaml
 
+from conftest import ROOT
 from lidarfield.cli import main
-from lidarfield.study.config import load_config
 from lidarfield.errors import InputError
 from lidarfield.io import read_scan, write_scan
 from lidarfield.io.parquet_table import read_table
 from lidarfield.pair import RegisteredPair, read_pair, write_pair
+from lidarfield.poses import pose_from_xyzrpy
+from lidarfield.sensors.models import PRESETS
+from lidarfield.simulation.raycast import simulate_scan
+from lidarfield.simulation.scene import load_scene
+from lidarfield.study.config import load_config
 from lidarfield.study.jobs import field_stage, mitigate_stage
 from lidarfield.study.run import run_pair
 from lidarfield.study.summary import write_summary
-from lidarfield.poses import pose_from_xyzrpy
-from lidarfield.simulation.scene import load_scene
-from lidarfield.sensors.models import PRESETS
-from lidarfield.simulation.raycast import simulate_scan
-
-from conftest import ROOT
 
 GRID = {"kind": "spherical", "azimuth_bins": 36, "elevation_deg": [-22.5, 15.0], "elevation_bins": 5, "min_points": 30}
 ROW_KEYS = {
-    "pair", "stage", "level", "hypothesis", "n1", "n2", "removed1", "removed2", "voxels_valid", "max_magnitude",
-    "mean_magnitude", "rms_magnitude", "p95_magnitude", "paper_max_metric", "rigid_translation_m",
-    "rigid_rotation_deg", "rigid_energy_share", "mean_resultant_length", "registration_method",
-    "registration_fitness", "registration_converged", "voxels_significant", "share_significant", "p_direction",
-    "p_coherence", "verdict", "field_energy", "energy_share_fov_edge", "energy_share_near_sensor",
-    "energy_share_depth_edge", "energy_share_radial", "energy_share_rigid", "energy_share_count_imbalance",
-}  # fmt: skip
+    "pair",
+    "stage",
+    "level",
+    "hypothesis",
+    "n1",
+    "n2",
+    "removed1",
+    "removed2",
+    "voxels_valid",
+    "max_magnitude",
+    "mean_magnitude",
+    "rms_magnitude",
+    "p95_magnitude",
+    "paper_max_metric",
+    "rigid_translation_m",
+    "rigid_rotation_deg",
+    "rigid_energy_share",
+    "mean_resultant_length",
+    "registration_method",
+    "registration_fitness",
+    "registration_converged",
+    "voxels_significant",
+    "share_significant",
+    "p_direction",
+    "p_coherence",
+    "verdict",
+    "field_energy",
+    "energy_share_fov_edge",
+    "energy_share_near_sensor",
+    "energy_share_depth_edge",
+    "energy_share_radial",
+    "energy_share_rigid",
+    "energy_share_count_imbalance",
+}
 
 
 @pytest.fixture(scope="module")
@@ -68,14 +94,19 @@ def _study(tmp_path: Path, scans, hypotheses: list) -> Path:
 def test_stage_functions_write_the_layout(tmp_path):
     rng = np.random.default_rng(0)
     pair = RegisteredPair(
-        rng.normal(scale=10, size=(4000, 3)), rng.normal(scale=10, size=(3000, 3)),
+        rng.normal(scale=10, size=(4000, 3)),
+        rng.normal(scale=10, size=(3000, 3)),
         registration={"method": "icp", "fitness": 0.8, "converged": True},
-    )  # fmt: skip
+    )
     write_pair(tmp_path / "registered.parquet", pair)
     s0, s1 = tmp_path / "00", tmp_path / "01"
-    mitigate_stage(tmp_path / "registered.parquet", None, "00-none-aaaaaaaa", 0, s0 / "points.parquet", s0 / "removed.parquet")
+    mitigate_stage(
+        tmp_path / "registered.parquet", None, "00-none-aaaaaaaa", 0, s0 / "points.parquet", s0 / "removed.parquet"
+    )
     step = {"ego_vehicle": {"radius_m": 8.0}}
-    mitigate_stage(s0 / "points.parquet", step, "01-ego_vehicle-bbbbbbbb", 1, s1 / "points.parquet", s1 / "removed.parquet")
+    mitigate_stage(
+        s0 / "points.parquet", step, "01-ego_vehicle-bbbbbbbb", 1, s1 / "points.parquet", s1 / "removed.parquet"
+    )
 
     stage0, meta0 = read_pair(s0 / "points.parquet")
     assert np.array_equal(stage0.xyz1, pair.xyz1) and meta0["stage"] == "00-none-aaaaaaaa" and meta0["level"] == 0
@@ -85,12 +116,23 @@ def test_stage_functions_write_the_layout(tmp_path):
     removed1, rmeta1 = read_table(s1 / "removed.parquet")
     near1 = np.linalg.norm(pair.xyz1, axis=1) < 8.0
     assert len(stage1.xyz1) == np.count_nonzero(~near1) and np.count_nonzero(removed1["cloud"] == 1) == near1.sum()
-    assert set(removed1["hypothesis"]) == {"ego_vehicle"} and rmeta1["spec"] == {"ego_vehicle": {"radius_m": 8.0, "box_m": None}}
+    assert set(removed1["hypothesis"]) == {"ego_vehicle"} and rmeta1["spec"] == {
+        "ego_vehicle": {"radius_m": 8.0, "box_m": None}
+    }
     assert meta1["hypothesis"] == "ego_vehicle" and meta1["registration"]["method"] == "icp"
 
     rows = []
     for folder in (s0, s1):
-        rows.append(field_stage(folder / "points.parquet", folder / "removed.parquet", GRID, "demo", folder / "field.parquet", folder / "stats.json"))
+        rows.append(
+            field_stage(
+                folder / "points.parquet",
+                folder / "removed.parquet",
+                GRID,
+                "demo",
+                folder / "field.parquet",
+                folder / "stats.json",
+            )
+        )
         assert json.loads((folder / "stats.json").read_text()) == rows[-1]
         assert read_table(folder / "field.parquet")[1]["stage"] == rows[-1]["stage"]
     assert ROW_KEYS <= set(rows[1])
@@ -109,7 +151,17 @@ def test_stage_functions_write_the_layout(tmp_path):
 def test_run_writes_every_stage_and_prints_the_table(tmp_path, paper_scans, capsys):
     config = _study(tmp_path, paper_scans, [{"field_of_view": {}}, {"shadow": {}}])
     out = tmp_path / "out"
-    argv = ["run", str(paper_scans[0]), str(paper_scans[1]), "--config", str(config), "--out", str(out), "--register", "truth"]
+    argv = [
+        "run",
+        str(paper_scans[0]),
+        str(paper_scans[1]),
+        "--config",
+        str(config),
+        "--out",
+        str(out),
+        "--register",
+        "truth",
+    ]
     assert main(argv) == 0
     printed = capsys.readouterr().out
     summary = pd.read_parquet(out / "summary.parquet")
@@ -130,7 +182,17 @@ def test_run_writes_every_stage_and_prints_the_table(tmp_path, paper_scans, caps
     assert set(known) == {(1, 20), (2, 20)}
     for cloud, xyz in ((1, registered.xyz1), (2, registered.xyz2)):
         np.testing.assert_array_equal(known[(cloud, 20)].mean, neighbour_distances(xyz, 20).mean)
-    assert printed.splitlines()[0].split() == ["stage", "hypothesis", "n1", "n2", "removed1", "removed2", "voxels_valid", "max_magnitude", "paper_max_metric"]
+    assert printed.splitlines()[0].split() == [
+        "stage",
+        "hypothesis",
+        "n1",
+        "n2",
+        "removed1",
+        "removed2",
+        "voxels_valid",
+        "max_magnitude",
+        "paper_max_metric",
+    ]
     assert summary["max_magnitude"].is_monotonic_decreasing
     # What to try next on the paper's simulated pair, before any mitigation: field_of_view or
     # shadow (the adversities the paper builds this pair to show), far ahead of the rest.
@@ -140,7 +202,9 @@ def test_run_writes_every_stage_and_prints_the_table(tmp_path, paper_scans, caps
     last = pd.read_parquet(out / "stages" / ids[-1] / "suggestions.parquet")
     assert set(last["hypothesis"]) == {"ego_vehicle", "crop", "outliers"}
     assert (summary["n1"][1:].to_numpy() + summary["removed1"][1:].to_numpy() == summary["n1"][:-1].to_numpy()).all()
-    assert all((out / name).is_file() for name in ("scan1.parquet", "scan2.parquet", "registered.parquet", "summary.csv"))
+    assert all(
+        (out / name).is_file() for name in ("scan1.parquet", "scan2.parquet", "registered.parquet", "summary.csv")
+    )
     # Run again into the same folder: allowed (it is lidarfield's), same stage ids.
     assert main(argv) == 0
     assert list(pd.read_parquet(out / "summary.parquet")["stage"]) == ids
@@ -188,8 +252,17 @@ def test_run_on_text_scans_without_a_sensor_skips_the_defaults_that_need_one(tmp
     assert len(skipped) == 2  # one per stage
     assert all(m.startswith("candidate field_of_view skipped") and "no sensor model" in m for m in skipped)
     ids = list(pd.read_parquet(out / "summary.parquet")["stage"])
-    assert set(pd.read_parquet(out / "stages" / ids[0] / "suggestions.parquet")["hypothesis"]) == {"ego_vehicle", "shadow", "crop", "outliers"}
-    assert set(pd.read_parquet(out / "stages" / ids[1] / "suggestions.parquet")["hypothesis"]) == {"shadow", "crop", "outliers"}
+    assert set(pd.read_parquet(out / "stages" / ids[0] / "suggestions.parquet")["hypothesis"]) == {
+        "ego_vehicle",
+        "shadow",
+        "crop",
+        "outliers",
+    }
+    assert set(pd.read_parquet(out / "stages" / ids[1] / "suggestions.parquet")["hypothesis"]) == {
+        "shadow",
+        "crop",
+        "outliers",
+    }
 
     capsys.readouterr()
     explicit = yaml.safe_load(config.read_text()) | {"suggest": [{"crop": {}}, {"field_of_view": {}}]}
@@ -210,7 +283,18 @@ def test_expd_paper_study_on_the_real_pair(expd, tmp_path, monkeypatch, capsys):
     monkeypatch.chdir(ROOT)
     scans = ["../shared/data/expd-vlp16/Cloud1_ExpD.txt", "../shared/data/expd-vlp16/Cloud10_ExpD.txt"]
     out = tmp_path / "expd-paper"
-    argv = ["run", *scans, "--config", "config/expd-paper.yaml", "--transform", "config/expd-T_1_10.txt", "--sensor", "vlp16", "--out", str(out)]
+    argv = [
+        "run",
+        *scans,
+        "--config",
+        "config/expd-paper.yaml",
+        "--transform",
+        "config/expd-T_1_10.txt",
+        "--sensor",
+        "vlp16",
+        "--out",
+        str(out),
+    ]
     assert main(argv) == 0
     printed = capsys.readouterr().out
     with capsys.disabled():
@@ -221,7 +305,9 @@ def test_expd_paper_study_on_the_real_pair(expd, tmp_path, monkeypatch, capsys):
     assert all(math.isfinite(v) for v in rows["max_magnitude"])
     assert rows["max_magnitude"].max() <= 13.0 * math.sqrt(3)  # max_component_m 13
     assert rows["max_magnitude"].iloc[-1] < rows["max_magnitude"].iloc[0]
-    assert set(rows["verdict"]) <= {"random", "patterned"} and (rows["voxels_significant"] <= rows["voxels_valid"]).all()
+    assert (
+        set(rows["verdict"]) <= {"random", "patterned"} and (rows["voxels_significant"] <= rows["voxels_valid"]).all()
+    )
     # What to try next on the raw pair: the van the scans were taken from.
     first = pd.read_parquet(out / "stages" / rows["stage"][0] / "suggestions.parquet")
     assert first["hypothesis"][0] == "ego_vehicle" and first["rank"][0] == 1

@@ -16,9 +16,9 @@ from pathlib import Path
 import pyarrow.parquet as pq
 import pytest
 
-from lidarfield.study.config import validate_config
 from lidarfield.hypotheses.steps import canonical_json
 from lidarfield.runner.launch import THREAD_VARS
+from lidarfield.study.config import validate_config
 
 pytestmark = pytest.mark.slow
 
@@ -29,7 +29,7 @@ SNAKEMAKE_ENV = {name: "1" for name in THREAD_VARS}
 GRID = {"azimuth_bins": 18, "elevation_deg": [-25, 12.5], "elevation_bins": 5, "min_points": 5}
 
 # A plugin hypothesis that hangs: it writes its process id where the test can read it.
-SLEEPER = '''import os, time
+SLEEPER = """import os, time
 from pathlib import Path
 
 
@@ -37,7 +37,7 @@ def remove(pair, params):
     Path(params["pid_file"]).write_text(str(os.getpid()))
     time.sleep(120)
     return pair.xyz1[:, 2] > 0, pair.xyz2[:, 2] > 0
-'''
+"""
 
 
 def study(hypothesis: dict, base_dir: Path):
@@ -55,20 +55,58 @@ def pair_jobs(hypothesis: dict, base_dir: Path) -> list[list[list[str]]]:
     s = study(hypothesis, base_dir)
     pair = s.pairs["shift"]
     stages = s.stage_ids("shift")
-    scans = [["simulate", "--spec", canonical_json(scan.spec), "--out", f"scans/{scan.id}.parquet"] for scan in (pair.scan1, pair.scan2)]
-    register = ["register", "--scan1", f"scans/{pair.scan1.id}.parquet", "--scan2", f"scans/{pair.scan2.id}.parquet",
-                "--settings", canonical_json(pair.register), "--out", "registered.parquet"]  # fmt: skip
+    scans = [
+        ["simulate", "--spec", canonical_json(scan.spec), "--out", f"scans/{scan.id}.parquet"]
+        for scan in (pair.scan1, pair.scan2)
+    ]
+    register = [
+        "register",
+        "--scan1",
+        f"scans/{pair.scan1.id}.parquet",
+        "--scan2",
+        f"scans/{pair.scan2.id}.parquet",
+        "--settings",
+        canonical_json(pair.register),
+        "--out",
+        "registered.parquet",
+    ]
 
     def mitigate(level: int) -> list[str]:
         points_in = "registered.parquet" if level == 0 else f"{stages[level - 1]}/points.parquet"
         step = canonical_json(s.hypotheses[level - 1] if level else None)
-        return ["mitigate", "--points-in", points_in, "--step", step, "--stage", stages[level], "--level", str(level),
-                "--points-out", f"{stages[level]}/points.parquet", "--removed-out", f"{stages[level]}/removed.parquet"]  # fmt: skip
+        return [
+            "mitigate",
+            "--points-in",
+            points_in,
+            "--step",
+            step,
+            "--stage",
+            stages[level],
+            "--level",
+            str(level),
+            "--points-out",
+            f"{stages[level]}/points.parquet",
+            "--removed-out",
+            f"{stages[level]}/removed.parquet",
+        ]
 
     def field(level: int) -> list[str]:
         d = stages[level]
-        return ["field", "--points", f"{d}/points.parquet", "--removed", f"{d}/removed.parquet", "--grid", canonical_json(s.grid),
-                "--pair", "shift", "--field-out", f"{d}/field.parquet", "--stats-out", f"{d}/stats.json"]  # fmt: skip
+        return [
+            "field",
+            "--points",
+            f"{d}/points.parquet",
+            "--removed",
+            f"{d}/removed.parquet",
+            "--grid",
+            canonical_json(s.grid_section),
+            "--pair",
+            "shift",
+            "--field-out",
+            f"{d}/field.parquet",
+            "--stats-out",
+            f"{d}/stats.json",
+        ]
 
     return [scans, [register], [mitigate(0)], [field(0), mitigate(1)], [field(1)]]
 
@@ -77,7 +115,9 @@ def start_job(argv: list[str], cwd: Path, worker: str, log: Path) -> subprocess.
     """``lidarfield job ARGV`` as a workflow rule runs it: output and errors into its log."""
     env = {**os.environ, **SNAKEMAKE_ENV, "LIDARFIELD_WORKER": worker}
     with open(log, "w") as f:
-        return subprocess.Popen([sys.executable, "-m", "lidarfield", "job", *argv], cwd=cwd, env=env, stdout=f, stderr=subprocess.STDOUT)
+        return subprocess.Popen(
+            [sys.executable, "-m", "lidarfield", "job", *argv], cwd=cwd, env=env, stdout=f, stderr=subprocess.STDOUT
+        )
 
 
 def run_waves(waves, cwd: Path, worker: str) -> None:
@@ -115,7 +155,9 @@ class Frame:
 def content(path: Path):
     if path.suffix == ".parquet":
         table = pq.read_table(path)
-        meta = {k.decode(): json.loads(v) if k == b"lidarfield" else v for k, v in (table.schema.metadata or {}).items()}
+        meta = {
+            k.decode(): json.loads(v) if k == b"lidarfield" else v for k, v in (table.schema.metadata or {}).items()
+        }
         return Frame(table.to_pandas()), rounded(meta)
     return path.read_bytes()
 
@@ -209,8 +251,21 @@ def test_killed_job_leaves_other_jobs_and_the_worker_sound(tmp_path, worker):
 
 def test_a_failing_job_reports_the_same_exit_code_and_message_on_both_paths(tmp_path, worker):
     _, sock = worker
-    argv = ["field", "--points", "missing.parquet", "--removed", "missing.parquet", "--grid", json.dumps(GRID),
-            "--pair", "p", "--field-out", "f.parquet", "--stats-out", "s.json"]  # fmt: skip
+    argv = [
+        "field",
+        "--points",
+        "missing.parquet",
+        "--removed",
+        "missing.parquet",
+        "--grid",
+        json.dumps(GRID),
+        "--pair",
+        "p",
+        "--field-out",
+        "f.parquet",
+        "--stats-out",
+        "s.json",
+    ]
     logs = {}
     for mode in ("off", sock):
         log = tmp_path / f"{'plain' if mode == 'off' else 'forked'}.log"
@@ -243,7 +298,9 @@ def test_without_a_reachable_worker_the_job_runs_in_process(tmp_path):
     listener.close()  # the socket file stays, nobody listens: as after a killed worker
     for worker in (str(stale), str(tmp_path / "absent.sock")):
         log = tmp_path / "plotly.log"
-        assert start_job(["plotly-js", "--out", "plotly.min.js"], tmp_path, worker, log).wait(timeout=60) == 0, log.read_text()
+        assert start_job(["plotly-js", "--out", "plotly.min.js"], tmp_path, worker, log).wait(timeout=60) == 0, (
+            log.read_text()
+        )
         assert (tmp_path / "plotly.min.js").stat().st_size > 1_000_000
         (tmp_path / "plotly.min.js").unlink()
 
@@ -252,10 +309,17 @@ def test_the_client_imports_none_of_the_numeric_libraries(tmp_path, worker):
     _, sock = worker
     code = (
         "import sys; from lidarfield.cli import main; status = main(['job', 'plotly-js', '--out', 'p.js']); "
-        "print(status, [m for m in ('numpy', 'pyarrow', 'pandas', 'matplotlib', 'open3d', 'yaml', 'argparse') if m in sys.modules])"
+        "print(status, [m for m in ('numpy', 'pyarrow', 'pandas', 'matplotlib', 'open3d', 'yaml', 'argparse') if m in "
+        "sys.modules])"
     )
-    proc = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, env={**os.environ, "LIDARFIELD_WORKER": sock},
-                          capture_output=True, text=True, timeout=60)  # fmt: skip
+    proc = subprocess.run(
+        [sys.executable, "-c", code],
+        cwd=tmp_path,
+        env={**os.environ, "LIDARFIELD_WORKER": sock},
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     assert proc.stdout.strip() == "0 []", proc.stderr
     assert (tmp_path / "p.js").stat().st_size > 1_000_000
 
@@ -265,7 +329,8 @@ def test_the_worker_stops_when_its_workflow_is_gone(tmp_path):
     # A parent that starts the worker and exits at once, as a killed Snakemake would.
     starter = (
         "import os, subprocess, sys; "
-        f"p = subprocess.Popen([sys.executable, '-m', 'lidarfield.runner.server', {str(path)!r}, '--parent-pid', str(os.getpid())]); "
+        f"p = subprocess.Popen([sys.executable, '-m', 'lidarfield.runner.server', {str(path)!r}, '--parent-pid', "
+        f"str(os.getpid())]); "
         "print(p.pid)"
     )
     pid = int(subprocess.run([sys.executable, "-c", starter], capture_output=True, text=True, check=True).stdout)
@@ -340,8 +405,16 @@ def test_figures_drawn_after_the_warm_up_are_those_of_a_plain_process(tmp_path, 
     figures = {}
     for mode in ("off", sock):
         out = tmp_path / ("plain" if mode == "off" else "forked")
-        argv = ["plot-stage", "--stage-dir", str(stages[1]), f"--previous={stages[0]}", "--plots", json.dumps({"top_k": 5}),
-                "--out", str(out)]  # fmt: skip
+        argv = [
+            "plot-stage",
+            "--stage-dir",
+            str(stages[1]),
+            f"--previous={stages[0]}",
+            "--plots",
+            json.dumps({"top_k": 5}),
+            "--out",
+            str(out),
+        ]
         assert start_job(argv, tmp_path, mode, tmp_path / f"{out.name}.log").wait(timeout=120) == 0
         figures[mode] = {p.name: p.read_bytes() for p in sorted(out.glob("*.png"))}
     assert len(figures["off"]) == 6

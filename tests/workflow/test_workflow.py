@@ -7,7 +7,6 @@ content-addressed stage ids must rerun exactly what a change touches.
 from __future__ import annotations
 
 import collections
-import json
 import os
 import re
 import shutil
@@ -103,7 +102,13 @@ def test_full_run_writes_the_study_level_and_a_page_per_pair(study_dir):
     assert len(pd.read_parquet(results / "study" / "hypotheses.parquet")) == 2 * 2
     assert sorted(pd.read_parquet(results / "study" / "pairs.parquet")["pair"]) == ["shift", "turn"]
     assert {p.name for p in (results / "study" / "figures").glob("*.png")} == {
-        "heatmap.png", "hypotheses.png", "all_pairs.png", "voxels_00.png", "voxels_01.png", "voxels_02.png"}
+        "heatmap.png",
+        "hypotheses.png",
+        "all_pairs.png",
+        "voxels_00.png",
+        "voxels_01.png",
+        "voxels_02.png",
+    }
     overview = (results / "report.html").read_text()
     for pair in ("shift", "turn"):
         assert f'href="{pair}/report.html"' in overview
@@ -118,17 +123,52 @@ def test_unchanged_config_plans_nothing(study_dir):
 
 def test_appending_a_hypothesis_plans_one_stage_per_pair(study_dir):
     jobs = planned_after(study_dir, lambda s: s["hypotheses"].append({"crop": {"max_range_m": 40.0}}))
-    assert jobs == {"mitigate": 2, "field": 2, "suggest": 2, "plot_stage": 2, "plot_pair": 2, "summary": 1, "study_voxels": 1, "study_tables": 1, "study_figures": 1, "pair_report": 2, "report": 1}
+    assert jobs == {
+        "mitigate": 2,
+        "field": 2,
+        "suggest": 2,
+        "plot_stage": 2,
+        "plot_pair": 2,
+        "summary": 1,
+        "study_voxels": 1,
+        "study_tables": 1,
+        "study_figures": 1,
+        "pair_report": 2,
+        "report": 1,
+    }
 
 
 def test_editing_hypothesis_two_replans_stage_two_only(study_dir):
     jobs = planned_after(study_dir, lambda s: s["hypotheses"].__setitem__(1, {"field_of_view": {"margin_deg": 1.0}}))
-    assert jobs == {"mitigate": 2, "field": 2, "suggest": 2, "plot_stage": 2, "plot_pair": 2, "summary": 1, "study_voxels": 1, "study_tables": 1, "study_figures": 1, "pair_report": 2, "report": 1}
+    assert jobs == {
+        "mitigate": 2,
+        "field": 2,
+        "suggest": 2,
+        "plot_stage": 2,
+        "plot_pair": 2,
+        "summary": 1,
+        "study_voxels": 1,
+        "study_tables": 1,
+        "study_figures": 1,
+        "pair_report": 2,
+        "report": 1,
+    }
 
 
 def test_editing_the_grid_replans_only_fields_plots_and_report(study_dir):
     jobs = planned_after(study_dir, lambda s: s["grid"].update(azimuth_bins=36))
-    assert jobs == {"field": 6, "suggest": 6, "plot_stage": 6, "plot_pair": 2, "summary": 1, "study_voxels": 1, "study_tables": 1, "study_figures": 1, "pair_report": 2, "report": 1}
+    assert jobs == {
+        "field": 6,
+        "suggest": 6,
+        "plot_stage": 6,
+        "plot_pair": 2,
+        "summary": 1,
+        "study_voxels": 1,
+        "study_tables": 1,
+        "study_figures": 1,
+        "pair_report": 2,
+        "report": 1,
+    }
 
 
 def test_the_outliers_candidates_neighbour_count_replans_the_pairs_one_search(study_dir):
@@ -163,13 +203,20 @@ def test_a_pair_left_out_of_plots_pairs_gets_its_figures_on_demand(study_dir):
             d.with_name("figures.away").rename(d)
         write_study(study_dir, tiny_study())
     assert "plot_stage" not in default  # the study itself does not draw them
-    assert re.search(r"^plot_stage\s+3\s*$", proc.stdout, re.M) and re.search(r"^pair_report\s+1\s*$", proc.stdout, re.M)
+    assert re.search(r"^plot_stage\s+3\s*$", proc.stdout, re.M) and re.search(
+        r"^pair_report\s+1\s*$", proc.stdout, re.M
+    )
 
 
 def test_asking_for_rematch_plans_rematch_jobs_and_what_reads_them(study_dir):
     # The field jobs do not depend on rematching: only the summary, pair figures and report rerun.
     planned = planned_after(study_dir, lambda s: s.update(rematch={"methods": ["icp"], "trials": 1}))
-    assert planned["rematch"] == 6 and planned["summary"] == 1 and planned["plot_pair"] == 2 and planned["pair_report"] == 2
+    assert (
+        planned["rematch"] == 6
+        and planned["summary"] == 1
+        and planned["plot_pair"] == 2
+        and planned["pair_report"] == 2
+    )
     assert not {"simulate", "register", "mitigate", "field", "suggest", "plot_stage"} & set(planned)
 
 
@@ -185,7 +232,19 @@ def test_editing_a_plugin_source_replans_its_stage_and_later(study_dir):
         jobs = planned_jobs(study_dir)
     finally:
         write_study(study_dir, tiny_study())
-    assert jobs == {"mitigate": 4, "field": 4, "suggest": 4, "plot_stage": 4, "plot_pair": 2, "summary": 1, "study_voxels": 1, "study_tables": 1, "study_figures": 1, "pair_report": 2, "report": 1}
+    assert jobs == {
+        "mitigate": 4,
+        "field": 4,
+        "suggest": 4,
+        "plot_stage": 4,
+        "plot_pair": 2,
+        "summary": 1,
+        "study_voxels": 1,
+        "study_tables": 1,
+        "study_figures": 1,
+        "pair_report": 2,
+        "report": 1,
+    }
 
 
 @pytest.mark.parametrize(
@@ -195,7 +254,10 @@ def test_editing_a_plugin_source_replans_its_stage_and_later(study_dir):
         (lambda s: s["grid"].update(azimuth_bins="many"), "grid.azimuth_bins"),
         (lambda s: s["hypotheses"].append({"wishful_thinking": {}}), "wishful_thinking"),
         (lambda s: s["pairs"].update(real={"scan1": "missing1.pcd", "scan2": "missing2.pcd"}), "missing1.pcd"),
-        (lambda s: s["pairs"]["shift"]["simulate"].update(sensor={"name": "x"}), "needs at least 'name' and 'elevation_deg'"),
+        (
+            lambda s: s["pairs"]["shift"]["simulate"].update(sensor={"name": "x"}),
+            "needs at least 'name' and 'elevation_deg'",
+        ),
     ],
     ids=["unknown-key", "wrong-type", "unknown-hypothesis", "missing-file", "sensor-without-elevations"],
 )
@@ -208,7 +270,11 @@ def test_invalid_config_is_one_line_before_any_job(tmp_path, edit, expected):
     assert proc.returncode == 2
     # Snakemake's own first line names the profile it reads; then the message alone, without
     # the stack frames of common.smk and the package.
-    printed = [line for line in (proc.stdout + proc.stderr).splitlines() if not line.startswith("Using workflow specific profile")]
+    printed = [
+        line
+        for line in (proc.stdout + proc.stderr).splitlines()
+        if not line.startswith("Using workflow specific profile")
+    ]
     assert len(printed) == 1 and printed[0].startswith(f"lidarfield: error: {tmp_path / 'study.yaml'}: "), printed
     assert expected in printed[0]
     assert not (tmp_path / "results").exists()
@@ -280,8 +346,12 @@ def test_two_runs_of_a_study_write_byte_identical_files(uninterrupted, tmp_path)
 def test_a_rerun_after_a_killed_run_and_unlock_gives_the_same_files(uninterrupted, tmp_path):
     write_study(tmp_path, tiny_study())
     command = [*SNAKEMAKE, "--directory", str(tmp_path), "--configfile", str(tmp_path / "study.yaml")]
-    run = subprocess.Popen([*command, "--cores", "1", SUMMARY_TARGET], stdout=subprocess.DEVNULL,
-                           stderr=subprocess.DEVNULL, start_new_session=True)
+    run = subprocess.Popen(
+        [*command, "--cores", "1", SUMMARY_TARGET],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+        start_new_session=True,
+    )
     try:  # kill -9 Snakemake and its running job once the first stage has started
         deadline = time.monotonic() + 600
         while not list(tmp_path.glob("results/*/stages/00-*")) and run.poll() is None and time.monotonic() < deadline:

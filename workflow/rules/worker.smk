@@ -15,9 +15,7 @@ USE_WORKER = (
 # Started importing now, while Snakemake plans: the run's first jobs need not wait for it. It
 # warms up for the figures when the study draws enough of them.
 if USE_WORKER:
-    launch.spawn(
-        RESULTS, figure_jobs=sum(len(STAGES[pair]) for pair in PLOT_PAIRS)
-    )
+    launch.spawn(RESULTS, figure_jobs=sum(len(STAGES[pair]) for pair in PLOT_PAIRS))
 
 
 onstart:

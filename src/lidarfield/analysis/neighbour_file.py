@@ -86,7 +86,8 @@ def carry_to_stage(
     (stage k-1's kept rows) and after it, for :func:`write_changes`."""
     if len(change_paths) != max(len(removed_paths) - 1, 0):
         raise ValueError(
-            f"stage {len(removed_paths)} needs the changes of the {max(len(removed_paths) - 1, 0)} stages before it, got {len(change_paths)}"
+            f"stage {len(removed_paths)} needs the changes of the {max(len(removed_paths) - 1, 0)} stages before it, "
+            f"got {len(change_paths)}"
         )
     removed = [read_table(path, required=("cloud", "x", "y", "z"))[0] for path in removed_paths]
     if any("row" not in table for table in removed):  # written before the column existed
@@ -112,7 +113,8 @@ def carry_to_stage(
         keep = removal_keep(table, cloud, len(distances), path)
         if np.count_nonzero(keep) != len(kept_xyz):
             raise InputError(
-                f"has {len(distances)} points in cloud {cloud} before stage {len(removed)}, not its {len(kept_xyz)} survivors "
+                f"has {len(distances)} points in cloud {cloud} before stage {len(removed)}, not its {len(kept_xyz)} "
+                f"survivors "
                 f"and {np.count_nonzero(~keep)} removed points",
                 neighbours_path,
             )

@@ -17,7 +17,8 @@ def add_parser(subparsers) -> None:
     p.add_argument(
         "--config",
         type=Path,
-        help="study YAML (validated; paths relative to the working directory): its plots section sets magnification, top_k, ...",
+        help="study YAML (validated; paths relative to the working directory): its plots section sets magnification, "
+        "top_k, ...",
     )
     p.set_defaults(func=run)
 

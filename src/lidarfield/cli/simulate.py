@@ -25,7 +25,8 @@ def add_parser(subparsers) -> None:
     p.add_argument(
         "--pose",
         required=True,
-        help="x,y,z,roll,pitch,yaw (m, rad): world-from-sensor at the sweep start (negative first value: --pose=-1,...)",
+        help="x,y,z,roll,pitch,yaw (m, rad): world-from-sensor at the sweep start (negative first value: "
+        "--pose=-1,...)",
     )
     p.add_argument("--out", required=True, help="output scan Parquet")
     p.add_argument("--time", type=float, default=0.0, help="scene time in seconds: places moving objects (default 0)")

@@ -37,7 +37,8 @@ class Params:
     azimuth_deg: tuple[float, float] | None = field(
         default=None,
         metadata=doc(
-            "[start, end] azimuth sector, counter-clockwise from +x, for both sensors (null: the models' sector, or 360 deg)"
+            "[start, end] azimuth sector, counter-clockwise from +x, for both sensors (null: the models' sector, or "
+            "360 deg)"
         ),
     )
     margin_deg: float = field(

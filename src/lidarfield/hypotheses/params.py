@@ -73,7 +73,7 @@ def params_to_dict(params) -> dict:
 
 
 def describe(cls: type) -> list[tuple[str, str, Any, str]]:
-    """(name, type label, default, doc) of each parameter, for help texts and the README."""
+    """(name, type label, default, doc) of each parameter, for help texts and the documentation."""
     hints = typing.get_type_hints(cls)
     return [
         (f.name, type_label(hints[f.name]), _plain(_default(f)), f.metadata.get("doc", ""))

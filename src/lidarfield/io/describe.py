@@ -63,7 +63,8 @@ def _describe_bag(path: Path) -> str:
     kind = "ROS 1 bag" if not reader.is2 else "ROS 2 bag" + (" folder" if path.is_dir() else "")
     total = sum(t.count for t in topics)
     lines = [
-        f"{path}: {kind}, {total:,} messages on {len(topics)} topics, {_span(reader.start_time * 1e-9, reader.end_time * 1e-9)}"
+        f"{path}: {kind}, {total:,} messages on {len(topics)} topics, "
+        f"{_span(reader.start_time * 1e-9, reader.end_time * 1e-9)}"
     ]
     roles = {**{msgtype: "poses" for msgtype in (*POSE_OF, TF)}, POINTCLOUD2: "scans"}
     order = {"poses": 0, "scans": 1, "": 2}  # the few pose topics stay in view
@@ -102,7 +103,8 @@ def _describe_velodyne(path: Path) -> str:
     scan = read_scan(f"{path}#0") if capture.rotations else None
     lines = [
         f"{path}: Velodyne capture, {capture.model}, {capture.return_mode} return(s)",
-        f"packets: {capture.data_packets:,} data, {capture.other_packets:,} other; {capture.rotations} whole rotation(s)"
+        f"packets: {capture.data_packets:,} data, {capture.other_packets:,} other; {capture.rotations} whole "
+        f"rotation(s)"
         + (f" (#0..#{capture.rotations - 1})" if capture.rotations else "")
         + f", {capture.dropped_packets} data packets after the last one (a partial rotation) not used",
     ]

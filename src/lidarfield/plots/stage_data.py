@@ -49,7 +49,8 @@ class VectorField:
             return np.abs(np.asarray(self.columns["z"], dtype=np.float64)) >= self.z_min
 
     def faded_label(self) -> str:
-        return f"faded: |z| < {self.z_min:g}, within sampling noise ({np.count_nonzero(~self.significant)} of {len(self.magnitude)})"
+        faded = np.count_nonzero(~self.significant)
+        return f"faded: |z| < {self.z_min:g}, within sampling noise ({faded} of {len(self.magnitude)})"
 
 
 @dataclass

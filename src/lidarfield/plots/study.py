@@ -162,7 +162,8 @@ def hypotheses_figure(hypotheses):
         ax = fig.add_subplot(1, 3, i + 1)
         _distribution(ax, [(label, value(rows).to_numpy(dtype=float)) for label, rows in groups], ylabel, zero)
     fig.suptitle(
-        f"what each hypothesis changed, over {n_pairs} pairs (box: quartiles, whiskers: 5-95 %, dots: pairs; below the red line: smaller)",
+        f"what each hypothesis changed, over {n_pairs} pairs (box: quartiles, whiskers: 5-95 %, dots: pairs; below "
+        f"the red line: smaller)",
         fontsize=10,
     )
     return fig

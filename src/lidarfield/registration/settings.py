@@ -22,7 +22,7 @@ MATCHING_METHODS = ("icp", "icp_point_to_plane", "gicp", "ndt")
 METHODS = FIXED_METHODS + MATCHING_METHODS
 
 # Defaults for automotive scans (10^4..10^5 points, scenes tens of metres across, sensors
-# moving under a metre or so between scans once the guess is applied). See README.
+# moving under a metre or so between scans once the guess is applied); docs/registration.md explains each.
 DEFAULTS = {
     "voxel_m": 0.2,  # downsampling of both clouds (NDT: of scan 2 only; it models scan 1 itself)
     "min_range_m": 0.0,  # drop points nearer than this to their sensor (e.g. the ego vehicle)

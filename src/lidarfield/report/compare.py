@@ -97,8 +97,10 @@ def compare_studies(results_a: str | Path, results_b: str | Path, out_html: str 
     names = list(pairs_a) + [n for n in pairs_b if n not in pairs_a]
     body = [
         "<h1>lidarfield: two studies compared</h1>",
-        f"<p>A: <code>{esc(results_a)}</code> ({len(pairs_a)} pairs)<br>B: <code>{esc(results_b)}</code> ({len(pairs_b)} pairs)</p>",
-        '<p class="note">Stages are matched by level. Δ = B − A; green: B smaller (more of the discrepancy explained), red: B larger.</p>',
+        f"<p>A: <code>{esc(results_a)}</code> ({len(pairs_a)} pairs)<br>B: <code>{esc(results_b)}</code> "
+        f"({len(pairs_b)} pairs)</p>",
+        '<p class="note">Stages are matched by level. Δ = B − A; green: B smaller (more of the discrepancy '
+        "explained), red: B larger.</p>",
         "<ul>"
         + "".join(
             f'<li><a href="#pair-{esc(n)}">{esc(n)}</a>'

@@ -167,8 +167,10 @@ def ranking_table(pairs, stage_figures: set[str]) -> str:
 def ranking_parts(tables: StudyTables, stage_figures: set[str]) -> list[str]:
     return [
         "<h2>Pairs ranked by what remains at the last stage</h2>",
-        '<p class="note">Ranked by the p95 magnitude of the last stage, largest first (<code>study/pairs.parquet</code>). '
-        "A pair's name opens its page: its table, its stage-by-stage figures and, where drawn (<code>plots.pairs</code>), "
+        '<p class="note">Ranked by the p95 magnitude of the last stage, largest first '
+        "(<code>study/pairs.parquet</code>). "
+        "A pair's name opens its page: its table, its stage-by-stage figures and, where drawn "
+        "(<code>plots.pairs</code>), "
         "its stage figures and 3-D views. Rows in red: the registration did not converge or warned.</p>",
         ranking_table(tables.pairs, stage_figures),
     ]

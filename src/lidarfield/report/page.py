@@ -12,7 +12,8 @@ from pathlib import Path
 from ..plots.png import compact_file, compact_png
 
 STYLE = """
-body { font-family: system-ui, -apple-system, "Segoe UI", sans-serif; margin: 1.5em auto; max-width: 1800px; padding: 0 1.5em; color: #222; }
+body { font-family: system-ui, -apple-system, "Segoe UI", sans-serif; margin: 1.5em auto; max-width: 1800px;
+       padding: 0 1.5em; color: #222; }
 h1 { margin-bottom: 0.2em; } h2 { border-bottom: 1px solid #ccc; padding-bottom: 0.2em; margin-top: 1.6em; }
 .table-box { max-width: 100%; max-height: 90vh; overflow: auto; margin: 0.6em 0; }
 table { border-collapse: collapse; font-size: 0.85em; }
@@ -26,7 +27,8 @@ pre { background: #f7f7f7; border: 1px solid #ddd; padding: 0.8em; overflow-x: a
 .figures { display: flex; flex-direction: column; gap: 14px; align-items: flex-start; }
 .figures.side-by-side { flex-direction: row; }
 .figures.side-by-side > figure { flex: 1 1 0; min-width: 0; }
-figure { margin: 0; width: 100%; } figure img { display: block; width: 100%; height: auto; border: 1px solid #ddd; box-sizing: border-box; }
+figure { margin: 0; width: 100%; }
+figure img { display: block; width: 100%; height: auto; border: 1px solid #ddd; box-sizing: border-box; }
 figcaption { font-size: 0.8em; color: #555; }
 figure.linked { width: auto; border: 1px dashed #bbb; padding: 4px 8px; font-size: 0.9em; }
 details > summary { cursor: pointer; font-size: 1.15em; font-weight: 600; margin: 0.6em 0; }

@@ -150,15 +150,20 @@ def not_drawn_note(on_demand: str | None) -> str:
         if on_demand
         else "<code>lidarfield plot STAGE_DIR --out STAGE_DIR/figures</code> draws a stage's figures"
     )
-    return f'<p class="note">The figures of this pair are not drawn (the config\'s <code>plots.pairs</code> leaves it out): {how}.</p>'
+    return (
+        f'<p class="note">The figures of this pair are not drawn (the config\'s <code>plots.pairs</code> leaves it '
+        f"out): {how}.</p>"
+    )
 
 
 def header_parts(name: str, stage_dirs: list[Path], overview_href: str | None) -> list:
     parts = [f'<nav><a href="{esc(overview_href)}">← study overview</a></nav>'] if overview_href else []
     return parts + [
         f"<h1>pair {esc(name)}</h1>",
-        f'<p class="note">lidarfield {esc(__version__)} · {len(stage_dirs)} stage(s). Vectors run from the mean of cloud 1 '
-        "to the mean of cloud 2 in each voxel; a hypothesis that explains part of the discrepancy shrinks the field and "
+        f'<p class="note">lidarfield {esc(__version__)} · {len(stage_dirs)} stage(s). Vectors run from the mean of '
+        f"cloud 1 "
+        "to the mean of cloud 2 in each voxel; a hypothesis that explains part of the discrepancy shrinks the field "
+        "and "
         "breaks its pattern.</p>",
         Note(),
     ]

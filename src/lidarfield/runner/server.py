@@ -9,8 +9,9 @@ job ...`` in-process, so a crash or a kill stays in its job. It reports the chil
 
 The workflow starts one worker per run while Snakemake reads the Snakefile, points the jobs
 at it when the run starts executing locally, with its socket in the results folder named after
-the Snakemake process, and stops it when the run ends (:mod:`lidarfield.runner.launch`). The worker also exits when the process that started it is gone, or after
-``idle_timeout_s`` without a job. Its log, with each job's CPU time and peak memory (which
+the Snakemake process, and stops it when the run ends (:mod:`lidarfield.runner.launch`). The
+worker also exits when the process that started it is gone, or after ``idle_timeout_s``
+without a job. Its log, with each job's CPU time and peak memory (which
 Snakemake's benchmark files cannot see), is ``results/logs/worker.log``. What only later jobs
 need (figures, pages) it imports between jobs, in steps, then draws a few figures once
 (``runner.warm_up``): see ``PRELOAD_BETWEEN_JOBS``.

@@ -35,7 +35,8 @@ def cloud_topic(reader, path: Path, topic: str | None) -> str:
         if not clouds:
             raise InputError(f"the bag holds no sensor_msgs/PointCloud2 topic; its topics: {listing}", path)
         raise InputError(
-            f"the bag holds {len(clouds)} PointCloud2 topics: name one ({path}#/TOPIC#k, or topic: in a sequence); topics: {listing}",
+            f"the bag holds {len(clouds)} PointCloud2 topics: name one ({path}#/TOPIC#k, or topic: in a sequence); "
+            f"topics: {listing}",
             path,
         )
     if topic not in clouds:

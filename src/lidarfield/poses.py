@@ -168,3 +168,11 @@ def weighted_rigid_transform(
     d = np.sign(np.linalg.det(vt.T @ u.T)) or 1.0
     rotation = vt.T @ np.diag([1.0, 1.0, d]) @ u.T
     return rotation, centroid_target - rotation @ centroid_source
+
+
+def poses_of_attached_frame(poses: np.ndarray, extrinsic: np.ndarray) -> np.ndarray:
+    """Poses of a frame rigidly attached to the one ``poses`` (M, 4, 4) describe, at
+    ``extrinsic`` (its pose in that frame): ``inv(E) @ P @ E``, the world being the attached
+    frame at the poses' origin. KITTI's lidar poses are its camera poses with E = Tr. The exact
+    inverse, not the transpose: a dataset's E is often rigid to 1e-7 only."""
+    return np.linalg.inv(extrinsic) @ np.asarray(poses) @ extrinsic

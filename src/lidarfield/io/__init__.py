@@ -61,6 +61,9 @@ FORMATS: dict[str, ScanFormat] = {
         ScanFormat("ouster", (".osf",), "formats.ouster", writable=False, container=True),
         ScanFormat("velodyne", (), "formats.velodyne", writable=False, container=True, sensor_decodes=True),
         ScanFormat("rosbag", (".bag", ".mcap", ".db3"), "rosbag.reader", writable=False, container=True, topics=True),
+        # dataset sweeps (lidarfield.datasets): named by the dataset reader, not by extension
+        ScanFormat("av2", (".feather",), "formats.av2", writable=False),
+        ScanFormat("nuscenes", (), "formats.nuscenes_bin", writable=False),
     )
 }
 
@@ -130,14 +133,16 @@ def read_scan(
     format: str | None = None,
     sensor: str | dict | SensorModel | None = None,
     poses: dict | None = None,
+    options: dict | None = None,
 ) -> Scan:
     """Read one scan from ``path``, ``path#k`` (scan k of a container file, 0-based) or, for a
     ROS bag, ``path#/topic#k``.
 
     ``sensor`` (a preset name, a YAML file, a dict or a model) is attached to the scan and
     overrides a model stored in the file. ``poses`` (ROS bags only: ``{"topic": ..., "frame":
-    ...}``) gives the scan the pose of that topic at its header stamp. Raises ``InputError``
-    naming the file and the problem.
+    ...}``) gives the scan the pose of that topic at its header stamp. ``options`` are the
+    format reader's own keyword arguments (an Argoverse 2 sweep: its frame and lidars). Raises
+    ``InputError`` naming the file and the problem.
     """
     reference = split_reference(reference)
     path = reference.path
@@ -152,10 +157,19 @@ def read_scan(
     if poses is not None and not fmt.topics:
         raise InputError(f"poses from a topic need a ROS bag, not a {fmt.name} file", path)
     bag = (reference.topic, poses) if fmt.topics else ()
-    scan = fmt.function("read")(path, index, model, *bag)
+    reader = fmt.function("read")
+    if options and not set(options) <= set(_parameters(reader)):
+        raise InputError(f"the {fmt.name} reader takes no option(s) {sorted(options)}", path)
+    scan = reader(path, index, model, *bag, **(options or {}))
     if model is not None:
         scan.sensor = model
     return scan
+
+
+def _parameters(function) -> list[str]:
+    import inspect  # only for readers given options: most jobs never need it
+
+    return list(inspect.signature(function).parameters)
 
 
 def _checked_format(reference: ScanReference, format: str | None) -> ScanFormat:

@@ -52,9 +52,13 @@ def simulated_scan(spec: dict) -> Scan:
 
 def recorded_scan(spec: dict) -> Scan:
     """Read one recorded scan as a :class:`ScanSpec` of kind ``recorded`` describes it."""
-    scan = read_scan(spec["path"], format=spec["format"], sensor=spec["sensor"], poses=spec.get("poses"))
+    scan = read_scan(
+        spec["path"], format=spec["format"], sensor=spec["sensor"], poses=spec.get("poses"), options=spec.get("options")
+    )
     if spec["pose"] is not None:
         scan.pose = np.asarray(spec["pose"], dtype=float)
+    if spec.get("stamp_s") is not None:
+        scan.stamp_s = spec["stamp_s"]
     return scan
 
 

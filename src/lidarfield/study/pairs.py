@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import ConfigError, LidarfieldError
-from ..poses import pose_from_xyzrpy
+from ..poses import pose_from_xyzrpy, poses_of_attached_frame
 
 
 @dataclass(frozen=True)
@@ -107,13 +107,27 @@ def _simulated_scan(scan_id: str, sim: dict, pose, time_s: float, velocity, angu
     return ScanSpec(scan_id, "simulated", spec)
 
 
-def recorded_scan_spec(path: str, format: str | None = None, sensor=None, pose=None, poses: dict | None = None) -> dict:
+def recorded_scan_spec(
+    path: str,
+    format: str | None = None,
+    sensor=None,
+    pose=None,
+    poses: dict | None = None,
+    options: dict | None = None,
+    stamp_s: float | None = None,
+) -> dict:
     """The spec of a recorded scan, as the ingest job reads it and stage ids hash it: the one
     place it is built, for a study's pairs and for ``lidarfield run`` (equal inputs, equal ids).
-    ``poses`` ({topic, frame}) takes the scan's pose from a topic of its bag when it is read."""
+    ``poses`` ({topic, frame}) takes the scan's pose from a topic of its bag when it is read;
+    ``options`` are the format reader's (a dataset's sweep: its frame and lidars); ``stamp_s``
+    the scan's time where its dataset gives it. Keys that are not given stay out of the spec."""
     spec = {"path": path, "format": format, "sensor": sensor, "pose": pose}
     if isinstance(poses, dict):
         spec["poses"] = poses
+    if options:
+        spec["options"] = options
+    if stamp_s is not None:
+        spec["stamp_s"] = float(stamp_s)
     return spec
 
 
@@ -158,9 +172,12 @@ def _checked_simulation(sim: dict, key: str, base_dir: Path) -> dict:
 
 def _sequence_pairs(name: str, entry: dict, base_dir: Path) -> list[PairSpec]:
     key = f"sequences.{name}"
-    scans = (
-        _simulated_sequence(name, entry, base_dir) if "simulate" in entry else _recorded_sequence(name, entry, base_dir)
-    )
+    if "simulate" in entry:
+        scans = _simulated_sequence(name, entry, base_dir)
+    elif "dataset" in entry:
+        scans = _dataset_sequence(name, entry, base_dir)
+    else:
+        scans = _recorded_sequence(name, entry, base_dir)
     register = _register(entry["register"], key, base_dir)
     stride = entry["stride"]
     return [
@@ -191,21 +208,79 @@ def _recorded_sequence(name: str, entry: dict, base_dir: Path) -> list[ScanSpec]
     if isinstance(scans, list):
         files = [_existing_file(s, key, base_dir) for s in scans]
     elif any(ch in scans for ch in "*?["):
-        files = sorted(str(Path(p).relative_to(base_dir)) for p in glob.glob(str(base_dir / scans)))
+        matches = glob.glob(str(base_dir / scans))  # an absolute pattern stays absolute
+        files = sorted(p if Path(scans).is_absolute() else str(Path(p).relative_to(base_dir)) for p in matches)
         if not files:
             raise ConfigError(f"{key}: no file matches {scans!r} (relative to {base_dir})")
     else:
         _existing_file(scans, key, base_dir)
         container = scans if entry.get("topic") is None else f"{scans}#{entry['topic']}"
         files = [f"{container}#{k}" for k in range(scan_count(base_dir / container, sensor=entry.get("sensor")))]
-    last = len(files) - 1 if entry["last"] is None else entry["last"]
-    if not entry["first"] <= last < len(files):
-        raise ConfigError(f"sequences.{name}: first/last ({entry['first']}, {last}) outside the {len(files)} scans")
+    first, last = _first_last(name, entry, len(files))
     poses = None
     if isinstance(entry.get("poses"), str):
         _existing_file(entry["poses"], f"sequences.{name}.poses", base_dir)
         poses = read_kitti_poses(base_dir / entry["poses"], expected=len(files))
+        if entry.get("extrinsic") is not None:
+            extrinsic = _extrinsic(entry["extrinsic"], f"sequences.{name}.extrinsic", base_dir)
+            poses = poses_of_attached_frame(poses, extrinsic)
     return [
         _recorded_scan(f"{name}-s{k:03d}", entry, files[k], None if poses is None else poses[k].tolist())
-        for k in range(entry["first"], last + 1)
+        for k in range(first, last + 1)
     ]
+
+
+def _dataset_sequence(name: str, entry: dict, base_dir: Path) -> list[ScanSpec]:
+    """The scans of a dataset sequence (:mod:`lidarfield.datasets`), read from its index."""
+    from ..datasets import read_dataset
+
+    key = f"sequences.{name}"
+    try:
+        dataset = read_dataset(entry["dataset"], base_dir)
+    except LidarfieldError as e:
+        raise type(e)(f"{key}.{e}" if not e.path else str(e)) from None
+    sensor = entry.get("sensor") if entry.get("sensor") is not None else dataset.sensor
+    _sensor(sensor, key, base_dir)
+    first, last = _first_last(name, entry, len(dataset.scans))
+    scans = dataset.scans[first : last + 1]
+    if _needs_poses(entry["register"]) and any(scan.pose is None for scan in scans):
+        raise ConfigError(
+            f"{key}: register {entry['register']!r} needs the scans' poses, and {dataset.what} has none; "
+            "register by scan matching instead (e.g. register: {method: gicp})"
+        )
+    return [
+        ScanSpec(
+            f"{name}-s{k:03d}",
+            "recorded",
+            recorded_scan_spec(scan.path, scan.format, sensor, scan.pose, None, scan.options, scan.stamp_s),
+        )
+        for k, scan in enumerate(scans, start=first)
+    ]
+
+
+def _needs_poses(register) -> bool:
+    """Whether a register setting uses the scans' poses (truth, or a scan matching guessed from them)."""
+    return register == "truth" or isinstance(register, dict) and register.get("guess") == "truth"
+
+
+def _first_last(name: str, entry: dict, count: int) -> tuple[int, int]:
+    """A sequence's ``first`` and ``last`` scans (inclusive), checked against its ``count``."""
+    last = count - 1 if entry["last"] is None else entry["last"]
+    if not entry["first"] <= last < count:
+        raise ConfigError(f"sequences.{name}: first/last ({entry['first']}, {last}) outside the {count} scans")
+    return entry["first"], last
+
+
+def _extrinsic(setting, key: str, base_dir: Path) -> np.ndarray:
+    """The lidar's pose in the frame of a sequence's poses: a matrix file, a KITTI calib.txt's
+    Tr, or x, y, z, roll, pitch, yaw."""
+    from ..datasets.kitti import read_calib
+    from ..io.pose_files import read_pose
+
+    if not isinstance(setting, str):
+        return pose_from_xyzrpy(setting)
+    _existing_file(setting, key, base_dir)
+    path = base_dir / setting
+    if any(line.lstrip().startswith("Tr:") for line in path.read_text(errors="replace").splitlines()):
+        return read_calib(path)
+    return read_pose(path)

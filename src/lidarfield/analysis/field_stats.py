@@ -23,6 +23,7 @@ import math
 
 import numpy as np
 
+from ..defaults import default
 from ..field.grid import FieldSettings
 from ..field.kernel import field_from_voxel_ids
 from ..pair import RegisteredPair
@@ -87,7 +88,7 @@ def field_statistics(columns: dict[str, np.ndarray], settings: FieldSettings | N
     stats["rigid_rotation_deg"] = float(np.degrees(rotation_angle(rotation)))
     stats["rigid_energy_share"] = rigid_energy_share(mean2, mean1, weight, rotation, translation)
     stats["mean_resultant_length"] = mean_resultant_length(uvw, weight)
-    z_min = 3.0 if settings is None else settings.z_min
+    z_min = default("grid", "z_min") if settings is None else settings.z_min
     significant = int(np.count_nonzero(np.abs(columns["z"][valid]) >= z_min))
     stats["voxels_significant"] = significant
     stats["share_significant"] = significant / magnitude.size if magnitude.size else math.nan

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..defaults import default
 from ..errors import ConfigError, InputError
 from ..yaml_file import read_yaml
 
@@ -23,6 +24,18 @@ _GRID_FLAGS = {
     "max_component_m": "max_component_m",
     "z_min": "z_min",
 }
+
+
+def _default(key: str) -> str:
+    """The schema's default of a grid key, as the help shows it."""
+    value = default("grid", key)
+    return (
+        " ".join(f"{v:g}" for v in value)
+        if isinstance(value, list)
+        else f"{value:g}"
+        if isinstance(value, float)
+        else str(value)
+    )
 
 
 def add_parser(subparsers) -> None:
@@ -45,20 +58,32 @@ def add_parser(subparsers) -> None:
     )
     p.add_argument("--format", help="scan file format of both scans (default: from the extension)")
     p.add_argument("--grid", type=Path, help="YAML with the grid keys (top level or under 'grid:')")
-    p.add_argument("--kind", choices=("spherical", "cartesian"), help="grid kind (default spherical)")
-    p.add_argument("--azimuth-bins", type=int, help="azimuth bins over 360 deg (default 36)")
-    p.add_argument("--azimuth-offset-deg", type=float, help="start of azimuth bin 0 (default 0)")
+    p.add_argument("--kind", choices=("spherical", "cartesian"), help=f"grid kind (default {_default('kind')})")
+    p.add_argument("--azimuth-bins", type=int, help=f"azimuth bins over 360 deg (default {_default('azimuth_bins')})")
     p.add_argument(
-        "--elevation-deg", type=float, nargs=2, metavar=("LO", "HI"), help="elevation range (default -20 20)"
+        "--azimuth-offset-deg", type=float, help=f"start of azimuth bin 0 (default {_default('azimuth_offset_deg')})"
     )
-    p.add_argument("--elevation-bins", type=int, help="elevation bins (default 5)")
-    p.add_argument("--range-edges-m", type=float, nargs="+", metavar="EDGE", help="range shell edges (default: none)")
-    p.add_argument("--cell-m", type=float, help="Cartesian cell size (default 1)")
-    p.add_argument("--min-points", type=int, help="points per cloud for a valid vector (default 30)")
+    p.add_argument(
+        "--elevation-deg",
+        type=float,
+        nargs=2,
+        metavar=("LO", "HI"),
+        help=f"elevation range (default {_default('elevation_deg')})",
+    )
+    p.add_argument("--elevation-bins", type=int, help=f"elevation bins (default {_default('elevation_bins')})")
+    p.add_argument(
+        "--range-edges-m", type=float, nargs="+", metavar="EDGE", help="range shell edges (default: none, one shell)"
+    )
+    p.add_argument("--cell-m", type=float, help=f"Cartesian cell size, m (default {_default('cell_m')})")
+    p.add_argument(
+        "--min-points", type=int, help=f"points per cloud for a valid vector (default {_default('min_points')})"
+    )
     p.add_argument(
         "--max-component-m", type=float, help="invalidate vectors with a larger |u|, |v| or |w| (default off)"
     )
-    p.add_argument("--z-min", type=float, help="a vector is significant when |z| >= this (default 3)")
+    p.add_argument(
+        "--z-min", type=float, help=f"a vector is significant when |z| >= this (default {_default('z_min')})"
+    )
     p.set_defaults(func=run)
 
 

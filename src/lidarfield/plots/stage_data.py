@@ -12,6 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..defaults import default
 from ..errors import InputError
 from ..io.parquet_table import read_table
 from ..layout import level_of
@@ -38,7 +39,7 @@ class VectorField:
 
     @property
     def z_min(self) -> float:
-        return float(self.meta.get("z_min") or 3.0)
+        return float(self.meta.get("z_min") or default("grid", "z_min"))  # a field written before z_min was stored
 
     @property
     def significant(self) -> np.ndarray:

@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
+from ..registration.settings import DEFAULTS
 
 _PARAMETER_FLAGS = ("voxel_m", "max_correspondence_m", "max_iterations", "min_fitness", "min_range_m")
 
@@ -47,11 +48,21 @@ def add_parser(subparsers) -> None:
     p.add_argument("--pose2", help="world-from-sensor pose of scan 2 (same forms)")
     p.add_argument("--format", help="scan file format of both scans (default: from the extension)")
     p.add_argument("--sensor", help="sensor model of both scans (preset name or YAML)")
-    p.add_argument("--voxel-m", type=float, help="downsampling voxel (default 0.2)")
-    p.add_argument("--max-correspondence-m", type=float, help="ICP/GICP pair distance limit (default 1.0)")
-    p.add_argument("--max-iterations", type=int, help="iterations per stage (default 50)")
-    p.add_argument("--min-fitness", type=float, help="fitness below which it is not converged (default 0.5)")
-    p.add_argument("--min-range-m", type=float, help="ignore points nearer their sensor (default 0)")
+    p.add_argument("--voxel-m", type=float, help=f"downsampling voxel, m (default {DEFAULTS['voxel_m']:g})")
+    p.add_argument(
+        "--max-correspondence-m",
+        type=float,
+        help=f"ICP/GICP pair distance limit, m (default {DEFAULTS['max_correspondence_m']:g})",
+    )
+    p.add_argument("--max-iterations", type=int, help=f"iterations per stage (default {DEFAULTS['max_iterations']})")
+    p.add_argument(
+        "--min-fitness",
+        type=float,
+        help=f"fitness below which it is not converged (default {DEFAULTS['min_fitness']:g})",
+    )
+    p.add_argument(
+        "--min-range-m", type=float, help=f"ignore points nearer their sensor, m (default {DEFAULTS['min_range_m']:g})"
+    )
     p.set_defaults(func=run)
 
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from ..defaults import default
 from ..errors import ConfigError
 
 
@@ -30,12 +31,21 @@ def add_parser(subparsers) -> None:
     )
     p.add_argument("--out", required=True, help="output scan Parquet")
     p.add_argument("--time", type=float, default=0.0, help="scene time in seconds: places moving objects (default 0)")
-    p.add_argument("--seed", type=int, default=0, help="seed of the noise and dropout (default 0)")
+    seed, noise, dropout = (default("simulation_options", key) for key in ("seed", "range_noise_m", "dropout"))
+    p.add_argument("--seed", type=int, default=seed, help=f"seed of the noise and dropout (default {seed})")
     p.add_argument(
-        "--range-noise", type=float, default=0.0, metavar="M", help="Gaussian range noise sigma, metres (default 0)"
+        "--range-noise",
+        type=float,
+        default=noise,
+        metavar="M",
+        help=f"Gaussian range noise sigma, m (default {noise:g})",
     )
     p.add_argument(
-        "--dropout", type=float, default=0.0, metavar="P", help="probability of losing each return (default 0)"
+        "--dropout",
+        type=float,
+        default=dropout,
+        metavar="P",
+        help=f"probability of losing each return (default {dropout:g})",
     )
     p.add_argument(
         "--max-range",

@@ -24,7 +24,9 @@ import importlib.util
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from ..errors import ConfigError
+import numpy as np
+
+from ..errors import ConfigError, LidarfieldError
 
 # format name -> module of this package
 FORMATS = {"kitti": "kitti", "av2": "av2", "nuscenes": "nuscenes"}
@@ -64,7 +66,13 @@ def read_dataset(settings: dict, base_dir: str | Path = ".") -> DatasetSequence:
 def describe_dataset(path: str | Path) -> str | None:
     """What a dataset folder holds (``lidarfield info``); None when ``path`` is no dataset's."""
     for module in FORMATS.values():
-        text = importlib.import_module(f".{module}", __name__).describe(Path(path))
+        try:
+            reader = importlib.import_module(f".{module}", __name__)
+        except ModuleNotFoundError as e:
+            if e.name != f"{__name__}.{module}":
+                raise
+            continue  # a format this installation does not have yet
+        text = reader.describe(Path(path))
         if text is not None:
             return text
     return None
@@ -102,7 +110,12 @@ def _reader(name: str, base_dir: Path):
 
 def _checked_plugin(reader, name: str):
     def read_index(settings: dict, base_dir: Path) -> DatasetSequence:
-        sequence = reader(settings, base_dir)
+        try:
+            sequence = reader(settings, base_dir)
+        except LidarfieldError:
+            raise  # the plugin's own message, naming its file
+        except Exception as e:  # the plugin's own code: any error, reported with its name
+            raise ConfigError(f"dataset.format: the reader plugin {name} failed: {type(e).__name__}: {e}") from None
         if not isinstance(sequence, DatasetSequence):
             scans = list(sequence) if isinstance(sequence, (list, tuple)) else None
             if scans is None or not all(isinstance(s, DatasetScan) for s in scans):
@@ -111,6 +124,18 @@ def _checked_plugin(reader, name: str):
                     "not a DatasetSequence (or a list of DatasetScan)"
                 )
             sequence = DatasetSequence(scans, None, name)
+        wrong = next((s for s in sequence.scans if not isinstance(s, DatasetScan)), None)
+        if wrong is not None:
+            raise ConfigError(
+                f"dataset.format: the reader plugin {name} returned a scan of type {type(wrong).__name__}, "
+                "not a DatasetScan"
+            )
+        for scan in sequence.scans:
+            if scan.pose is not None and np.shape(scan.pose) != (4, 4):
+                raise ConfigError(
+                    f"dataset.format: the reader plugin {name} gave {scan.path} a pose of shape "
+                    f"{np.shape(scan.pose)}, not 4x4 (world-from-lidar)"
+                )
         return sequence
 
     return read_index

@@ -67,6 +67,16 @@ def _uniform(first_deg: float, step_deg: float, n: int) -> tuple[float, ...]:
 # Elevation tables from the manufacturers' manuals. The HDL-32E and the HDL-64E upper block are
 # spaced in exact thirds of a degree (-30.67 = -92/3, +10.67 = 32/3, -8.33 = -25/3).
 _HDL32_ELEVATION = _uniform(-92.0 / 3.0, 4.0 / 3.0, 32)
+# Velodyne VLP-32C: the user manual's vertical angle of each laser ID 0..31, in laser-ID order
+# (the firing order, not sorted: ring k is laser ID k, as Argoverse 2's laser_number counts
+# them); -25..+15 deg, beams 1/3 deg apart near the horizon and sparser away from it.
+_VLP32C_ELEVATION = tuple(
+    float(a)
+    for a in """
+    -25 -1 -1.667 -15.639 -11.31 0 -0.667 -8.843 -7.254 0.333 -0.333 -6.148 -5.333 1.333 0.667 -4
+    -4.667 1.667 1 -3.667 -3.333 3.333 2.333 -2.667 -3 7 4.667 -2.333 -2 15 10.333 -1.333
+    """.split()
+)
 PRESETS: dict[str, SensorModel] = {
     # The source paper's simulated sensor: 80 channels 0.4 deg apart from -22 deg upward,
     # whole scan at one instant.
@@ -86,6 +96,10 @@ PRESETS: dict[str, SensorModel] = {
         120.0,
         10.0,
     ),
+    # Velodyne VLP-32C: 32 channels, -25..+15 deg at the datasheet's non-uniform angles (ring =
+    # laser ID), 200 m, 0.2 deg at 10 Hz; the datasheet gives no minimum range, so none is set.
+    # Argoverse 2's two roof lidars are VLP-32Cs.
+    "vlp32c": SensorModel("vlp32c", _VLP32C_ELEVATION, 0.2, 0.0, 200.0, 10.0),
     # Ouster OS1-128 (rev 7): 128 channels uniform over -22.5..+22.5 deg, 1024 columns at 10 Hz.
     "os1-128": SensorModel("os1-128", _uniform(-22.5, 45.0 / 127.0, 128), 360.0 / 1024, 0.3, 200.0, 10.0),
 }

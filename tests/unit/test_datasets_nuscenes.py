@@ -271,3 +271,38 @@ def test_info_describes_the_folder(nuscenes_folder):
     root, _ = nuscenes_folder
     assert describe(root) == f"{root}: nuScenes dataset\n  {VERSION}: 2 scenes, 4 key frames: scene-0061, scene-0103"
     assert describe(root / VERSION) is None and describe(root / "samples") is None
+
+
+def test_big_tables_decoded_in_pieces_give_the_same_scans(nuscenes_folder, monkeypatch):
+    from lidarfield.datasets import nuscenes
+
+    root, sweeps = nuscenes_folder
+    whole = read_dataset(_dataset(root, "scene-0103"))
+    monkeypatch.setattr(nuscenes, "_PIECE", 300)  # every table but sensor.json is 'big'
+    decoded, load_in_pieces = [], nuscenes._load_in_pieces
+    monkeypatch.setattr(nuscenes, "_load_in_pieces", lambda *a: decoded.append(load_in_pieces(*a)) or decoded[-1])
+    nuscenes._cached_index.cache_clear()
+    pieces = read_dataset(_dataset(root, "scene-0103"))
+    nuscenes._cached_index.cache_clear()
+    assert len(decoded) == 2 and all(rows for rows in decoded)  # sample_data and ego_pose, in pieces
+    assert pieces == whole and len(pieces.scans) == 4
+
+
+@pytest.mark.parametrize(
+    "rows",
+    [
+        [{"token": f"t{k}", "name": "}{" * k, "n": [k, k + 1]} for k in range(40)],  # braces in strings
+        [{"token": f"t{k}", "nested": {"k": {"deeper": k}}} for k in range(40)],  # nested objects
+    ],
+)
+def test_pieces_that_do_not_decode_fall_back_to_the_whole_table(tmp_path, monkeypatch, rows):
+    from lidarfield.datasets import nuscenes
+
+    monkeypatch.setattr(nuscenes, "_PIECE", 64)
+    path = tmp_path / "table.json"
+    path.write_text(json.dumps(rows, indent=1))
+    kept = nuscenes._load(path, lambda r: None if "token" in r and not r["token"].endswith("7") else r)
+    assert kept == [r for r in rows if r["token"].endswith("7")]
+    path.write_text(json.dumps(rows)[:-40])
+    with pytest.raises(ConfigError, match="table.json: dataset: not a JSON table"):
+        nuscenes._load(path, lambda r: r)

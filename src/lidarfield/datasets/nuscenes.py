@@ -33,6 +33,7 @@ from . import DatasetScan, DatasetSequence
 SENSOR = "hdl32"
 CHANNEL = "LIDAR_TOP"
 TABLES = ("scene", "sample", "sample_data", "ego_pose", "calibrated_sensor", "sensor")
+_PIECE = 1 << 24  # characters of JSON decoded at a time
 _UNIT_TOLERANCE = 1e-3  # a quaternion further from unit length is a mistake, not rounding
 
 
@@ -157,7 +158,13 @@ def _cached_index(keys: tuple) -> LidarIndex:
 
 
 def _load(path: Path, keep=None) -> list:
-    """A table's records; ``keep(record)`` returning None drops a record while it is decoded."""
+    """A table's records; ``keep(record)`` returning None drops a record while it is decoded.
+    A big table filtered so is decoded piece by piece (a gigabyte of JSON would otherwise be
+    held twice, as bytes and as text, beside its records)."""
+    if keep is not None and path.stat().st_size > _PIECE:
+        rows = _load_in_pieces(path, keep)
+        if rows is not None:
+            return rows
     try:
         with open(path, "rb") as f:
             rows = json.load(f, object_hook=keep)
@@ -166,6 +173,38 @@ def _load(path: Path, keep=None) -> list:
     if not isinstance(rows, list):
         raise ConfigError(f"dataset: a nuScenes table is a JSON list of records, not a {type(rows).__name__}", path)
     return [r for r in rows if r is not None] if keep is not None else rows
+
+
+def _load_in_pieces(path: Path, keep) -> list | None:
+    """The kept records of a JSON list of flat records, decoded in pieces cut after a ``}``;
+    None when the file is not such a list (a ``}`` in a string or a nested object cuts a piece
+    that does not decode), and the caller decodes it whole, which also says where it is wrong."""
+    rows: list = []
+    try:
+        with open(path, encoding="utf-8") as f:
+            rest = f.read(_PIECE).lstrip()
+            if not rest.startswith("["):
+                return None
+            rest = rest[1:]
+            while more := f.read(_PIECE):
+                rest += more
+                cut = rest.rfind("}") + 1
+                if cut:
+                    rows += _piece(rest[:cut], keep)
+                    rest = rest[cut:]
+            rest = rest.rstrip()
+            if not rest.endswith("]"):
+                return None
+            rows += _piece(rest[:-1], keep)
+    except (json.JSONDecodeError, UnicodeDecodeError):
+        return None
+    return [r for r in rows if r is not None]
+
+
+def _piece(text: str, keep) -> list:
+    text = text.lstrip()
+    text = text[1:] if text.startswith(",") else text
+    return json.loads(f"[{text}]", object_hook=keep) if text.strip() else []
 
 
 def _fields(path: Path, rows: list, *names: str) -> list[tuple]:

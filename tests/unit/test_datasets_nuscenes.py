@@ -184,6 +184,11 @@ def _drop(rows, where):
         (lambda f: (f / VERSION / "scene.json").write_text("{}"), "scene.json", "a JSON list of records"),
         (_edit("sample_data", lambda rows: _lidar_record(rows).pop("timestamp")), "sample_data.json", "'timestamp'"),
         (
+            _edit("sample_data", lambda rows: _lidar_record(rows).update(timestamp="1531883530100000")),
+            "sample_data.json",
+            "a timestamp (integer, us) and a filename expected",
+        ),
+        (
             _edit("sensor", lambda rows: _drop(rows, lambda r: r["channel"] == "LIDAR_TOP")),
             "sensor.json",
             "no sensor of channel LIDAR_TOP",

@@ -138,7 +138,13 @@ def _cached_index(keys: tuple) -> LidarIndex:
             raise ConfigError(
                 f"dataset: lidar file {filename} refers to sample {sample}, not in sample.json", paths["sample_data"]
             )
-        records.setdefault(scene, []).append(LidarRecord(int(timestamp), filename, bool(key_frame), ego_pose, calib))
+        if not isinstance(timestamp, int) or not isinstance(filename, str):
+            raise ConfigError(
+                f"dataset: lidar sample_data {filename!r} at {timestamp!r}: a timestamp (integer, us) and a "
+                "filename expected",
+                paths["sample_data"],
+            )
+        records.setdefault(scene, []).append(LidarRecord(timestamp, filename, bool(key_frame), ego_pose, calib))
     needed = {r.ego_pose for rows in records.values() for r in rows}
     ego_rows = _load(paths["ego_pose"], lambda r: r if r.get("token") in needed else None)
     # Matrices for the scene a study reads only: a whole trainval holds 340,000 lidar poses.

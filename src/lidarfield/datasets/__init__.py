@@ -66,13 +66,7 @@ def read_dataset(settings: dict, base_dir: str | Path = ".") -> DatasetSequence:
 def describe_dataset(path: str | Path) -> str | None:
     """What a dataset folder holds (``lidarfield info``); None when ``path`` is no dataset's."""
     for module in FORMATS.values():
-        try:
-            reader = importlib.import_module(f".{module}", __name__)
-        except ModuleNotFoundError as e:
-            if e.name != f"{__name__}.{module}":
-                raise
-            continue  # a format this installation does not have yet
-        text = reader.describe(Path(path))
+        text = importlib.import_module(f".{module}", __name__).describe(Path(path))
         if text is not None:
             return text
     return None

@@ -1,5 +1,5 @@
 """``lidarfield info`` on a dataset folder: its sequences, scans, time spans and poses; a folder
-that is no dataset's keeps the error it had (``describe_file``'s)."""
+that is no dataset's says which folders are read."""
 
 from __future__ import annotations
 
@@ -45,14 +45,14 @@ def test_a_scan_file_inside_the_dataset_is_still_a_scan_file(kitti_root):
     assert text.splitlines()[0].endswith("000000.bin: bin file, 1 scan(s)")
 
 
-def test_a_folder_that_is_no_dataset_keeps_its_error(tmp_path, capsys):
+def test_a_folder_that_is_no_dataset_says_which_folders_are_read(tmp_path, capsys):
     folder = tmp_path / "just-a-folder"
     folder.mkdir()
     (folder / "notes.txt").write_text("nothing here\n")
-    with pytest.raises(InputError, match=r"unknown scan file extension '\(none\)'"):
+    with pytest.raises(InputError, match=r"just-a-folder: a folder that is no dataset lidarfield reads \(KITTI"):
         describe_path(folder)
     assert main(["info", str(folder)]) == 2
-    assert "unknown scan file extension" in capsys.readouterr().err
+    assert "no ROS 2 bag" in capsys.readouterr().err
 
 
 def test_describing_a_file_does_not_import_the_datasets():

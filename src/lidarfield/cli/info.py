@@ -28,16 +28,22 @@ def _info(args: argparse.Namespace) -> int:
 def describe_path(path: str) -> str:
     """What ``lidarfield info`` prints of ``path``: a dataset folder's sequences
     (:func:`lidarfield.datasets.describe_dataset`), else the file's scans
-    (:func:`lidarfield.io.describe.describe_file`; a folder that is no dataset's and no ROS 2
-    bag gets its error). Decided here, above both: lidarfield.io must not import
-    lidarfield.datasets, which builds on it."""
+    (:func:`lidarfield.io.describe.describe_file`). A folder that is no dataset's and no ROS 2
+    bag is an InputError saying what folders are read. Decided here, above both: lidarfield.io
+    must not import lidarfield.datasets, which builds on it."""
     from ..datasets import describe_dataset
+    from ..errors import InputError
     from ..io.describe import describe_file
     from ..io.rosbag.bag import is_bag_folder
 
     folder = Path(path)
     if folder.is_dir() and not is_bag_folder(folder):
         text = describe_dataset(folder)
-        if text is not None:
-            return text
+        if text is None:
+            raise InputError(
+                "a folder that is no dataset lidarfield reads (KITTI odometry: sequences/; an Argoverse 2 log: "
+                "sensors/lidar/; nuScenes: v1.0-*/ tables) and no ROS 2 bag (metadata.yaml)",
+                folder,
+            )
+        return text
     return describe_file(path)

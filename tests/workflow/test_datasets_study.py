@@ -48,7 +48,7 @@ def test_a_broken_dataset_stops_the_run_with_one_line_and_writes_nothing(tmp_pat
     (tmp_path / "kitti" / "sequences" / "07" / "calib.txt").unlink()
     write_study(tmp_path, study({"kitti": {"dataset": KITTI}}))
     proc = snakemake(tmp_path, "--cores", "2", check=False)
-    assert proc.returncode != 0
+    assert proc.returncode == 2
     errors = [line for line in proc.stderr.splitlines() if "calib.txt" in line]
     assert errors and "calib.txt not found" in errors[0] and "Traceback" not in proc.stderr
     assert not (tmp_path / "results").exists()

@@ -255,3 +255,101 @@ def test_a_carried_body_is_at_the_same_place_in_every_scan_and_hides_what_is_beh
     assert len(on_body[0]) > 0.3 * 16 * 360  # the sensor's rear view, behind a 0.3 m gap
     for other in on_body[1:]:
         assert np.array_equal(other, on_body[0])
+
+
+# Calibration faults: the ray is the truth, the reported point the measurement.
+FAULT_SENSOR = SensorModel("test-8", elevation_deg=tuple(np.linspace(-20, -6, 8)), azimuth_resolution_deg=2.0)
+
+
+@pytest.fixture(scope="module")
+def ground():
+    """A flat ground at z = 0, 200 x 200 m; the sensor 3 m above it."""
+    return scene_from_dict({"objects": [{"kind": "plane", "size": [200, 200]}]})
+
+
+def _wall_true_range(scan, sensor):
+    """The range to the wall x = 10 of each point's ray at its nominal elevation and azimuth."""
+    ring, time = scan.attributes["ring"], scan.attributes["time"]
+    elevation = np.radians(np.asarray(sensor.elevation_deg)[ring])
+    azimuth = 2 * np.pi * time * sensor.rotation_hz
+    return 10.0 / (np.cos(elevation) * np.cos(azimuth))
+
+
+def test_range_fault_reports_scale_times_true_range_plus_offset_on_a_wall(wall):
+    clean = simulate_scan(wall, FAULT_SENSOR, np.eye(4))
+    scale, offset = 1.003, -0.04
+    faulted = simulate_scan(wall, FAULT_SENSOR, np.eye(4), range_scale=scale, range_offset_m=offset)
+    for name in ("ring", "time"):  # the same rays return: limits act on the true range
+        assert np.array_equal(faulted.attributes[name], clean.attributes[name])
+    true_range = _wall_true_range(faulted, FAULT_SENSOR)
+    assert np.allclose(np.linalg.norm(clean.xyz, axis=1), true_range, rtol=0, atol=1e-9)
+    assert np.allclose(np.linalg.norm(faulted.xyz, axis=1), scale * true_range + offset, rtol=0, atol=1e-9)
+    # along the same (nominal) direction as the fault-free point
+    unit = clean.xyz / np.linalg.norm(clean.xyz, axis=1)[:, None]
+    assert np.allclose(faulted.xyz, unit * (scale * true_range + offset)[:, None], rtol=0, atol=1e-9)
+    assert f"range_scale={scale!r}" in faulted.source and f"range_offset_m={offset!r}" in faulted.source
+
+
+def test_range_fault_on_the_ground_scales_the_ground_rings(ground):
+    pose = pose_from_values([0, 0, 3, 0, 0, 0])
+    scan = simulate_scan(ground, FAULT_SENSOR, pose, range_scale=0.99, range_offset_m=0.25)
+    elevation = np.radians(np.asarray(FAULT_SENSOR.elevation_deg)[scan.attributes["ring"]])
+    true_range = 3.0 / np.sin(-elevation)
+    assert len(scan) == FAULT_SENSOR.channels * 180
+    assert np.allclose(np.linalg.norm(scan.xyz, axis=1), 0.99 * true_range + 0.25, rtol=0, atol=1e-9)
+
+
+def test_elevation_offsets_cast_the_actual_beam_and_report_it_at_the_nominal_elevation(ground):
+    pose = pose_from_values([0, 0, 3, 0, 0, 0])
+    offsets = np.linspace(-0.5, 0.5, FAULT_SENSOR.channels)
+    scan = simulate_scan(ground, FAULT_SENSOR, pose, elevation_offsets_deg=offsets)
+    ring = scan.attributes["ring"]
+    nominal = np.asarray(FAULT_SENSOR.elevation_deg)[ring]
+    actual = nominal + offsets[ring]
+    # reported: the nominal elevation, at the true range of the beam that fired at the actual one
+    assert np.allclose(_elevation_deg(scan.xyz), nominal, rtol=0, atol=1e-9)
+    true_range = 3.0 / np.sin(np.radians(-actual))
+    assert np.allclose(np.linalg.norm(scan.xyz, axis=1), true_range, rtol=0, atol=1e-9)
+    # so a beam fired lower than it believes (negative offset) reports the ground too high
+    height = scan.xyz[:, 2] + 3.0
+    assert np.allclose(height, 3.0 - 3.0 * np.sin(np.radians(nominal)) / np.sin(np.radians(actual)), atol=1e-9)
+    assert np.all(height[offsets[ring] < 0] > 1e-3) and np.all(height[offsets[ring] > 0] < -1e-3)
+    assert "elevation_offsets_deg=[-0.5," in scan.source
+
+
+def test_elevation_offsets_on_a_wall_hit_at_the_actual_elevation(wall):
+    offsets = np.full(FAULT_SENSOR.channels, 0.3)
+    scan = simulate_scan(wall, FAULT_SENSOR, np.eye(4), elevation_offsets_deg=offsets, range_scale=1.01)
+    ring, time = scan.attributes["ring"], scan.attributes["time"]
+    azimuth = 2 * np.pi * time * FAULT_SENSOR.rotation_hz
+    actual = np.radians(np.asarray(FAULT_SENSOR.elevation_deg)[ring] + 0.3)
+    true_range = 10.0 / (np.cos(actual) * np.cos(azimuth))
+    assert np.allclose(np.linalg.norm(scan.xyz, axis=1), 1.01 * true_range, rtol=0, atol=1e-9)
+    assert np.allclose(_elevation_deg(scan.xyz), np.asarray(FAULT_SENSOR.elevation_deg)[ring], atol=1e-9)
+
+
+def test_zero_faults_are_the_fault_free_scan(wall):
+    clean = simulate_scan(wall, FAULT_SENSOR, np.eye(4))
+    zero = simulate_scan(
+        wall, FAULT_SENSOR, np.eye(4), range_scale=1.0, range_offset_m=0.0, elevation_offsets_deg=[0.0] * 8
+    )
+    assert np.array_equal(zero.xyz, clean.xyz)
+    assert "range_scale" not in zero.source and "range_offset_m" not in zero.source
+
+
+@pytest.mark.parametrize(
+    "kwargs, expected",
+    [
+        ({"range_scale": 0.0}, "range scale must be positive"),
+        ({"range_scale": -1.0}, "range scale must be positive"),
+        ({"range_offset_m": float("nan")}, "range offset finite"),
+        ({"elevation_offsets_deg": [0.1] * 7}, "one value per beam of sensor test-8 (8), got 7"),
+        ({"elevation_offsets_deg": [[0.1] * 8]}, "one value per beam of sensor test-8 (8), got 8"),
+        ({"elevation_offsets_deg": [0.1] * 7 + [float("inf")]}, "must be finite"),
+        ({"elevation_offsets_deg": ["a"] * 8}, "must be numbers"),
+    ],
+)
+def test_bad_faults_are_one_line_errors(wall, kwargs, expected):
+    with pytest.raises(ConfigError) as e:
+        simulate_scan(wall, FAULT_SENSOR, np.eye(4), **kwargs)
+    assert expected in str(e.value) and "\n" not in str(e.value)

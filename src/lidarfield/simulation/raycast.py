@@ -6,6 +6,13 @@ surface to rounding. ``first_hits_reference`` is the plain numpy version of the 
 
 Timing: azimuth step j of a revolution of n steps fires at ``j / (n * rotation_hz)`` seconds
 after the sweep start, all channels at once, azimuth counter-clockwise from the sensor's +x.
+
+Calibration faults (``range_scale``, ``range_offset_m``, ``elevation_offsets_deg``): the scene
+and the ray are the truth, the reported point is the measurement. Beam k is cast at its actual
+elevation ``elevation_deg[k] + elevation_offsets_deg[k]`` and hits at the true range r; the
+sensor believes the beam is at its nominal elevation ``elevation_deg[k]`` and measures
+``range_scale * r + range_offset_m`` (then noise), so the point is reported at that measured
+range along the nominal direction.
 """
 
 from __future__ import annotations
@@ -106,6 +113,9 @@ def simulate_scan(
     rolling_shutter: bool = False,
     linear_velocity_mps=(0.0, 0.0, 0.0),
     angular_velocity_rps=(0.0, 0.0, 0.0),
+    range_scale: float = 1.0,
+    range_offset_m: float = 0.0,
+    elevation_offsets_deg=None,
 ) -> Scan:
     """One sweep of ``sensor`` at ``pose`` (4x4 world-from-sensor at the sweep start) in ``scene``.
 
@@ -122,15 +132,28 @@ def simulate_scan(
     frame), and moving objects are where they are at ``time_s + t``; each point keeps the
     coordinates measured in the sensor frame of its own firing, as a driver without de-skewing
     outputs them (so with zero velocity the scan equals the instantaneous one exactly).
+
+    Calibration faults, off by default (see the module's docstring for truth and measurement):
+    beam k fires at ``elevation_deg[k] + elevation_offsets_deg[k]`` (one offset per channel, or
+    None) but its point is reported along the nominal elevation, at the measured range
+    ``range_scale * true_range + range_offset_m`` plus noise. Range limits and dropout act on
+    the true range, so a range fault changes where the points are, not which rays return one.
+    The faults applied are written in the scan's ``source``.
     """
     pose = np.asarray(pose, dtype=np.float64).reshape(4, 4)
     limit = _checked_max_range(sensor, max_range_m)
     if not 0.0 <= dropout <= 1.0 or range_noise_m < 0 or not np.isfinite(range_noise_m):
         raise ConfigError(f"simulate: dropout must be in [0, 1] and range noise >= 0; got {dropout}, {range_noise_m}")
+    range_scale, range_offset_m = _checked_range_fault(range_scale, range_offset_m)
+    elevation_offsets_deg = checked_elevation_offsets(elevation_offsets_deg, sensor)
 
     steps, steps_per_revolution = azimuth_steps(sensor)
     firing_time = steps / (steps_per_revolution * sensor.rotation_hz)
-    local = beam_directions(steps * (2 * np.pi / steps_per_revolution), np.radians(sensor.elevation_deg))
+    azimuth = steps * (2 * np.pi / steps_per_revolution)
+    nominal = beam_directions(azimuth, np.radians(sensor.elevation_deg))
+    local = nominal  # the directions the beams actually fire in
+    if elevation_offsets_deg is not None:
+        local = beam_directions(azimuth, np.radians(np.asarray(sensor.elevation_deg) + elevation_offsets_deg))
     motion_time = firing_time if rolling_shutter else np.zeros_like(firing_time)
     poses = moved_pose(pose, motion_time, linear_velocity_mps, angular_velocity_rps)
     world_dirs = np.einsum("aij,acj->aci", poses[:, :3, :3], local).reshape(-1, 3)
@@ -144,12 +167,14 @@ def simulate_scan(
     if dropout > 0:
         keep &= rng.random(len(keep)) >= dropout
     kept_distance = distance[keep]
+    if range_scale != 1.0 or range_offset_m != 0.0:
+        kept_distance = range_scale * kept_distance + range_offset_m
     if range_noise_m > 0:
         kept_distance = kept_distance + rng.normal(0.0, range_noise_m, len(kept_distance))
 
     ring = np.tile(np.arange(sensor.channels, dtype=np.int32), len(steps))
     time = np.repeat(firing_time, sensor.channels)
-    xyz = local.reshape(-1, 3)[keep] * kept_distance[:, None]
+    xyz = nominal.reshape(-1, 3)[keep] * kept_distance[:, None]
     source = _describe(
         scene,
         sensor,
@@ -161,6 +186,9 @@ def simulate_scan(
         rolling_shutter,
         linear_velocity_mps,
         angular_velocity_rps,
+        range_scale,
+        range_offset_m,
+        elevation_offsets_deg,
     )
     return Scan(xyz, {"ring": ring[keep], "time": time[keep]}, sensor, pose, source)
 
@@ -199,7 +227,35 @@ def _checked_max_range(sensor: SensorModel, max_range_m: float | None) -> float:
     return min(sensor.max_range_m, float(max_range_m))
 
 
-def _describe(scene, sensor, time_s, seed, noise, dropout, max_range, rolling, velocity, angular) -> str:
+def _checked_range_fault(scale, offset) -> tuple[float, float]:
+    scale, offset = float(scale), float(offset)
+    if not (np.isfinite(scale) and scale > 0 and np.isfinite(offset)):
+        raise ConfigError(f"simulate: range scale must be positive and range offset finite; got {scale:g}, {offset:g}")
+    return scale, offset
+
+
+def checked_elevation_offsets(offsets, sensor: SensorModel) -> np.ndarray | None:
+    """Per-channel elevation offsets (degrees) as an array, or None; one finite number per beam
+    of ``sensor``, else a one-line ConfigError."""
+    if offsets is None:
+        return None
+    try:
+        values = np.asarray(offsets, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ConfigError(f"simulate: elevation offsets must be numbers, got {offsets!r}") from None
+    if values.ndim != 1 or len(values) != sensor.channels:
+        raise ConfigError(
+            f"simulate: elevation offsets need one value per beam of sensor {sensor.name} "
+            f"({sensor.channels}), got {values.size}"
+        )
+    if not np.all(np.isfinite(values)):
+        raise ConfigError("simulate: elevation offsets must be finite numbers")
+    return values
+
+
+def _describe(
+    scene, sensor, time_s, seed, noise, dropout, max_range, rolling, velocity, angular, scale, offset, elevation
+) -> str:
     parts = [f"simulated scene={scene.source} sensor={sensor.name} time_s={time_s:g} seed={seed}"]
     if noise:
         parts.append(f"range_noise_m={noise:g}")
@@ -209,4 +265,11 @@ def _describe(scene, sensor, time_s, seed, noise, dropout, max_range, rolling, v
         parts.append(f"max_range_m={max_range:g}")
     if rolling:
         parts.append(f"rolling_shutter v={list(map(float, velocity))} w={list(map(float, angular))}")
+    # The calibration faults applied: the truth a test or a hypothesis checks against.
+    if scale != 1.0:
+        parts.append(f"range_scale={scale!r}")
+    if offset != 0.0:
+        parts.append(f"range_offset_m={offset!r}")
+    if elevation is not None:
+        parts.append(f"elevation_offsets_deg={[float(v) for v in elevation]}")
     return " ".join(parts)

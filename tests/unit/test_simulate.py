@@ -343,8 +343,11 @@ def test_zero_faults_are_the_fault_free_scan(wall):
         ({"range_scale": 0.0}, "range scale must be positive"),
         ({"range_scale": -1.0}, "range scale must be positive"),
         ({"range_offset_m": float("nan")}, "range offset finite"),
-        ({"elevation_offsets_deg": [0.1] * 7}, "one value per beam of sensor test-8 (8), got 7"),
-        ({"elevation_offsets_deg": [[0.1] * 8]}, "one value per beam of sensor test-8 (8), got 8"),
+        (
+            {"elevation_offsets_deg": [0.1] * 7},
+            "elevation offsets: need one value per beam of sensor test-8 (8 beams), got 7",
+        ),
+        ({"elevation_offsets_deg": [[0.1] * 8]}, "need one value per beam of sensor test-8 (8 beams), got 8"),
         ({"elevation_offsets_deg": [0.1] * 7 + [float("inf")]}, "must be finite"),
         ({"elevation_offsets_deg": ["a"] * 8}, "must be numbers"),
     ],

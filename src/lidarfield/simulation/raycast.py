@@ -234,22 +234,23 @@ def _checked_range_fault(scale, offset) -> tuple[float, float]:
     return scale, offset
 
 
-def checked_elevation_offsets(offsets, sensor: SensorModel) -> np.ndarray | None:
+def checked_elevation_offsets(
+    offsets, sensor: SensorModel, what: str = "simulate: elevation offsets"
+) -> np.ndarray | None:
     """Per-channel elevation offsets (degrees) as an array, or None; one finite number per beam
-    of ``sensor``, else a one-line ConfigError."""
+    of ``sensor``, else a one-line ConfigError that starts with ``what``."""
     if offsets is None:
         return None
     try:
         values = np.asarray(offsets, dtype=np.float64)
     except (TypeError, ValueError):
-        raise ConfigError(f"simulate: elevation offsets must be numbers, got {offsets!r}") from None
+        raise ConfigError(f"{what}: must be numbers, got {offsets!r}") from None
     if values.ndim != 1 or len(values) != sensor.channels:
         raise ConfigError(
-            f"simulate: elevation offsets need one value per beam of sensor {sensor.name} "
-            f"({sensor.channels}), got {values.size}"
+            f"{what}: need one value per beam of sensor {sensor.name} ({sensor.channels} beams), got {values.size}"
         )
     if not np.all(np.isfinite(values)):
-        raise ConfigError("simulate: elevation offsets must be finite numbers")
+        raise ConfigError(f"{what}: must be finite numbers")
     return values
 
 

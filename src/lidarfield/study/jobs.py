@@ -47,6 +47,10 @@ def simulated_scan(spec: dict) -> Scan:
         rolling_shutter=spec["rolling_shutter"],
         linear_velocity_mps=spec["velocity_mps"],
         angular_velocity_rps=spec["angular_velocity_rps"],
+        # calibration faults: in the spec only when set (study.pairs keeps older specs unchanged)
+        range_scale=spec.get("range_scale", 1.0),
+        range_offset_m=spec.get("range_offset_m", 0.0),
+        elevation_offsets_deg=spec.get("elevation_offsets_deg"),
     )
 
 

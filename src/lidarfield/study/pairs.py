@@ -64,14 +64,14 @@ def _existing_file(path: str, key: str, base_dir: Path) -> str:
 
 def _sensor(setting, key: str, base_dir: Path):
     """A scan's sensor setting (preset, YAML file, model, or none), checked now so that a bad
-    one fails before any job."""
+    one fails before any job: its model, or None."""
     from ..sensors.models import sensor_model
 
     if isinstance(setting, str) and setting.endswith((".yaml", ".yml")):
         _existing_file(setting, f"{key}.sensor", base_dir)
         setting = str(base_dir / setting)
     try:
-        sensor_model(setting)
+        return sensor_model(setting)
     except LidarfieldError as e:
         raise ConfigError(f"{key}.sensor: {e}") from None
 
@@ -94,7 +94,26 @@ def _rounded(values) -> list:
     return np.asarray(values, dtype=float).round(12).tolist()
 
 
-def _simulated_scan(scan_id: str, sim: dict, pose, time_s: float, velocity, angular_velocity) -> ScanSpec:
+# The simulator's calibration faults and the values that mean "no fault".
+_NO_FAULT = {"range_scale": 1.0, "range_offset_m": 0.0, "elevation_offsets_deg": None}
+_PER_SCAN = ("scan1", "scan2")
+
+
+def _simulated_scan(
+    scan_id: str, sim: dict, pose, time_s: float, velocity, angular_velocity, scan: int | None = None
+) -> ScanSpec:
+    """The spec of one simulated scan; ``scan`` (1 or 2, a pair's) applies the options'
+    ``scan1``/``scan2`` faults over their own. A fault that is off stays out of the spec, so a
+    config without faults keeps the spec (and the stage ids) it had before they existed."""
+    options = {k: v for k, v in sim["options"].items() if k not in _PER_SCAN}
+    if scan is not None:
+        options.update(sim["options"].get(f"scan{scan}", {}))
+    for key, off in _NO_FAULT.items():
+        value = options.pop(key, off)
+        if key == "elevation_offsets_deg" and value is not None and any(value):
+            options[key] = [float(v) for v in value]
+        elif key != "elevation_offsets_deg" and value != off:
+            options[key] = float(value)
     spec = {
         "scene": sim["scene"],
         "sensor": sim["sensor"],
@@ -102,7 +121,7 @@ def _simulated_scan(scan_id: str, sim: dict, pose, time_s: float, velocity, angu
         "time_s": float(time_s),
         "velocity_mps": _rounded(velocity),
         "angular_velocity_rps": _rounded(angular_velocity),
-        **sim["options"],
+        **options,
     }
     return ScanSpec(scan_id, "simulated", spec)
 
@@ -149,6 +168,7 @@ def _pair(name: str, entry: dict, base_dir: Path) -> PairSpec:
                 sim["time_s"][i],
                 sim.get("velocity_mps", still)[i],
                 sim.get("angular_velocity_rps", still)[i],
+                i + 1,
             )
             for i in (0, 1)
         ]
@@ -161,12 +181,24 @@ def _pair(name: str, entry: dict, base_dir: Path) -> PairSpec:
     return PairSpec(name, scans[0], scans[1], _register(entry["register"], key, base_dir))
 
 
-def _checked_simulation(sim: dict, key: str, base_dir: Path) -> dict:
-    """A ``simulate`` section whose sensor and scene file (a built-in scene is the schema's
-    business) are checked."""
-    _sensor(sim["sensor"], key, base_dir)
+def _checked_simulation(sim: dict, key: str, base_dir: Path, pair: bool = True) -> dict:
+    """A ``simulate`` section whose sensor, scene file (a built-in scene is the schema's
+    business) and elevation offsets (one per beam of the sensor) are checked; per-scan faults
+    (``options.scan1``/``scan2``) only in a ``pair``."""
+    from ..simulation.raycast import checked_elevation_offsets
+
+    sensor = _sensor(sim["sensor"], key, base_dir)
     if sim["scene"].endswith((".yaml", ".yml")):
         _existing_file(sim["scene"], f"{key}.scene", base_dir)
+    options = sim["options"]
+    for name in _PER_SCAN:
+        if name in options and not pair:
+            raise ConfigError(
+                f"{key}.options.{name}: per-scan faults are for a pair's two sensors; a sequence's scans "
+                "share one sensor: set its faults in options"
+            )
+    for where, faults in [("options", options)] + [(f"options.{n}", options[n]) for n in _PER_SCAN if n in options]:
+        checked_elevation_offsets(faults.get("elevation_offsets_deg"), sensor, f"{key}.{where}.elevation_offsets_deg")
     return sim
 
 
@@ -189,7 +221,7 @@ def _sequence_pairs(name: str, entry: dict, base_dir: Path) -> list[PairSpec]:
 def _simulated_sequence(name: str, entry: dict, base_dir: Path) -> list[ScanSpec]:
     from ..simulation.trajectory import arc_trajectory
 
-    sim = _checked_simulation(entry["simulate"], f"sequences.{name}.simulate", base_dir)
+    sim = _checked_simulation(entry["simulate"], f"sequences.{name}.simulate", base_dir, pair=False)
     rate_hz = sim["trajectory"]["rate_hz"]
     # The schema's trajectory keys are arc_trajectory's parameters.
     return [

@@ -115,3 +115,36 @@ def test_a_bad_sensor_yaml_is_named(tmp_path, capsys, content, expected):
         f"{sensor}: ",
         expected,
     )
+
+
+def test_simulate_applies_and_records_calibration_faults(tmp_path):
+    clean, faulted = tmp_path / "clean.parquet", tmp_path / "faulted.parquet"
+    args = [*BASE, "--pose", "0,0,3,0,0,0"]
+    assert main([*args, "--out", str(clean)]) == 0
+    offsets = ",".join(["0"] * 15 + ["0.5"])  # only the top beam (+15 deg) is off
+    faulted_args = ["--range-scale", "1.002", "--range-offset", "-0.05", "--elevation-offsets", offsets]
+    assert main([*args, *faulted_args, "--out", str(faulted)]) == 0
+    a, b = read_scan(clean), read_scan(faulted)
+    assert "range_scale=1.002 range_offset_m=-0.05 elevation_offsets_deg=[0.0," in b.source
+    assert "range_scale" not in a.source
+    same = b.attributes["ring"] < 15
+    assert np.array_equal(a.attributes["ring"][a.attributes["ring"] < 15], b.attributes["ring"][same])
+    expected = 1.002 * np.linalg.norm(a.xyz[a.attributes["ring"] < 15], axis=1) - 0.05
+    assert np.allclose(np.linalg.norm(b.xyz[same], axis=1), expected, rtol=0, atol=1e-9)
+
+
+@pytest.mark.parametrize(
+    "fault, expected",
+    [
+        (["--range-scale", "0"], "range scale must be positive"),
+        (["--range-scale", "big"], "--range-scale: not numbers: 'big'"),
+        (["--range-offset", "1,2"], "--range-offset needs 1 comma-separated values, got 2"),
+        (
+            ["--elevation-offsets", "0.1,0.2"],
+            "--elevation-offsets (sensor vlp16) needs 16 comma-separated values, got 2",
+        ),
+        (["--elevation-offsets", ",".join(["0"] * 15 + ["nan"])], "elevation offsets: must be finite"),
+    ],
+)
+def test_bad_faults_are_one_line(tmp_path, capsys, fault, expected):
+    _fails([*BASE, "--pose", "0,0,3,0,0,0", *fault], tmp_path, capsys, expected)

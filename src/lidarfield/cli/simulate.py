@@ -57,6 +57,26 @@ def add_parser(subparsers) -> None:
     p.add_argument("--rolling-shutter", action="store_true", help="move the sensor during the sweep")
     p.add_argument("--velocity", default="0,0,0", help="vx,vy,vz m/s, world frame (rolling shutter)")
     p.add_argument("--angular-velocity", default="0,0,0", help="wx,wy,wz rad/s, sensor frame (rolling shutter)")
+    scale, offset = (default("simulation_options", key) for key in ("range_scale", "range_offset_m"))
+    p.add_argument(
+        "--range-scale",
+        default=str(scale),
+        metavar="S",
+        help=f"calibration fault: measured range = S * true range + M (default {scale:g})",
+    )
+    p.add_argument(
+        "--range-offset",
+        default=str(offset),
+        metavar="M",
+        help=f"calibration fault: range offset, m (default {offset:g})",
+    )
+    p.add_argument(
+        "--elevation-offsets",
+        default=None,
+        metavar="A,B,...",
+        help="calibration fault: one offset per beam (deg); beam k fires at its elevation + offset k but is "
+        "reported at its nominal elevation (default: none; negative first value: --elevation-offsets=-0.1,...)",
+    )
     p.set_defaults(func=run)
 
 
@@ -73,9 +93,15 @@ def run(args) -> int:
     moving = any(velocity) or any(angular_velocity)
     if moving and not args.rolling_shutter:
         raise ConfigError("--velocity/--angular-velocity need --rolling-shutter")
+    range_scale = _numbers(args.range_scale, 1, "--range-scale")[0]
+    range_offset = _numbers(args.range_offset, 1, "--range-offset")[0]
+    sensor = sensor_model(args.sensor)
+    offsets = None
+    if args.elevation_offsets is not None:
+        offsets = _numbers(args.elevation_offsets, sensor.channels, f"--elevation-offsets (sensor {sensor.name})")
     scan = simulate_scan(
         load_scene(args.scene),
-        sensor_model(args.sensor),
+        sensor,
         pose,
         time_s=args.time,
         seed=args.seed,
@@ -85,6 +111,9 @@ def run(args) -> int:
         rolling_shutter=args.rolling_shutter,
         linear_velocity_mps=velocity,
         angular_velocity_rps=angular_velocity,
+        range_scale=range_scale,
+        range_offset_m=range_offset,
+        elevation_offsets_deg=offsets,
     )
     write_scan(scan, args.out)
     print(f"{len(scan)} points -> {args.out}")

@@ -24,6 +24,7 @@ import trimesh
 from ..errors import ConfigError
 from ..scan import Scan
 from ..sensors.models import SensorModel
+from .faults import checked_elevation_offsets, checked_range_fault
 from .scene import Scene
 from .trajectory import moved_pose
 
@@ -144,7 +145,7 @@ def simulate_scan(
     limit = _checked_max_range(sensor, max_range_m)
     if not 0.0 <= dropout <= 1.0 or range_noise_m < 0 or not np.isfinite(range_noise_m):
         raise ConfigError(f"simulate: dropout must be in [0, 1] and range noise >= 0; got {dropout}, {range_noise_m}")
-    range_scale, range_offset_m = _checked_range_fault(range_scale, range_offset_m)
+    range_scale, range_offset_m = checked_range_fault(range_scale, range_offset_m)
     elevation_offsets_deg = checked_elevation_offsets(elevation_offsets_deg, sensor)
 
     steps, steps_per_revolution = azimuth_steps(sensor)
@@ -225,33 +226,6 @@ def _checked_max_range(sensor: SensorModel, max_range_m: float | None) -> float:
     if not max_range_m > 0:
         raise ConfigError(f"simulate: max range must be positive, got {max_range_m}")
     return min(sensor.max_range_m, float(max_range_m))
-
-
-def _checked_range_fault(scale, offset) -> tuple[float, float]:
-    scale, offset = float(scale), float(offset)
-    if not (np.isfinite(scale) and scale > 0 and np.isfinite(offset)):
-        raise ConfigError(f"simulate: range scale must be positive and range offset finite; got {scale:g}, {offset:g}")
-    return scale, offset
-
-
-def checked_elevation_offsets(
-    offsets, sensor: SensorModel, what: str = "simulate: elevation offsets"
-) -> np.ndarray | None:
-    """Per-channel elevation offsets (degrees) as an array, or None; one finite number per beam
-    of ``sensor``, else a one-line ConfigError that starts with ``what``."""
-    if offsets is None:
-        return None
-    try:
-        values = np.asarray(offsets, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise ConfigError(f"{what}: must be numbers, got {offsets!r}") from None
-    if values.ndim != 1 or len(values) != sensor.channels:
-        raise ConfigError(
-            f"{what}: need one value per beam of sensor {sensor.name} ({sensor.channels} beams), got {values.size}"
-        )
-    if not np.all(np.isfinite(values)):
-        raise ConfigError(f"{what}: must be finite numbers")
-    return values
 
 
 def _describe(

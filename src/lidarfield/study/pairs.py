@@ -185,7 +185,7 @@ def _checked_simulation(sim: dict, key: str, base_dir: Path, pair: bool = True) 
     """A ``simulate`` section whose sensor, scene file (a built-in scene is the schema's
     business) and elevation offsets (one per beam of the sensor) are checked; per-scan faults
     (``options.scan1``/``scan2``) only in a ``pair``."""
-    from ..simulation.raycast import checked_elevation_offsets
+    from ..simulation.faults import checked_elevation_offsets
 
     sensor = _sensor(sim["sensor"], key, base_dir)
     if sim["scene"].endswith((".yaml", ".yml")):

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
@@ -307,10 +306,27 @@ def test_the_suggest_jobs_search_a_moved_cloud_anew(tmp_path):
         tmp_path / "neighbours.parquet",
         [d / "removed.parquet" for d in dirs[1:]],
         [d / "neighbour_changes.parquet" for d in dirs[1:3]],
-        meta["moved"],
+        meta.get("moved", ()),
     )
     for (cloud, k), known in last.neighbours.items():
         expected = neighbour_distances(last.xyz1 if cloud == 1 else last.xyz2, k)
         np.testing.assert_array_equal(known.mean, expected.mean)
         np.testing.assert_array_equal(known.reach, expected.reach)
-    assert json.loads(json.dumps(meta["moved"])) == []  # the last stage (a crop) moved nothing
+    assert "moved" not in meta and "correction" not in meta  # the last stage (a crop) only removed
+
+
+def test_the_pair_pages_stage_table_shows_a_correction_only_when_a_stage_corrects():
+    from lidarfield.report.pair_page import stages_table
+
+    base = {"pair": "p", "hypothesis": "none", "n1": 10, "n2": 10, "correction": "", "displacement2_max_m": 0.0}
+    removing = stages_table([{**base, "stage": "00-none-a"}, {**base, "stage": "01-crop-b", "hypothesis": "crop"}])
+    assert "correction" not in removing and "displacement2" not in removing
+    fitted = '{"angle_deg":0.50123456,"translation_m":[-0.3001234,0.0,0.0]}'
+    correcting = stages_table(
+        [
+            {**base, "stage": "00-none-a"},
+            {**base, "stage": "01-realign-c", "correction": fitted, "displacement2_max_m": 0.31},
+        ]
+    )
+    assert "correction" in correcting and "displacement2" in correcting
+    assert "angle_deg: 0.5012; translation_m: [-0.3001, 0, 0]" in correcting and "0.31" in correcting

@@ -6,7 +6,8 @@ of cloud 1 from its neighbours within ``normal_radius_m``, starting from the ide
 pair is already registered: what is fitted is the correction). The fitted transform ``T``
 (a point ``p`` of cloud 2 becomes ``R p + t``) is applied to every point of cloud 2 and to
 sensor 2's pose (``T_1_2`` becomes ``T @ T_1_2``), so later stages and figures see the
-corrected pose.
+corrected pose. ``T``'s rotation vector and translation are rounded to 1e-9 (rad, m), so that a
+rerun writes the same files (Open3D's parallel sums vary in the last digits).
 
 What it records (the stage's ``correction``): ``translation_m`` (t, frame 1), ``rotation_deg``
 (the rotation vector of R, axis times angle, in degrees, about frame 1's x, y, z: for small
@@ -88,7 +89,7 @@ def realign(pair: RegisteredPair, params: Params) -> Outcome:
         reg.TransformationEstimationPointToPlane(),
         criteria,
     )
-    T = np.array(result.transformation, dtype=np.float64)
+    T = _rounded(np.array(result.transformation, dtype=np.float64))
     evaluation = reg.evaluate_registration(source, target, params.max_correspondence_m, T)
     pairs = np.asarray(evaluation.correspondence_set).reshape(-1, 2)
     if len(pairs) < MIN_POINTS:
@@ -141,6 +142,18 @@ def _fitted(T: np.ndarray, mapped: np.ndarray, target: np.ndarray, normals: np.n
         "inlier_rmse_m": float(np.sqrt(np.mean(np.sum((mapped - target) ** 2, axis=1)))),
         "sigma_m": float(np.sqrt(sigma2)),
     }
+
+
+def _rounded(T: np.ndarray) -> np.ndarray:
+    """``T`` with its rotation vector and translation rounded to 1e-9 (rad, m): Open3D's parallel
+    sums change the last digits of its estimate from run to run, and a rerun should write the
+    same files. (1e-9 rad moves a point 100 m away by 0.1 um.)"""
+    from scipy.spatial.transform import Rotation
+
+    rounded = np.eye(4)
+    rounded[:3, :3] = Rotation.from_rotvec(np.round(Rotation.from_matrix(T[:3, :3]).as_rotvec(), 9)).as_matrix()
+    rounded[:3, 3] = np.round(T[:3, 3], 9)
+    return rounded
 
 
 def _skew(v: np.ndarray) -> np.ndarray:

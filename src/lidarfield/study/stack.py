@@ -64,12 +64,13 @@ class Stage:
         return columns
 
     def metadata(self, stage_id: str) -> dict:
-        """The stage's keys in its points and removed files' metadata."""
+        """The stage's keys in its points and removed files' metadata (a correcting stage's also
+        ``correction``, ``moved`` and ``displacement``)."""
+        meta = {"stage": stage_id, "level": self.level, "hypothesis": self.name, "spec": self.spec}
+        if self.correction is None:  # a removing stage: its files as before corrections existed
+            return meta
         return {
-            "stage": stage_id,
-            "level": self.level,
-            "hypothesis": self.name,
-            "spec": self.spec,
+            **meta,
             "correction": self.correction,
             "moved": [cloud for cloud, moved in ((1, self.moved1), (2, self.moved2)) if moved],
             "displacement": {

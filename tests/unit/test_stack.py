@@ -36,7 +36,12 @@ def test_each_stage_removes_from_the_previous_survivors_and_records_it():
     ]
     stages = list(apply_stack(pair, stack))
     assert [(s.level, s.name) for s in stages] == [(0, "none"), (1, "ego_vehicle"), (2, "crop"), (3, "field_of_view")]
-    assert stages[0].pair is pair and stages[0].removed1 == stages[0].removed2 == 0 and stages[0].spec is None
+    # stage 0: the registered pair's own arrays, numbered by their row in it
+    assert np.shares_memory(stages[0].pair.xyz1, pair.xyz1) and np.shares_memory(stages[0].pair.xyz2, pair.xyz2)
+    assert stages[0].removed1 == stages[0].removed2 == 0 and stages[0].spec is None
+    for stage in stages:  # every stage's survivors know their row in the registered pair
+        assert np.array_equal(xyz1[stage.pair.attributes1["row"]], stage.pair.xyz1)
+        assert np.array_equal(xyz2[stage.pair.attributes2["row"]], stage.pair.xyz2)
     assert stages[1].spec == {"ego_vehicle": {"radius_m": 4.0, "box_m": None}}
     for before, after in zip(stages, stages[1:]):
         assert after.removed1 > 0 and after.removed2 > 0

@@ -235,6 +235,49 @@ def test_failing_plugin_is_one_error_and_no_output(tmp_path, paper_scans, capsys
     assert not out.exists()
 
 
+def test_run_with_correcting_stages(tmp_path, paper_scans, monkeypatch):
+    """A plugin that shifts cloud 2 by 0.2 m in x, then realign: the points files hold the
+    corrected survivors with their rows in the registered pair, the summary their correction
+    and displacements; realign as a suggested candidate too."""
+    import shutil
+
+    monkeypatch.chdir(tmp_path)  # plugin files are relative to the folder the study runs from
+    (tmp_path / "hypotheses").mkdir()
+    shutil.copy(ROOT / "hypotheses" / "shift_cloud2.py", tmp_path / "hypotheses")
+    shift = {"plugin": {"file": "hypotheses/shift_cloud2.py", "function": "shift", "params": {"shift_m": [0.2, 0, 0]}}}
+    config = _study(tmp_path, paper_scans, [{"field_of_view": {}}, shift, {"realign": {}}])
+    study = yaml.safe_load(config.read_text())
+    study["suggest"] = [{"realign": {}}, {"outliers": {}}]
+    config.write_text(yaml.safe_dump(study))
+    out = tmp_path / "out"
+    argv = ["run", *map(str, paper_scans), "--config", str(config), "--out", str(out), "--register", "truth"]
+    assert main(argv) == 0
+    summary = pd.read_parquet(out / "summary.parquet")
+    assert list(summary["hypothesis"]) == ["none", "field_of_view", "plugin", "realign"]
+    assert list(summary["correction"][:3]) == ["", "", '{"shift_m":[0.2,0.0,0.0]}']
+    realigned = json.loads(summary["correction"][3])
+    assert realigned["translation_m"][0] == pytest.approx(-0.2, abs=0.01) and realigned["fitness"] > 0.9
+    assert summary["displacement2_median_m"].tolist()[:3] == pytest.approx([0, 0, 0.2])
+    assert summary["displacement2_max_m"][3] == pytest.approx(0.2, abs=0.05)
+    assert (summary[["displacement1_median_m", "displacement1_max_m"]].to_numpy() == 0).all()
+    registered, _ = read_pair(out / "registered.parquet")
+    ids = list(summary["stage"])
+    for stage_id, offset in zip(ids, ([0, 0, 0], [0, 0, 0], [0.2, 0, 0])):
+        stage, _ = read_pair(out / "stages" / stage_id / "points.parquet")
+        assert np.array_equal(registered.xyz1[stage.attributes1["row"]], stage.xyz1)
+        assert np.allclose(registered.xyz2[stage.attributes2["row"]] + offset, stage.xyz2)
+        assert "row" in read_table(out / "stages" / stage_id / "points.parquet")[0]
+    last, meta = read_pair(out / "stages" / ids[3] / "points.parquet")
+    assert meta["moved"] == [2] and np.abs(last.T_1_2[:3, 3] - registered.T_1_2[:3, 3]).max() < 0.01
+    suggested = pd.read_parquet(out / "stages" / ids[2] / "suggestions.parquet")
+    assert set(suggested["hypothesis"]) == {"realign", "outliers"}
+    assert suggested["hypothesis"][0] == "realign" and suggested["energy_reduction"][0] > 0
+    # again into the same folder: the same stage ids, the same corrections
+    assert main(argv) == 0
+    again = pd.read_parquet(out / "summary.parquet")
+    assert list(again["stage"]) == ids and list(again["correction"][:3]) == list(summary["correction"][:3])
+
+
 def test_run_on_text_scans_without_a_sensor_skips_the_defaults_that_need_one(tmp_path, paper_scans, caplog, capsys):
     """Text scans carry no sensor model: the default candidate field_of_view cannot apply, so it
     is skipped with a logged reason; configured explicitly, it is one error naming it."""

@@ -13,6 +13,10 @@ stage's suggestions. A stage's points are the previous stage's minus what it rem
   distances came out different are kept here (columns ``cloud``, ``k``, ``row`` among the
   stage's points of that cloud, ``mean``, ``reach``).
 
+A stage that moved a cloud (a correction, such as ``realign``) changes every distance of it
+(not exactly: a rigid motion keeps them only up to rounding), so that cloud is searched anew
+and its change is the whole distances.
+
 So a stage's suggest job reads the pair's file and the changes of stages 1..k-1, and searches
 only near what its own stage removed: an appended hypothesis costs what it removes, not what
 the whole stack removed. The per-stage files hold only the changes: the distances are as large
@@ -76,14 +80,19 @@ def neighbours_job(points_path: str | Path, ks: list[int], out: str | Path) -> N
 
 
 def carry_to_stage(
-    pair: RegisteredPair, neighbours_path: str | Path, removed_paths: list[str | Path], change_paths: list[str | Path]
-) -> dict[tuple[int, int], tuple[NeighbourDistances, NeighbourDistances]]:
+    pair: RegisteredPair,
+    neighbours_path: str | Path,
+    removed_paths: list[str | Path],
+    change_paths: list[str | Path],
+    moved: tuple[int, ...] | list[int] = (),
+) -> dict[tuple[int, int], tuple[NeighbourDistances | None, NeighbourDistances]]:
     """Give ``pair`` (stage k's survivors) the registered pair's neighbour distances
     (``neighbours_path``), carried past stages 1..k-1 by their changes (``change_paths``) and
     past what stage k removed by a search near it. ``removed_paths``: the ``removed.parquet``
     of stages 1..k, in order (their ``row`` columns say where each removed point was among the
-    previous stage's points). Returns, by (cloud, k), the distances before stage k's search
-    (stage k-1's kept rows) and after it, for :func:`write_changes`."""
+    previous stage's points). ``moved``: the clouds stage k moved (its points file's ``moved``),
+    searched anew. Returns, by (cloud, k), the distances before stage k's search (stage k-1's
+    kept rows; None where searched anew) and after it, for :func:`write_changes`."""
     if len(change_paths) != max(len(removed_paths) - 1, 0):
         raise ValueError(
             f"stage {len(removed_paths)} needs the changes of the {max(len(removed_paths) - 1, 0)} stages before it, "
@@ -118,6 +127,10 @@ def carry_to_stage(
                 f"and {np.count_nonzero(~keep)} removed points",
                 neighbours_path,
             )
+        if cloud in moved:  # corrected coordinates: no distance carries over
+            pair.neighbours[(cloud, k)] = neighbour_distances(kept_xyz, k)
+            carried[(cloud, k)] = (None, pair.neighbours[(cloud, k)])
+            continue
         mine = table["cloud"] == cloud
         xyz = np.empty((len(distances), 3))
         xyz[table["row"][mine]] = np.column_stack([table["x"][mine], table["y"][mine], table["z"][mine]])

@@ -31,7 +31,7 @@ import numpy as np
 from ..errors import HypothesisError, NotApplicableError
 from ..field.grid import FieldSettings, field_settings_from_config
 from ..field.kernel import field_from_voxel_ids
-from ..hypotheses import BUILTINS, apply_step, validate_step
+from ..hypotheses import BUILTINS, CORRECTING, apply_step, validate_step
 from ..hypotheses.steps import canonical_json, step_name
 from ..io.parquet_table import write_table
 from ..pair import RegisteredPair, read_pair
@@ -60,10 +60,11 @@ def candidate_steps(
     suggest: list[dict] | None, applied: list[dict], base_dir: str | Path = ".", study_grid: dict | None = None
 ) -> list[dict]:
     """The normalised candidates of a stage whose stack so far is ``applied``: ``suggest``
-    validated, or every built-in not in ``applied`` with its defaults."""
+    validated, or every built-in not in ``applied`` with its defaults (a correcting one, such as
+    ``realign``, only when ``suggest`` names it)."""
     if suggest is None:
         done = {step_name(step) for step in applied}
-        suggest = [{name: {}} for name in BUILTINS if name not in done]
+        suggest = [{name: {}} for name in BUILTINS if name not in done and name not in CORRECTING]
     if not isinstance(suggest, list):
         raise HypothesisError(f"suggest: a list of {{name: {{parameters}}}} entries, got {suggest!r}")
     candidates = []
@@ -95,14 +96,20 @@ def suggestions(
     for k, spec in enumerate(candidates, start=1):
         start = time.perf_counter()
         try:
-            keep1, keep2 = apply_step(pair, spec, base_dir, study_grid)
+            outcome = apply_step(pair, spec, base_dir, study_grid)
         except NotApplicableError as e:
             if not defaults:
                 raise HypothesisError(f"suggest entry {k}: {e}") from None
             log.info("candidate %s skipped: it does not apply to this pair (%s)", step_name(spec), e)
             continue
+        keep1, keep2 = outcome
         removed1, removed2 = int(np.count_nonzero(~keep1)), int(np.count_nonzero(~keep2))
-        if removed1 or removed2:
+        if outcome.xyz1 is not None or outcome.xyz2 is not None:  # a correction: the moved points' field
+            xyz1 = pair.xyz1 if outcome.xyz1 is None else outcome.xyz1
+            xyz2 = pair.xyz2 if outcome.xyz2 is None else outcome.xyz2
+            xyz1, xyz2 = xyz1[keep1], xyz2[keep2]
+            after = field_from_voxel_ids(settings.grid.assign(xyz1), xyz1, settings.grid.assign(xyz2), xyz2, settings)
+        elif removed1 or removed2:
             after = field_from_voxel_ids(ids1[keep1], pair.xyz1[keep1], ids2[keep2], pair.xyz2[keep2], settings)
         else:  # the same points: the same field (as a no-op ego_vehicle or crop often is)
             after = before
@@ -191,7 +198,11 @@ def suggest_stage(
     changes go (see :mod:`.neighbour_file`; no rows without ``neighbours``).
     """
     pair, meta = read_pair(points_path)
-    carried = carry_to_stage(pair, neighbours, list(removed_paths), list(change_paths)) if neighbours else {}
+    carried = (
+        carry_to_stage(pair, neighbours, list(removed_paths), list(change_paths), meta.get("moved") or ())
+        if neighbours
+        else {}
+    )
     table = suggestions(pair, field_settings_from_config(grid_section), candidates, base_dir, grid_section, defaults)
     write_suggestions(out, table, meta.get("stage"), candidates, grid_section)
     if changes_out is not None:

@@ -2,7 +2,9 @@
 
 A hypothesis is a pure function ``(pair, params) -> (keep1, keep2)`` of a
 :class:`~lidarfield.pair.RegisteredPair` and a frozen dataclass of typed parameters, returning
-one boolean keep-mask per cloud. A stack entry is a one-key mapping ``{name: {params}}``;
+one boolean keep-mask per cloud, or an :class:`~.outcome.Outcome` that also corrects: the
+corrected coordinates of a cloud, sensor 2's corrected pose, and what it fitted (see
+:mod:`.outcome`; ``realign`` is the built-in one). A stack entry is a one-key mapping ``{name: {params}}``;
 :func:`validate_stack` checks every entry before anything runs and returns the normalised
 entries (defaults filled in, the study's grid filled into ``shadow``), which are what stage ids
 are computed from.
@@ -19,7 +21,8 @@ import numpy as np
 
 from ..errors import HypothesisError
 from ..pair import RegisteredPair
-from . import crop, ego_vehicle, field_of_view, outliers, plugin, shadow
+from . import crop, ego_vehicle, field_of_view, outliers, plugin, realign, shadow
+from .outcome import Outcome, checked_outcome
 from .params import describe, params_to_dict, parse_params
 
 Masks = tuple[np.ndarray, np.ndarray]
@@ -28,7 +31,7 @@ Masks = tuple[np.ndarray, np.ndarray]
 @dataclass(frozen=True)
 class Hypothesis:
     name: str
-    function: Callable[[RegisteredPair, Any], Masks]
+    function: Callable[[RegisteredPair, Any], Masks | Outcome]
     params: type  # frozen dataclass of the parameters, with defaults and docs
     summary: str
 
@@ -45,8 +48,12 @@ BUILTINS: dict[str, Hypothesis] = {
         _builtin(shadow, "shadow"),
         _builtin(crop, "crop"),
         _builtin(outliers, "outliers"),
+        _builtin(realign, "realign"),
     )
 }
+# The built-ins that correct (move a cloud) rather than remove: not among the default candidates
+# of "what to try next", which ranks removals.
+CORRECTING = frozenset({"realign"})
 PLUGIN = Hypothesis("plugin", plugin.run_plugin, plugin.Params, plugin.__doc__.strip().splitlines()[0])
 
 
@@ -111,12 +118,14 @@ def apply_step(
     base_dir: str | Path = ".",
     study_grid: dict | None = None,
     level: int | None = None,
-) -> Masks:
-    """Validate one stack entry and apply it: the keep-masks of both clouds."""
+) -> Outcome:
+    """Validate one stack entry and apply it: its checked :class:`Outcome` (which unpacks as the
+    keep-masks of both clouds, ``keep1, keep2 = apply_step(...)``)."""
     name, params = parse_step(step, base_dir, study_grid, level)
     if name == PLUGIN.name:
         return plugin.run_plugin(pair, params, base_dir, level)
-    return BUILTINS[name].function(pair, params)
+    result = BUILTINS[name].function(pair, params)
+    return checked_outcome(result, (len(pair.xyz1), len(pair.xyz2)), _where(name, level))
 
 
 def describe_hypotheses() -> dict[str, list[tuple[str, str, Any, str]]]:

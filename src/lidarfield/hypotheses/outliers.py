@@ -178,10 +178,15 @@ def cloud_neighbour_distances(pair: RegisteredPair, cloud: int, k: int) -> Neigh
     return known
 
 
-def carry_neighbours(before: RegisteredPair, keep1: np.ndarray, keep2: np.ndarray, after: RegisteredPair) -> None:
+def carry_neighbours(
+    before: RegisteredPair, keep1: np.ndarray, keep2: np.ndarray, after: RegisteredPair, skip: tuple[int, ...] = ()
+) -> None:
     """Give ``after`` (``before``'s survivors) every neighbour distance ``before`` has, carried
-    by :func:`after_removal`."""
+    by :func:`after_removal`, except for the clouds in ``skip`` (moved by a correction: their
+    distances are searched anew when asked for)."""
     for (cloud, k), distances in before.neighbours.items():
+        if cloud in skip:
+            continue
         xyz, keep = (before.xyz1, keep1) if cloud == 1 else (before.xyz2, keep2)
         after.neighbours[(cloud, k)] = after_removal(distances, xyz, keep)
 

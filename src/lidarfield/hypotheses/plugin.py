@@ -4,8 +4,11 @@ Stack entry: ``plugin: {file: hypotheses/moving_cars.py, function: remove, param
 ``file`` is relative to the study's base folder. The function is called as
 ``function(pair, params)`` with the :class:`~lidarfield.pair.RegisteredPair` (read-only arrays)
 and the ``params`` mapping, and returns ``(keep1, keep2)``: boolean arrays of the lengths of
-the two clouds. Anything that goes wrong (no file, an import or call that raises, masks of the
-wrong type or length) is one :class:`HypothesisError` naming the file and the hypothesis.
+the two clouds, or, to correct as well as remove, a mapping with ``keep1``, ``keep2``, ``xyz1``,
+``xyz2`` (corrected coordinates of every point, row for row), ``T_1_2`` and ``fitted`` (see
+:mod:`.outcome`). Anything that goes wrong (no file, an import or call that raises, masks or
+coordinates of the wrong type, shape, or not finite) is one :class:`HypothesisError` naming the
+file and the hypothesis.
 """
 
 from __future__ import annotations
@@ -19,13 +22,19 @@ import numpy as np
 
 from ..errors import HypothesisError
 from ..pair import RegisteredPair
+from .outcome import Outcome, checked_outcome
 from .params import doc
 
 
 @dataclass(frozen=True)
 class Params:
     file: str = field(metadata=doc("the Python file, relative to the study's base folder"))
-    function: str = field(default="remove", metadata=doc("the function in it: (pair, params) -> (keep1, keep2)"))
+    function: str = field(
+        default="remove",
+        metadata=doc(
+            "the function in it: (pair, params) -> (keep1, keep2) or {keep1, keep2, xyz1, xyz2, T_1_2, fitted}"
+        ),
+    )
     params: dict = field(default_factory=dict, metadata=doc("passed to the function as its second argument"))
 
 
@@ -45,10 +54,8 @@ def check_plugin_file(params: Params, base_dir: str | Path, level: int | None = 
         raise HypothesisError(f"{describe_plugin(params, level)}: plugin file not found", path)
 
 
-def run_plugin(
-    pair: RegisteredPair, params: Params, base_dir: str | Path = ".", level: int | None = None
-) -> tuple[np.ndarray, np.ndarray]:
-    """Load the plugin's file, call its function on ``pair`` and check the masks it returns."""
+def run_plugin(pair: RegisteredPair, params: Params, base_dir: str | Path = ".", level: int | None = None) -> Outcome:
+    """Load the plugin's file, call its function on ``pair`` and check what it returns."""
     path = plugin_path(params, base_dir)
     what = describe_plugin(params, level)
     check_plugin_file(params, base_dir, level)
@@ -57,7 +64,7 @@ def run_plugin(
         result = function(_read_only(pair), dict(params.params))
     except Exception as e:  # the analyst's code: any failure is reported as theirs
         raise HypothesisError(f"{what}: raised {type(e).__name__}: {e}", path) from e
-    return _checked_masks(result, (len(pair.xyz1), len(pair.xyz2)), what, path)
+    return checked_outcome(result, (len(pair.xyz1), len(pair.xyz2)), what, path)
 
 
 def _load_function(path: Path, name: str, what: str):
@@ -80,22 +87,6 @@ def _load_function(path: Path, name: str, what: str):
             f"{what}: the file has no function {name!r} (functions: {', '.join(found) or 'none'})", path
         )
     return function
-
-
-def _checked_masks(result, lengths: tuple[int, int], what: str, path: Path) -> tuple[np.ndarray, np.ndarray]:
-    if not isinstance(result, (tuple, list)) or len(result) != 2:
-        raise HypothesisError(f"{what}: must return (keep1, keep2), got {type(result).__name__}", path)
-    masks = []
-    for cloud, (mask, n) in enumerate(zip(result, lengths), start=1):
-        mask = np.asarray(mask)
-        if mask.dtype != np.bool_ or mask.shape != (n,):
-            raise HypothesisError(
-                f"{what}: keep{cloud} must be a boolean array of length {n} (cloud {cloud}), "
-                f"got dtype {mask.dtype} and shape {mask.shape}",
-                path,
-            )
-        masks.append(mask)
-    return masks[0], masks[1]
 
 
 def _read_only(pair: RegisteredPair) -> RegisteredPair:

@@ -10,6 +10,7 @@ The page is built from small functions, each returning a list of parts (HTML tex
 
 from __future__ import annotations
 
+import json
 from functools import partial
 from pathlib import Path
 
@@ -84,16 +85,54 @@ def registration_problem(row: dict) -> str:
     return "; ".join(problems)
 
 
+# A correcting stage's columns, shown when a stage of the pair corrects (the correction last, wrapped).
+CORRECTION_COLUMNS = (
+    "displacement1_median_m",
+    "displacement1_max_m",
+    "displacement2_median_m",
+    "displacement2_max_m",
+    "correction",
+)
+
+
+def correction_text(value) -> str:
+    """A summary row's ``correction`` (canonical JSON) for reading: ``key: value`` pairs, numbers
+    to 4 significant digits ('' for a removing stage)."""
+    if not isinstance(value, str) or not value:
+        return ""
+    try:
+        fitted = json.loads(value)
+    except ValueError:
+        return value
+    if not isinstance(fitted, dict):
+        return value
+
+    def number(v) -> str:
+        if isinstance(v, float):
+            return f"{v:.4g}"
+        if isinstance(v, list):
+            return "[" + ", ".join(number(x) for x in v) + "]"
+        return str(v)
+
+    return "; ".join(f"{key}: {number(v)}" for key, v in fitted.items())
+
+
 def stages_table(rows: list[dict]) -> str:
-    """One row per stage (rows in red: the registration did not converge or warned)."""
+    """One row per stage (rows in red: the registration did not converge or warned); with a
+    correcting stage, also each stage's displacements and what it fitted."""
     headers = [c for c in SUMMARY_COLUMNS if any(c in r for r in rows)]
+    corrects = any(isinstance(r.get("correction"), str) and r["correction"] for r in rows)
+    extra = list(CORRECTION_COLUMNS) if corrects else []
     body, classes = [], []
     for r in rows:
         problem, found = registration_problem(r), "; ".join(stage_findings(r))
-        body.append([r.get(c, "") for c in headers] + [problem, found])
+        corrected = [r.get(c, "") for c in extra[:-1]] + [correction_text(r.get("correction"))] if extra else []
+        body.append([r.get(c, "") for c in headers] + corrected + [problem, found])
         classes.append("flag" if problem or found else "")
-    prose = (len(headers), len(headers) + 1)  # the two sentences last, wrapped
-    return table(headers + ["registration problem", "findings"], body, classes, text_columns=2, prose_columns=prose)
+    columns = headers + extra
+    prose = tuple(range(len(columns) - 1, len(columns))) if extra else ()
+    prose += (len(columns), len(columns) + 1)  # the two sentences last, wrapped
+    return table(columns + ["registration problem", "findings"], body, classes, text_columns=2, prose_columns=prose)
 
 
 def findings_parts(rows: list[dict]) -> list[str]:

@@ -106,6 +106,8 @@ def mitigate_stage(
     pair, _ = read_pair(points_in)
     stage = initial_stage(pair) if step is None else next_stage(pair, step, level, base_dir, study_grid)
     log.info("stage %s: removed %d + %d points", stage_id, stage.removed1, stage.removed2)
+    if stage.correction is not None:
+        log.info("stage %s: corrected, %s", stage_id, stage.correction_json())
     write_stage(stage, stage_id, points_out, removed_out)
 
 

@@ -3,6 +3,13 @@
 Every stage keeps its survivors and the points it removed (with their attributes), so that a
 figure can draw the removed points of a stage over the kept ones, and the field of every stage
 can be compared with the one before.
+
+A correcting stage (a hypothesis returning corrected coordinates, see
+:mod:`lidarfield.hypotheses.outcome`) keeps its survivors *as corrected*, and sensor 2's
+corrected pose; its removed points are as they were. Every stage's survivors carry ``row``
+(an attribute of both clouds, so a column of the points file): the point's row among its
+cloud's points in the registered pair. Stage 0 numbers them 0..N-1; every later stage keeps
+the rows of its survivors, whatever it moved.
 """
 
 from __future__ import annotations
@@ -14,11 +21,13 @@ from pathlib import Path
 import numpy as np
 
 from ..hypotheses import apply_step, validate_stack, validate_step
+from ..hypotheses.outcome import displacement
 from ..hypotheses.outliers import carry_neighbours
-from ..hypotheses.steps import step_name
+from ..hypotheses.steps import canonical_json, step_name
 from ..pair import RegisteredPair
 
 NO_MITIGATION = "none"  # the hypothesis name of stage 0
+ROW = "row"  # the survivors' attribute: each point's row among its cloud's points in the registered pair
 
 
 @dataclass
@@ -30,6 +39,12 @@ class Stage:
     removed: RegisteredPair  # the points this stage removed: xyz1 of cloud 1, xyz2 of cloud 2
     keep1: np.ndarray  # over the previous stage's cloud 1 (stage 0: the registered pair's)
     keep2: np.ndarray
+    correction: dict | None = None  # what a correcting stage fitted and applied; None: it only removed
+    moved1: bool = False  # whether the stage moved cloud 1's survivors
+    moved2: bool = False
+    # (median, max) distance the survivors of each cloud moved, metres
+    displacement1: tuple[float, float] = (0.0, 0.0)
+    displacement2: tuple[float, float] = (0.0, 0.0)
 
     @property
     def removed1(self) -> int:
@@ -43,17 +58,54 @@ class Stage:
         """The removed-points table: points-table columns plus ``hypothesis`` and ``row`` (the
         point's row among its cloud's points in the previous stage)."""
         columns = self.removed.to_columns()
+        columns.pop(ROW, None)  # here: the row in the previous stage, below
         columns["hypothesis"] = np.full(len(columns["cloud"]), self.name, dtype=object).astype(str)
         columns["row"] = np.concatenate([np.flatnonzero(~self.keep1), np.flatnonzero(~self.keep2)]).astype(np.int64)
         return columns
 
     def metadata(self, stage_id: str) -> dict:
-        """The stage's keys in its points and removed files' metadata."""
-        return {"stage": stage_id, "level": self.level, "hypothesis": self.name, "spec": self.spec}
+        """The stage's keys in its points and removed files' metadata (a correcting stage's also
+        ``correction``, ``moved`` and ``displacement``)."""
+        meta = {"stage": stage_id, "level": self.level, "hypothesis": self.name, "spec": self.spec}
+        if self.correction is None:  # a removing stage: its files as before corrections existed
+            return meta
+        return {
+            **meta,
+            "correction": self.correction,
+            "moved": [cloud for cloud, moved in ((1, self.moved1), (2, self.moved2)) if moved],
+            "displacement": {
+                "1": dict(zip(("median_m", "max_m"), self.displacement1)),
+                "2": dict(zip(("median_m", "max_m"), self.displacement2)),
+            },
+        }
+
+    def correction_json(self) -> str:
+        """The canonical JSON of what the stage fitted and applied; '' for a removing stage."""
+        return "" if self.correction is None else canonical_json(self.correction)
+
+
+def with_rows(pair: RegisteredPair) -> RegisteredPair:
+    """``pair`` with the ``row`` attribute (0..N-1 per cloud) if it has none; its neighbour
+    distances are shared (same points, same order)."""
+    if ROW in pair.attributes1 and ROW in pair.attributes2:
+        return pair
+    return RegisteredPair(
+        pair.xyz1,
+        pair.xyz2,
+        pair.T_1_2,
+        pair.sensor1,
+        pair.sensor2,
+        {**pair.attributes1, ROW: np.arange(len(pair.xyz1), dtype=np.int64)},
+        {**pair.attributes2, ROW: np.arange(len(pair.xyz2), dtype=np.int64)},
+        pair.registration,
+        pair.sensor_fit,
+        neighbours=pair.neighbours,
+    )
 
 
 def initial_stage(pair: RegisteredPair) -> Stage:
-    """Stage 0: the registered pair itself, nothing removed."""
+    """Stage 0: the registered pair itself (numbered by ``row``), nothing removed."""
+    pair = with_rows(pair)
     keep1, keep2 = np.ones(len(pair.xyz1), dtype=bool), np.ones(len(pair.xyz2), dtype=bool)
     return Stage(0, NO_MITIGATION, None, pair, pair.subset(~keep1, ~keep2), keep1, keep2)
 
@@ -63,8 +115,22 @@ def next_stage(
 ) -> Stage:
     """Stage ``level``: hypothesis ``step`` applied to ``pair`` (the previous stage's survivors)."""
     spec = validate_step(step, base_dir, study_grid, level)
-    keep1, keep2 = apply_step(pair, spec, base_dir, study_grid, level)
-    return Stage(level, step_name(spec), spec, pair.subset(keep1, keep2), pair.subset(~keep1, ~keep2), keep1, keep2)
+    outcome = apply_step(pair, spec, base_dir, study_grid, level)
+    keep1, keep2 = outcome
+    survivors = pair.subset(keep1, keep2)
+    stage = Stage(level, step_name(spec), spec, survivors, pair.subset(~keep1, ~keep2), keep1, keep2)
+    if not outcome.corrects:
+        return stage
+    stage.correction = outcome.fitted
+    if outcome.xyz1 is not None:
+        survivors.xyz1 = np.ascontiguousarray(outcome.xyz1[keep1])
+        stage.moved1, stage.displacement1 = True, displacement(pair.xyz1[keep1], survivors.xyz1)
+    if outcome.xyz2 is not None:
+        survivors.xyz2 = np.ascontiguousarray(outcome.xyz2[keep2])
+        stage.moved2, stage.displacement2 = True, displacement(pair.xyz2[keep2], survivors.xyz2)
+    if outcome.T_1_2 is not None:
+        survivors.T_1_2 = outcome.T_1_2
+    return stage
 
 
 def apply_stack(
@@ -86,6 +152,12 @@ def _stages(pair: RegisteredPair, steps: list[dict], base_dir, study_grid) -> It
     for level, step in enumerate(steps, start=1):
         previous, stage = stage, next_stage(stage.pair, step, level, base_dir, study_grid)
         # what the caller derived from the previous stage's points (its suggestions' outlier
-        # scores), carried over exactly for less than a new search costs
-        carry_neighbours(previous.pair, stage.keep1, stage.keep2, stage.pair)
+        # scores), carried over exactly for less than a new search costs; a cloud the stage
+        # moved is searched anew when needed (carrying assumes unmoved points)
+        carry_neighbours(previous.pair, stage.keep1, stage.keep2, stage.pair, skip=moved_clouds(stage))
         yield stage
+
+
+def moved_clouds(stage: Stage) -> tuple[int, ...]:
+    """The clouds (1, 2) whose survivors the stage moved."""
+    return tuple(cloud for cloud, moved in ((1, stage.moved1), (2, stage.moved2)) if moved)

@@ -11,6 +11,7 @@ import numpy as np
 
 from ..analysis.tags import TAGS
 from ..errors import InputError
+from ..hypotheses.steps import canonical_json
 from ..io.atomic import atomic_path, write_text
 from ..layout import level_of
 from ..pair import RegisteredPair
@@ -67,7 +68,30 @@ def summary_row(pair_name: str, pair: RegisteredPair, meta: dict, removed_cloud:
     for k in ("1", "2"):
         row[f"sensor_outside{k}"] = (fits.get(k) or {}).get("outside")  # None: no sensor model
     row["sensor_warning"] = "; ".join(filter(None, (fit_warning(fits.get(k), f"scan {k}") for k in ("1", "2"))))
+    row.update(correction_columns(meta))
     return row
+
+
+# A correcting stage's columns: in every row (a removing stage: '' and 0).
+CORRECTION_COLUMNS = (
+    "correction",
+    "displacement1_median_m",
+    "displacement1_max_m",
+    "displacement2_median_m",
+    "displacement2_max_m",
+)
+
+
+def correction_columns(meta: dict) -> dict:
+    """``correction`` (canonical JSON of what the stage fitted and applied, '' when it only
+    removed) and the median and maximum distance each cloud's survivors moved (0 when not)."""
+    correction = meta.get("correction")
+    moved = meta.get("displacement") or {}
+    columns = {"correction": "" if correction is None else canonical_json(correction)}
+    for k in ("1", "2"):
+        for stat in ("median", "max"):
+            columns[f"displacement{k}_{stat}_m"] = float((moved.get(k) or {}).get(f"{stat}_m", 0.0))
+    return columns
 
 
 def field_warning(row: dict) -> str:
@@ -97,6 +121,8 @@ def read_stats(stats_paths: list[str | Path], rematch_paths: list[str | Path] = 
             row = json.loads(Path(path).read_text())
         except ValueError as e:
             raise InputError(f"not valid JSON ({e})", path) from None
+        # a stats.json written before the correction columns existed: a removing stage's values
+        row.update({k: v for k, v in correction_columns({}).items() if k not in row})
         rows.append({**row, **rematched.get(Path(path).parent, {})})
     return rows
 

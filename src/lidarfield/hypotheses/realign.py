@@ -1,0 +1,160 @@
+"""``realign``: re-estimate the rigid transform of cloud 2 onto cloud 1 from the survivors, and apply it.
+
+A correcting hypothesis: it removes nothing, and moves cloud 2. Point-to-plane ICP (Open3D, as
+the registration uses it), source = cloud 2, target = cloud 1, both voxel-downsampled, normals
+of cloud 1 from its neighbours within ``normal_radius_m``, starting from the identity (the
+pair is already registered: what is fitted is the correction). The fitted transform ``T``
+(a point ``p`` of cloud 2 becomes ``R p + t``) is applied to every point of cloud 2 and to
+sensor 2's pose (``T_1_2`` becomes ``T @ T_1_2``), so later stages and figures see the
+corrected pose. ``T``'s rotation vector and translation are rounded to 1e-9 (rad, m), so that a
+rerun writes the same files (Open3D's parallel sums vary in the last digits).
+
+What it records (the stage's ``correction``): ``translation_m`` (t, frame 1), ``rotation_deg``
+(the rotation vector of R, axis times angle, in degrees, about frame 1's x, y, z: for small
+rotations its z is the yaw), ``angle_deg`` (its norm), their standard errors
+``translation_se_m`` and ``rotation_se_deg``, ``fitness`` (share of the downsampled cloud-2
+points with a cloud-1 point within ``max_correspondence_m`` at ``T``), ``inlier_rmse_m``,
+``correspondences`` and ``sigma_m``. The standard errors are the point-to-plane least squares'
+at ``T``: with one residual ``r_i = n_i . (T s_i - q_i)`` per correspondence and its Jacobian
+``[(T s_i) x n_i, n_i]`` for a small rotation and translation applied after ``T``, the
+covariance is ``sigma^2 (J^T J)^-1`` with ``sigma^2 = sum r_i^2 / (m - 6)``, propagated to ``t``
+to first order. They treat the residuals as independent, which neighbouring points of a scan
+are not quite: read them as a lower bound.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..errors import HypothesisError
+from ..pair import RegisteredPair
+from .outcome import Outcome
+from .params import doc
+
+MIN_POINTS = 10  # per downsampled cloud, and correspondences: 6 unknowns and a residual's sigma
+
+
+@dataclass(frozen=True)
+class Params:
+    max_correspondence_m: float = field(
+        default=1.0, metadata=doc("ICP ignores pairs of points farther apart than this (m)")
+    )
+    voxel_m: float = field(
+        default=0.2, metadata=doc("both clouds are voxel-downsampled to this size first (m; 0: not)")
+    )
+    max_iterations: int = field(default=50, metadata=doc("ICP iterations at most"))
+    normal_radius_m: float = field(
+        default=1.0, metadata=doc("cloud 1's normals from its points within this radius (m)")
+    )
+    normal_max_nn: int = field(default=30, metadata=doc("... and at most this many of them"))
+
+    def __post_init__(self):
+        if not self.max_correspondence_m > 0 or self.voxel_m < 0 or self.max_iterations < 1:
+            raise ValueError(
+                f"need max_correspondence_m > 0, voxel_m >= 0 and max_iterations >= 1, got "
+                f"{self.max_correspondence_m}, {self.voxel_m} and {self.max_iterations}"
+            )
+        if not self.normal_radius_m > 0 or self.normal_max_nn < 3:
+            raise ValueError(
+                f"need normal_radius_m > 0 and normal_max_nn >= 3, got {self.normal_radius_m} and {self.normal_max_nn}"
+            )
+
+
+def realign(pair: RegisteredPair, params: Params) -> Outcome:
+    """Cloud 2 moved by point-to-plane ICP onto cloud 1, sensor 2's pose with it; nothing removed."""
+    import open3d as o3d  # only where a stage realigns
+
+    from ..registration.matching import point_cloud
+
+    reg = o3d.pipelines.registration
+    source = point_cloud(pair.xyz2, params.voxel_m, 0.0)
+    target = point_cloud(pair.xyz1, params.voxel_m, 0.0)
+    for cloud, points in ((2, source), (1, target)):
+        if len(points.points) < MIN_POINTS:
+            raise HypothesisError(
+                f"realign: too few points: cloud {cloud} has {len(points.points)} after {params.voxel_m} m voxels, "
+                f"it needs at least {MIN_POINTS}"
+            )
+    target.estimate_normals(
+        o3d.geometry.KDTreeSearchParamHybrid(radius=params.normal_radius_m, max_nn=params.normal_max_nn)
+    )
+    criteria = reg.ICPConvergenceCriteria(1e-6, 1e-6, params.max_iterations)
+    result = reg.registration_icp(
+        source,
+        target,
+        params.max_correspondence_m,
+        np.eye(4),
+        reg.TransformationEstimationPointToPlane(),
+        criteria,
+    )
+    T = _rounded(np.array(result.transformation, dtype=np.float64))
+    evaluation = reg.evaluate_registration(source, target, params.max_correspondence_m, T)
+    pairs = np.asarray(evaluation.correspondence_set).reshape(-1, 2)
+    if len(pairs) < MIN_POINTS:
+        raise HypothesisError(
+            f"realign: too few correspondences: {len(pairs)} cloud-2 points have a cloud-1 point within "
+            f"max_correspondence_m = {params.max_correspondence_m} m, it needs at least {MIN_POINTS}"
+        )
+    pairs = pairs[np.argsort(pairs[:, 0], kind="stable")]  # source order: sums independent of Open3D's threads
+    mapped = np.asarray(source.points)[pairs[:, 0]] @ T[:3, :3].T + T[:3, 3]
+    fitted = {
+        **_fitted(T, mapped, np.asarray(target.points)[pairs[:, 1]], np.asarray(target.normals)[pairs[:, 1]]),
+        "fitness": float(evaluation.fitness),
+        "correspondences": len(pairs),
+        "method": "icp_point_to_plane",
+    }
+    keep1, keep2 = np.ones(len(pair.xyz1), dtype=bool), np.ones(len(pair.xyz2), dtype=bool)
+    xyz2 = pair.xyz2 @ T[:3, :3].T + T[:3, 3]
+    return Outcome(keep1, keep2, xyz2=xyz2, T_1_2=T @ pair.T_1_2, fitted=fitted)
+
+
+def _fitted(T: np.ndarray, mapped: np.ndarray, target: np.ndarray, normals: np.ndarray) -> dict:
+    """The transform's translation and rotation vector, and their standard errors (see the module)."""
+    from scipy.spatial.transform import Rotation
+
+    residuals = np.einsum("ij,ij->i", mapped - target, normals)
+    J = np.hstack([np.cross(mapped, normals), normals])  # d r / d (rotation, translation) applied after T
+    m = len(residuals)
+    sigma2 = float(residuals @ residuals) / (m - 6)
+    information = J.T @ J
+    try:
+        covariance = sigma2 * np.linalg.inv(information)
+    except np.linalg.LinAlgError:
+        covariance = np.full((6, 6), np.nan)
+    t = T[:3, 3]
+    # t after a small rotation w and translation v applied after T: t + w x t + v
+    A = np.hstack([-_skew(t), np.eye(3)])
+    translation_cov = A @ covariance @ A.T
+    rotvec = Rotation.from_matrix(T[:3, :3]).as_rotvec()
+
+    def se(values: np.ndarray, scale: float = 1.0) -> list | None:
+        values = np.sqrt(np.clip(np.diag(values), 0, None)) * scale
+        return [float(v) for v in values] if np.isfinite(values).all() else None  # singular: unknown
+
+    return {
+        "translation_m": [float(v) for v in t],
+        "translation_se_m": se(translation_cov),
+        "rotation_deg": [float(v) for v in np.degrees(rotvec)],
+        "rotation_se_deg": se(covariance[:3, :3], float(np.degrees(1.0))),
+        "angle_deg": float(np.degrees(np.linalg.norm(rotvec))),
+        "inlier_rmse_m": float(np.sqrt(np.mean(np.sum((mapped - target) ** 2, axis=1)))),
+        "sigma_m": float(np.sqrt(sigma2)),
+    }
+
+
+def _rounded(T: np.ndarray) -> np.ndarray:
+    """``T`` with its rotation vector and translation rounded to 1e-9 (rad, m): Open3D's parallel
+    sums change the last digits of its estimate from run to run, and a rerun should write the
+    same files. (1e-9 rad moves a point 100 m away by 0.1 um.)"""
+    from scipy.spatial.transform import Rotation
+
+    rounded = np.eye(4)
+    rounded[:3, :3] = Rotation.from_rotvec(np.round(Rotation.from_matrix(T[:3, :3]).as_rotvec(), 9)).as_matrix()
+    rounded[:3, 3] = np.round(T[:3, 3], 9)
+    return rounded
+
+
+def _skew(v: np.ndarray) -> np.ndarray:
+    return np.array([[0, -v[2], v[1]], [v[2], 0, -v[0]], [-v[1], v[0], 0]], dtype=np.float64)

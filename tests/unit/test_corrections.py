@@ -1,0 +1,332 @@
+"""Stages that correct as well as remove: the contract, ``realign``, the files, the neighbours."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from lidarfield.analysis.field_stats import analyse_field
+from lidarfield.errors import HypothesisError
+from lidarfield.field.grid import field_settings_from_config
+from lidarfield.hypotheses import apply_step
+from lidarfield.hypotheses.outcome import Outcome, checked_outcome
+from lidarfield.hypotheses.outliers import neighbour_distances
+from lidarfield.io.parquet_table import read_table
+from lidarfield.pair import RegisteredPair, read_pair, write_pair
+from lidarfield.poses import pose_from_xyzrpy
+from lidarfield.registration import register_pair
+from lidarfield.sensors.models import PRESETS
+from lidarfield.simulation.raycast import simulate_scan
+from lidarfield.simulation.scene import load_scene
+from lidarfield.study.jobs import field_stage, mitigate_stage
+from lidarfield.study.stack import apply_stack
+from lidarfield.study.summary import CORRECTION_COLUMNS, write_summary
+
+ROOT = Path(__file__).resolve().parents[2]
+SHIFT = {"plugin": {"file": "hypotheses/shift_cloud2.py", "function": "shift", "params": {"shift_m": [-0.3, 0, 0]}}}
+GRID = {"kind": "spherical", "azimuth_bins": 36, "elevation_deg": [-22.5, 15.0], "elevation_bins": 5, "min_points": 30}
+
+
+def offset_pair(pair: RegisteredPair, offset: np.ndarray) -> RegisteredPair:
+    """``pair`` with cloud 2 (and sensor 2's pose) registered ``offset`` (4x4, frame 1) off."""
+    return RegisteredPair(
+        pair.xyz1,
+        pair.xyz2 @ offset[:3, :3].T + offset[:3, 3],
+        offset @ pair.T_1_2,
+        pair.sensor1,
+        pair.sensor2,
+        dict(pair.attributes1),
+        dict(pair.attributes2),
+        dict(pair.registration),
+    )
+
+
+@pytest.fixture(scope="module")
+def intersection():
+    """The paper's intersection seen twice by a VLP-16 from about the same place, registered by
+    the truth: two independent samplings (different seeds, 2 cm range noise), sensor 2 yawed by
+    0.21 deg so that its rays interleave with sensor 1's instead of repeating them."""
+    scene, sensor = load_scene("paper-intersection"), PRESETS["vlp16"]
+    scans = [
+        simulate_scan(scene, sensor, pose_from_xyzrpy(pose), seed=seed, range_noise_m=0.02)
+        for seed, pose in ((1, [0, 0, 3, 0, 0, 0]), (2, [0, 0, 3, 0, 0, 0.0037]))
+    ]
+    return register_pair(scans[0], scans[1], "truth")
+
+
+def _field(pair: RegisteredPair) -> dict:
+    return analyse_field(pair, field_settings_from_config({}))[1]
+
+
+@pytest.mark.parametrize(
+    "offset, check",
+    [
+        ([0.3, 0, 0, 0, 0, 0], lambda c: abs(c["translation_m"][0] + 0.3) < 0.01),
+        ([0, 0, 0, 0, 0, np.radians(0.5)], lambda c: abs(c["rotation_deg"][2] + 0.5) < 0.02),
+    ],
+    ids=["x 0.3 m", "yaw 0.5 deg"],
+)
+def test_realign_recovers_a_registration_offset(intersection, offset, check):
+    truth = intersection
+    moved = offset_pair(truth, pose_from_xyzrpy(offset))
+    stages = list(apply_stack(moved, [{"realign": {}}]))
+    stage = stages[1]
+    c = stage.correction
+    assert check(c), c
+    # the rest of the transform is near the identity, and the pose is corrected with the points
+    T_back = stage.pair.T_1_2 @ np.linalg.inv(truth.T_1_2)
+    assert (
+        np.abs(T_back[:3, 3]).max() < 0.01
+        and np.degrees(np.arccos(min(1.0, (np.trace(T_back[:3, :3]) - 1) / 2))) < 0.02
+    )
+    assert np.abs(stage.pair.xyz2 - truth.xyz2).max() < 0.02
+    assert np.array_equal(stage.pair.xyz1, truth.xyz1) and stage.removed1 == stage.removed2 == 0
+    assert stage.moved2 and not stage.moved1 and stage.displacement1 == (0.0, 0.0)
+    # standard errors: finite, small, and the offset is far outside them
+    assert all(0 < se < 0.005 for se in c["translation_se_m"]) and all(0 < se < 0.01 for se in c["rotation_se_deg"])
+    assert c["fitness"] > 0.9 and c["correspondences"] > 1000
+    # The field: the offset's pattern is gone, back to the correctly registered pair's field.
+    # That field is itself 'patterned' (the simulated scene's sampling: p_coherence 0.001 with no
+    # offset at all), so the verdict after realign is the truth's, not 'random'.
+    before, after, reference = _field(moved), _field(stage.pair), _field(truth)
+    assert after["verdict"] == reference["verdict"]
+    assert after["rms_magnitude"] < 1.2 * reference["rms_magnitude"] < before["rms_magnitude"]
+
+
+def test_realign_names_what_is_missing(intersection):
+    few = RegisteredPair(intersection.xyz1, intersection.xyz2[:5])
+    with pytest.raises(
+        HypothesisError, match=r"realign: too few points: cloud 2 has 2 after 0.2 m voxels, it needs at least 10"
+    ):
+        apply_step(few, {"realign": {}})
+    apart = RegisteredPair(intersection.xyz1, intersection.xyz2 + [100.0, 0, 0])
+    with pytest.raises(HypothesisError, match="too few correspondences: 0 cloud-2 points"):
+        apply_step(apart, {"realign": {}})
+    with pytest.raises(HypothesisError, match="max_correspondence_m"):
+        apply_step(intersection, {"realign": {"max_correspondence_m": 0}})
+
+
+# --- the contract -----------------------------------------------------------------------------
+
+
+def test_a_correcting_plugin_through_apply_stack():
+    rng = np.random.default_rng(3)
+    xyz1, xyz2 = rng.normal(scale=8, size=(3000, 3)), rng.normal(scale=8, size=(2500, 3))
+    pair = RegisteredPair(xyz1, xyz2, pose_from_xyzrpy([1, 0, 0, 0, 0, 0.1]))
+    stack = [{"crop": {"max_range_m": 12}}, SHIFT, {"outliers": {}}]
+    stages = list(apply_stack(pair, stack, ROOT))
+    crop, shift, outliers = stages[1:]
+    assert shift.removed1 == shift.removed2 == 0 and shift.correction == {"shift_m": [-0.3, 0.0, 0.0]}
+    assert np.allclose(shift.pair.xyz2, crop.pair.xyz2 + [-0.3, 0, 0]) and np.array_equal(
+        shift.pair.xyz1, crop.pair.xyz1
+    )
+    assert np.allclose(shift.pair.T_1_2[:3, 3], [0.7, 0, 0]) and np.allclose(outliers.pair.T_1_2, shift.pair.T_1_2)
+    assert shift.displacement2 == pytest.approx((0.3, 0.3)) and shift.displacement1 == (0.0, 0.0)
+    assert (
+        crop.correction is None
+        and crop.correction_json() == ""
+        and shift.correction_json() == '{"shift_m":[-0.3,0.0,0.0]}'
+    )
+    for stage in stages:  # every survivor's row in the registered pair, and where it is now
+        rows1, rows2 = stage.pair.attributes1["row"], stage.pair.attributes2["row"]
+        assert np.array_equal(xyz1[rows1], stage.pair.xyz1)
+        moved = stage.level >= 2
+        assert np.allclose(xyz2[rows2] + ([-0.3, 0, 0] if moved else 0), stage.pair.xyz2)
+    # the removed file's row: the point's row in the previous stage (as for a removing stage)
+    columns = outliers.removed_columns()
+    assert list(columns)[-2:] == ["hypothesis", "row"]
+    back = shift.pair.xyz2[columns["row"][columns["cloud"] == 2]]
+    assert np.array_equal(back, outliers.removed.xyz2)
+    # The neighbour distances the outliers stage used: cloud 2 searched anew after the shift,
+    # cloud 1 carried; both what a new search finds.
+    for cloud in (1, 2):
+        xyz = outliers.pair.xyz1 if cloud == 1 else outliers.pair.xyz2
+        known = outliers.pair.neighbours[(cloud, 20)]
+        expected = neighbour_distances(xyz, 20)
+        np.testing.assert_array_equal(known.mean, expected.mean)
+        np.testing.assert_array_equal(known.reach, expected.reach)
+
+
+def _lengths():
+    return (4, 3)
+
+
+@pytest.mark.parametrize(
+    "result, message",
+    [
+        ("nope", "must return \\(keep1, keep2\\) or a mapping"),
+        ({"keep1": np.ones(4, bool), "xyz9": 1}, "returned unknown key\\(s\\) 'xyz9'"),
+        ({"keep1": np.ones(3, bool)}, "keep1 must be a boolean array of length 4"),
+        ({"xyz2": np.zeros((2, 3))}, "xyz2 must have shape \\(3, 3\\).*got shape \\(2, 3\\)"),
+        ({"xyz1": np.zeros(12)}, "xyz1 must have shape \\(4, 3\\)"),
+        ({"xyz1": [[0, 0, np.nan]] + [[0, 0, 0]] * 3}, "xyz1 has 1 row\\(s\\) not finite \\(first: row 0\\)"),
+        ({"xyz2": [["a", 0, 0]] * 3}, "xyz2 must be an array of numbers"),
+        ({"T_1_2": np.eye(3)}, "T_1_2 must be a finite 4x4 matrix"),
+        ({"T_1_2": np.full((4, 4), np.inf)}, "T_1_2 must be a finite 4x4 matrix"),
+        ({"fitted": [1, 2]}, "fitted must be a mapping"),
+        ({"fitted": {"a": float("nan")}}, "fitted must be JSON-able with finite numbers"),
+        ({"fitted": {"a": object()}}, "fitted must be JSON-able"),
+    ],
+)
+def test_outcome_shape_and_finiteness_errors(result, message):
+    with pytest.raises(HypothesisError, match=f"^my hypothesis: {message}"):
+        checked_outcome(result, _lengths(), "my hypothesis")
+
+
+def test_outcome_forms():
+    keep1, keep2 = np.array([True, False, True, True]), np.ones(3, bool)
+    as_tuple = checked_outcome((keep1, keep2), _lengths(), "h")
+    assert not as_tuple.corrects and as_tuple.xyz2 is None
+    mapping = checked_outcome(
+        {"xyz2": np.ones((3, 3)), "fitted": {"n": np.int64(2), "v": np.array([1.5])}}, _lengths(), "h"
+    )
+    assert mapping.corrects and mapping.keep1.all() and mapping.fitted == {"n": 2, "v": [1.5]}
+    k1, k2 = checked_outcome(Outcome(keep1, keep2, xyz1=np.zeros((4, 3))), _lengths(), "h")
+    assert np.array_equal(k1, keep1) and np.array_equal(k2, keep2)
+
+
+def test_a_plugin_returning_a_bad_correction_names_its_file(tmp_path):
+    (tmp_path / "bad.py").write_text(
+        "import numpy as np\ndef f(pair, params):\n    return {'xyz2': np.zeros((len(pair.xyz2), 2))}\n"
+    )
+    pair = RegisteredPair(np.zeros((5, 3)), np.ones((4, 3)))
+    with pytest.raises(
+        HypothesisError, match=r"plugin hypothesis 'f' \(stack entry 2\): xyz2 must have shape \(4, 3\)"
+    ) as e:
+        apply_step(pair, {"plugin": {"file": "bad.py", "function": "f"}}, tmp_path, level=2)
+    assert "bad.py" in str(e.value)
+
+
+# --- the files ---------------------------------------------------------------------------------
+
+
+def test_a_correcting_stages_files_and_summary_row(tmp_path):
+    rng = np.random.default_rng(1)
+    pair = RegisteredPair(rng.normal(scale=10, size=(4000, 3)), rng.normal(scale=10, size=(3000, 3)))
+    write_pair(tmp_path / "registered.parquet", pair)
+    steps = [None, {"ego_vehicle": {"radius_m": 8.0}}, SHIFT]
+    dirs = [tmp_path / f"0{level}" for level in range(3)]
+    previous = tmp_path / "registered.parquet"
+    for level, (step, folder) in enumerate(zip(steps, dirs)):
+        mitigate_stage(
+            previous,
+            step,
+            f"0{level}-x-0000000{level}",
+            level,
+            folder / "points.parquet",
+            folder / "removed.parquet",
+            ROOT,
+        )
+        field_stage(
+            folder / "points.parquet",
+            folder / "removed.parquet",
+            GRID,
+            "demo",
+            folder / "field.parquet",
+            folder / "stats.json",
+        )
+        previous = folder / "points.parquet"
+    columns, meta = read_table(dirs[2] / "points.parquet")
+    stage2, _ = read_pair(dirs[2] / "points.parquet")
+    row2 = columns["row"][columns["cloud"] == 2]
+    assert np.allclose(stage2.xyz2, pair.xyz2[row2] + [-0.3, 0, 0], atol=1e-12)
+    assert np.array_equal(stage2.xyz1, pair.xyz1[columns["row"][columns["cloud"] == 1]])
+    assert meta["moved"] == [2] and meta["correction"] == {"shift_m": [-0.3, 0.0, 0.0]}
+    assert np.allclose(stage2.T_1_2[:3, 3], [-0.3, 0, 0])
+    removed, _ = read_table(dirs[2] / "removed.parquet")
+    assert len(removed["cloud"]) == 0 and list(removed)[-2:] == ["hypothesis", "row"]
+
+    write_summary([d / "stats.json" for d in dirs], tmp_path / "summary.parquet", tmp_path / "summary.csv")
+    table = pd.read_parquet(tmp_path / "summary.parquet")
+    assert set(CORRECTION_COLUMNS) <= set(table.columns)
+    assert list(table["correction"]) == ["", "", '{"shift_m":[-0.3,0.0,0.0]}']
+    assert list(table["displacement1_median_m"]) == list(table["displacement1_max_m"]) == [0.0, 0.0, 0.0]
+    assert table["displacement2_median_m"][:2].tolist() == [0.0, 0.0]
+    assert table["displacement2_median_m"][2] == pytest.approx(0.3) and table["displacement2_max_m"][
+        2
+    ] == pytest.approx(0.3)
+    assert pd.read_csv(tmp_path / "summary.csv", keep_default_na=False)["correction"].tolist() == list(
+        table["correction"]
+    )
+
+
+def test_the_suggest_jobs_search_a_moved_cloud_anew(tmp_path):
+    """Neighbour distances through the files: a stage that moved cloud 2 stores its distances
+    whole, and a removing stage after it carries them on; every stage's equal a new search."""
+    from lidarfield.analysis.neighbour_file import neighbours_job, read_changes
+    from lidarfield.analysis.suggest import suggest_stage
+
+    rng = np.random.default_rng(2)
+    pair = RegisteredPair(rng.normal(scale=6, size=(3000, 3)), rng.normal(scale=6, size=(2500, 3)))
+    write_pair(tmp_path / "registered.parquet", pair)
+    neighbours_job(tmp_path / "registered.parquet", [20], tmp_path / "neighbours.parquet")
+    steps = [None, {"crop": {"max_range_m": 12}}, SHIFT, {"crop": {"max_range_m": 9}}]
+    dirs = [tmp_path / f"0{level}" for level in range(len(steps))]
+    previous = tmp_path / "registered.parquet"
+    for level, (step, folder) in enumerate(zip(steps, dirs)):
+        mitigate_stage(
+            previous,
+            step,
+            f"0{level}-x-0000000{level}",
+            level,
+            folder / "points.parquet",
+            folder / "removed.parquet",
+            ROOT,
+        )
+        previous = folder / "points.parquet"
+        suggest_stage(
+            folder / "points.parquet",
+            [{"outliers": {}}],
+            GRID,
+            folder / "suggestions.parquet",
+            ROOT,
+            neighbours=tmp_path / "neighbours.parquet",
+            removed_paths=[d / "removed.parquet" for d in dirs[1 : level + 1]],
+            change_paths=[d / "neighbour_changes.parquet" for d in dirs[1:level]],
+            changes_out=folder / "neighbour_changes.parquet",
+        )
+        searched = tmp_path / f"searched{level}.parquet"
+        suggest_stage(folder / "points.parquet", [{"outliers": {}}], GRID, searched, ROOT)
+        carried, anew = read_table(folder / "suggestions.parquet")[0], read_table(searched)[0]
+        for name in anew:
+            np.testing.assert_array_equal(carried[name], anew[name])
+    # the shift stage's change: cloud 2 whole (searched anew), cloud 1 carried (no change: nothing removed)
+    changes = read_changes(dirs[2] / "neighbour_changes.parquet")
+    assert len(changes[(2, 20)]) == len(read_pair(dirs[2] / "points.parquet")[0].xyz2)
+    assert len(changes.get((1, 20), ([],))[0]) == 0
+    # and the distances the last stage carried: a new search's, to the bit
+    from lidarfield.analysis.neighbour_file import carry_to_stage
+
+    last, meta = read_pair(dirs[3] / "points.parquet")
+    carry_to_stage(
+        last,
+        tmp_path / "neighbours.parquet",
+        [d / "removed.parquet" for d in dirs[1:]],
+        [d / "neighbour_changes.parquet" for d in dirs[1:3]],
+        meta.get("moved", ()),
+    )
+    for (cloud, k), known in last.neighbours.items():
+        expected = neighbour_distances(last.xyz1 if cloud == 1 else last.xyz2, k)
+        np.testing.assert_array_equal(known.mean, expected.mean)
+        np.testing.assert_array_equal(known.reach, expected.reach)
+    assert "moved" not in meta and "correction" not in meta  # the last stage (a crop) only removed
+
+
+def test_the_pair_pages_stage_table_shows_a_correction_only_when_a_stage_corrects():
+    from lidarfield.report.pair_page import stages_table
+
+    base = {"pair": "p", "hypothesis": "none", "n1": 10, "n2": 10, "correction": "", "displacement2_max_m": 0.0}
+    removing = stages_table([{**base, "stage": "00-none-a"}, {**base, "stage": "01-crop-b", "hypothesis": "crop"}])
+    assert "correction" not in removing and "displacement2" not in removing
+    fitted = '{"angle_deg":0.50123456,"translation_m":[-0.3001234,0.0,0.0]}'
+    correcting = stages_table(
+        [
+            {**base, "stage": "00-none-a"},
+            {**base, "stage": "01-realign-c", "correction": fitted, "displacement2_max_m": 0.31},
+        ]
+    )
+    assert "correction" in correcting and "displacement2" in correcting
+    assert "angle_deg: 0.5012; translation_m: [-0.3001, 0, 0]" in correcting and "0.31" in correcting

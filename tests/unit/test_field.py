@@ -117,11 +117,21 @@ def test_kernel_matches_reference(name):
     assert spread.any() or name == "cartesian-sparse"
     assert np.isfinite(fast["se"][spread]).all() and (fast["se"][spread] > 0).all()
     assert np.isnan(fast["se"][fast["valid"] & ~spread]).all()
+    # The local surface: a unit normal facing the origin and a planarity in [0, 1] for every
+    # valid voxel with 3 points (all of them but the 0.2 m grid's), NaN elsewhere.
+    normal = np.column_stack([fast["nx"], fast["ny"], fast["nz"]])
+    surface = np.isfinite(fast["planarity"])
+    assert surface.any() or name == "cartesian-sparse"
+    assert not surface[~fast["valid"]].any()
+    np.testing.assert_allclose(np.linalg.norm(normal[surface], axis=1), 1.0, atol=1e-12)
+    assert ((fast["planarity"][surface] >= 0) & (fast["planarity"][surface] <= 1)).all()
+    centre = np.column_stack([fast["x1"] + fast["x2"], fast["y1"] + fast["y2"], fast["z1"] + fast["z2"]]) / 2
+    assert (np.einsum("ij,ij->i", normal[surface], centre[surface] - origin) <= 0).all()
     assert_same_field(fast, reference)
     # From precomputed ids (one binning, several subsets): the same field, both implementations.
     grid = settings.grid
     ids1, ids2 = grid.assign(xyz1, origin), grid.assign(xyz2, origin)
-    assert_same_field(field_from_voxel_ids(ids1, xyz1, ids2, xyz2, settings), fast)
+    assert_same_field(field_from_voxel_ids(ids1, xyz1, ids2, xyz2, settings, origin), fast)
     keep = slice(0, 20_000)
     assert_same_field(
         field_from_voxel_ids(ids1[keep], xyz1[keep], ids2, xyz2, settings),

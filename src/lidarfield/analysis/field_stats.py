@@ -3,11 +3,17 @@
 Everything is computed over the *valid* voxels and returned as plain Python floats (NaN where a
 figure is undefined, e.g. no valid voxel; ``summary_json_safe`` turns NaN into null for JSON).
 
-- The rigid part is the best rigid transform (rotation R, translation t, no scale) mapping the
-  voxel means of cloud 2 onto those of cloud 1, weighted by ``min(n1, n2)`` (weighted
-  Kabsch/Umeyama). ``rigid_translation_m`` is t and ``rigid_rotation_deg`` the angle of R: the
-  correction that would move scan 2 onto scan 1 (a field of +d everywhere gives t = -d).
-  ``rigid_energy_share`` = 1 - sum w |R m2 + t - m1|^2 / sum w |m2 - m1|^2: near 1 when a
+- The rigid part is fitted point-to-plane on the voxel means (``rigid_fit``): each valid
+  voxel constrains the motion only along its surface normal, weighted by min(n1, n2) and its
+  planarity, robustly (Cauchy IRLS). ``rigid_translation_m`` is t and ``rigid_rotation_deg``
+  the angle of R: the correction that would move scan 2 onto scan 1 (a shift of scan 2 by
+  +d gives t = -d). ``rigid_information`` is the fit's 6 x 6 information matrix (row-major,
+  36 numbers; rx, ry, rz in rad, tx, ty, tz in m, about sensor 1) and ``rigid_unconstrained``
+  the directions the scene does not constrain (names; the fit does not move along them, so
+  t and R hold 0 there by construction, not by measurement).
+  ``rigid_energy_share`` = 1 - sum w |e|^2 / sum w |v|^2 over valid voxels, w = min(n1, n2),
+  e the residual vector ``rigid_fit.voxel_residuals`` (the field vector minus what the rigid
+  part predicts the voxel mean to see: the normal part on a plane): near 1 when a
   registration error explains the field, low for a scale error or local disagreements.
 - ``mean_resultant_length`` = |sum w u/|u|| / sum w: 1 when all vectors point the same way,
   about 1/sqrt(voxels) for random directions.
@@ -27,8 +33,9 @@ from ..defaults import default
 from ..field.grid import FieldSettings
 from ..field.kernel import field_from_voxel_ids
 from ..pair import RegisteredPair
-from ..poses import rotation_angle, weighted_rigid_transform
+from ..poses import weighted_rigid_transform  # noqa: F401 (re-exported: the tests' Kabsch)
 from .randomness import neighbour_pairs, randomness_tests, unit_vectors
+from .rigid_fit import field_rigid_part
 from .tags import energy_shares, voxel_energy, voxel_tags
 
 STATISTIC_KEYS = (
@@ -42,6 +49,8 @@ STATISTIC_KEYS = (
     "rigid_translation_m",
     "rigid_rotation_deg",
     "rigid_energy_share",
+    "rigid_information",
+    "rigid_unconstrained",
     "mean_resultant_length",
     "voxels_significant",
     "share_significant",
@@ -69,8 +78,6 @@ def field_statistics(columns: dict[str, np.ndarray], settings: FieldSettings | N
     valid = np.asarray(columns["valid"], dtype=bool)
     uvw = np.column_stack([columns[c][valid] for c in ("u", "v", "w")]).astype(np.float64)
     magnitude = np.asarray(columns["magnitude"], dtype=np.float64)[valid]
-    mean1 = np.column_stack([columns[c][valid] for c in ("x1", "y1", "z1")]).astype(np.float64)
-    mean2 = np.column_stack([columns[c][valid] for c in ("x2", "y2", "z2")]).astype(np.float64)
     weight = np.minimum(columns["n1"][valid], columns["n2"][valid]).astype(np.float64)
 
     stats: dict = {"voxels": int(len(valid)), "voxels_valid": int(valid.sum())}
@@ -83,10 +90,12 @@ def field_statistics(columns: dict[str, np.ndarray], settings: FieldSettings | N
     else:
         for key in ("max_magnitude", "mean_magnitude", "rms_magnitude", "p95_magnitude", "paper_max_metric"):
             stats[key] = math.nan
-    rotation, translation = weighted_rigid_transform(mean2, mean1, weight)
-    stats["rigid_translation_m"] = [float(c) for c in translation]
-    stats["rigid_rotation_deg"] = float(np.degrees(rotation_angle(rotation)))
-    stats["rigid_energy_share"] = rigid_energy_share(mean2, mean1, weight, rotation, translation)
+    fit, residual = field_rigid_part(columns)
+    stats["rigid_translation_m"] = [float(c) for c in fit.translation]
+    stats["rigid_rotation_deg"] = fit.rotation_deg
+    stats["rigid_energy_share"] = rigid_energy_share(uvw, residual[valid], weight)
+    stats["rigid_information"] = [float(c) for c in fit.information.ravel()]
+    stats["rigid_unconstrained"] = list(fit.unconstrained)
     stats["mean_resultant_length"] = mean_resultant_length(uvw, weight)
     z_min = default("grid", "z_min") if settings is None else settings.z_min
     significant = int(np.count_nonzero(np.abs(columns["z"][valid]) >= z_min))
@@ -102,14 +111,12 @@ def field_statistics(columns: dict[str, np.ndarray], settings: FieldSettings | N
     return stats
 
 
-def rigid_energy_share(
-    source: np.ndarray, target: np.ndarray, weight: np.ndarray, rotation: np.ndarray, translation: np.ndarray
-) -> float:
-    """1 - weighted residual energy after the rigid transform / weighted field energy."""
-    energy = float(weight @ np.sum((source - target) ** 2, axis=1))
-    if not energy > 0 or not np.all(np.isfinite(rotation)):
+def rigid_energy_share(vectors: np.ndarray, residual: np.ndarray, weight: np.ndarray) -> float:
+    """1 - weighted residual energy left by the rigid part / weighted field energy (NaN without
+    a fit or without energy)."""
+    energy = float(weight @ np.sum(vectors**2, axis=1))
+    if not energy > 0 or not np.all(np.isfinite(residual)):
         return math.nan
-    residual = source @ rotation.T + translation - target
     return float(1.0 - (weight @ np.sum(residual**2, axis=1)) / energy)
 
 

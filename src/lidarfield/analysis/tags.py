@@ -15,9 +15,13 @@ carry several tags; an invalid voxel carries none. The point-based tags hold whe
 
 From the vector and counts:
 
-- ``radial``: the vector within ``RADIAL_DEG`` of the line of sight from sensor 1 (either way).
-- ``rigid``: the field's rigid part (``poses.weighted_rigid_transform``) leaves a residual
-  no longer than ``RIGID_RESIDUAL_SHARE`` of the vector (it explains >= 75% of its energy).
+- ``rigid``: the field's rigid part (the point-to-plane fit of ``rigid_fit``) leaves a
+  residual vector (``rigid_fit.voxel_residuals``: the vector minus what the rigid part
+  predicts the voxel mean to see, the normal part on a plane) no longer than
+  ``RIGID_RESIDUAL_SHARE`` of the vector (it explains >= 75% of its energy).
+- ``radial``: the vector within ``RADIAL_DEG`` of the line of sight from sensor 1 (either way)
+  and *not* ``rigid``: a wall seen head-on turns a shift into a vector along the line of
+  sight, which the rigid part explains; radial is what it does not.
 - ``count_imbalance``: one cloud has at least ``IMBALANCE_RATIO`` times the other's points.
 
 The energy of a voxel is min(n1, n2) |v|^2 (the weight of the rigid fit: the precision of a
@@ -34,7 +38,7 @@ import numpy as np
 from ..errors import HypothesisError
 from ..field.grid import FieldSettings, SphericalGrid
 from ..pair import RegisteredPair
-from ..poses import weighted_rigid_transform
+from .rigid_fit import field_rigid_part
 
 TAGS = ("fov_edge", "near_sensor", "depth_edge", "radial", "rigid", "count_imbalance")
 POINT_SHARE = 0.1
@@ -80,10 +84,10 @@ def voxel_tags(
         "fov_edge": point_tag(_near_fov_edge(pair)),
         "near_sensor": point_tag([_near_a_sensor(xyz, pair) for xyz in (pair.xyz1, pair.xyz2)]),
         "depth_edge": point_tag(_on_depth_edge(pair, settings)),
-        "radial": _radial(columns),
         "rigid": _rigid(columns, valid),
         "count_imbalance": _imbalanced(columns["n1"], columns["n2"]),
     }
+    tags["radial"] = _radial(columns) & ~tags["rigid"]
     return {tag_column(tag): tags[tag] & valid for tag in TAGS}
 
 
@@ -152,17 +156,10 @@ def _radial(columns: dict[str, np.ndarray]) -> np.ndarray:
 
 
 def _rigid(columns: dict[str, np.ndarray], valid: np.ndarray) -> np.ndarray:
-    mean1 = np.column_stack([columns[c] for c in ("x1", "y1", "z1")])
-    mean2 = np.column_stack([columns[c] for c in ("x2", "y2", "z2")])
-    weight = np.minimum(columns["n1"], columns["n2"]).astype(np.float64)
-    rotation, translation = weighted_rigid_transform(mean2[valid], mean1[valid], weight[valid])
-    tagged = np.zeros(len(valid), dtype=bool)
-    if not np.all(np.isfinite(rotation)):
-        return tagged
-    residual = np.linalg.norm(mean2[valid] @ rotation.T + translation - mean1[valid], axis=1)
-    magnitude = np.asarray(columns["magnitude"], dtype=np.float64)[valid]
-    tagged[valid] = (magnitude > 0) & (residual <= RIGID_RESIDUAL_SHARE * magnitude)
-    return tagged
+    _, residual = field_rigid_part(columns)
+    magnitude = np.asarray(columns["magnitude"], dtype=np.float64)
+    with np.errstate(invalid="ignore"):
+        return valid & (magnitude > 0) & (np.linalg.norm(residual, axis=1) <= RIGID_RESIDUAL_SHARE * magnitude)
 
 
 def _imbalanced(n1: np.ndarray, n2: np.ndarray) -> np.ndarray:

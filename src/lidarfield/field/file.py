@@ -1,5 +1,6 @@
 """The field file (``field.parquet``): the kernel's columns, with the grid, the validity rules
-and the field's statistics in its metadata."""
+and the field's statistics in its metadata. The surface columns (``nx, ny, nz, planarity``)
+are optional on reading: files written before them lack them."""
 
 from __future__ import annotations
 

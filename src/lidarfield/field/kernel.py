@@ -4,7 +4,7 @@ The kernel never sorts points. Each cloud's points get a dense index (the spheri
 itself, or for a Cartesian grid a cell index inside the bounding box of both clouds) and every
 per-voxel sum is one ``np.bincount`` in float64: counts, coordinate sums and the sums of the six
 coordinate products that give each cloud's spread in the voxel (for ``se`` and ``z``, see
-``significance``). Out-of-grid points get the index one past the
+``significance``, and for the local surface normal, ``surface``). Out-of-grid points get the index one past the
 end, whose bin is dropped. ``reference.py`` holds a pandas groupby version of the same
 contract for the tests and the benchmark.
 """
@@ -15,9 +15,13 @@ import numpy as np
 
 from .grid import CARTESIAN_BITS, FieldSettings, Grid, SphericalGrid, relative_columns
 from .significance import COVARIANCE_ENTRIES, covariance_from_sums, vector_standard_error, z_score
+from .surface import surface_normals
 
 GRID_COLUMNS = {"spherical": ("az_bin", "el_bin", "r_bin"), "cartesian": ("ix", "iy", "iz")}
 VALUE_COLUMNS = ("n1", "n2", "x1", "y1", "z1", "x2", "y2", "z2", "u", "v", "w", "magnitude", "se", "z", "valid")
+# The local surface of each valid voxel (``surface``): written after VALUE_COLUMNS, optional
+# when a field file is read (files written before them lack them).
+SURFACE_COLUMNS = ("nx", "ny", "nz", "planarity")
 
 # A Cartesian bounding box with more cells than this (and than a few per point) falls back to
 # np.unique for compaction: the dense bincount arrays would cost more than the sort.
@@ -26,7 +30,7 @@ _MAX_DENSE_CELLS = 1 << 24
 
 def field_columns(grid: Grid) -> tuple[str, ...]:
     """The column names of the field Parquet for ``grid``, in order."""
-    return ("voxel", *GRID_COLUMNS[grid.kind], *VALUE_COLUMNS)
+    return ("voxel", *GRID_COLUMNS[grid.kind], *VALUE_COLUMNS, *SURFACE_COLUMNS)
 
 
 def discrepancy_field(
@@ -38,7 +42,8 @@ def discrepancy_field(
     ``field_columns(settings.grid)``. Means are NaN where a cloud has no point; ``u, v, w``
     and ``magnitude`` are NaN and ``valid`` False where either count is below ``min_points``
     or, with ``max_component_m`` set, any |component| exceeds it; ``se`` and ``z`` (see
-    ``significance``) are NaN there too.
+    ``significance``) and the surface columns ``nx, ny, nz, planarity`` (see ``surface``) are
+    NaN there too.
     """
     grid = settings.grid
     columns1, columns2 = relative_columns(xyz1, origin), relative_columns(xyz2, origin)
@@ -54,12 +59,18 @@ def discrepancy_field(
 
 
 def field_from_voxel_ids(
-    ids1: np.ndarray, xyz1: np.ndarray, ids2: np.ndarray, xyz2: np.ndarray, settings: FieldSettings
+    ids1: np.ndarray,
+    xyz1: np.ndarray,
+    ids2: np.ndarray,
+    xyz2: np.ndarray,
+    settings: FieldSettings,
+    origin=(0.0, 0.0, 0.0),
 ) -> dict[str, np.ndarray]:
     """The field from voxel ids already assigned by ``settings.grid`` (-1 = out of grid).
 
     For callers that bin once and aggregate several subsets (e.g. the survivors of each
-    stage); same result as ``discrepancy_field`` with the origin the ids were assigned about.
+    stage); same result as ``discrepancy_field`` when ``origin`` is the one the ids were
+    assigned about (it only orients the normals).
     """
     grid = settings.grid
     ids1, ids2 = np.asarray(ids1, dtype=np.int64), np.asarray(ids2, dtype=np.int64)
@@ -68,8 +79,22 @@ def field_from_voxel_ids(
         dense = (np.where(ids1 < 0, n, ids1), np.where(ids2 < 0, n, ids2), n, _identity)
     else:
         dense = _cartesian_dense_index(ids1, ids2)
-    origin = (0.0, 0.0, 0.0)
-    return _aggregate(dense, relative_columns(xyz1, origin), relative_columns(xyz2, origin), origin, settings)
+    zero = (0.0, 0.0, 0.0)
+    field = _aggregate(dense, relative_columns(xyz1, zero), relative_columns(xyz2, zero), zero, settings)
+    if any(origin):
+        _orient_normals(field, origin)
+    return field
+
+
+def _orient_normals(field: dict[str, np.ndarray], origin) -> None:
+    """Flip the normals of ``field`` to face ``origin`` (in place)."""
+    normal = np.vstack([field["nx"], field["ny"], field["nz"]])
+    centre = 0.5 * (
+        np.vstack([field["x1"], field["y1"], field["z1"]]) + np.vstack([field["x2"], field["y2"], field["z2"]])
+    )
+    away = np.einsum("ij,ij->j", normal, centre - np.asarray(origin, dtype=np.float64).reshape(3, 1)) > 0
+    for axis in ("nx", "ny", "nz"):
+        field[axis] = np.where(away, -field[axis], field[axis])
 
 
 def _identity(occupied: np.ndarray) -> np.ndarray:
@@ -92,7 +117,7 @@ def _aggregate(dense, columns1, columns2, origin, settings: FieldSettings) -> di
     mean2 = _means(sums2, n2) + offset
     covariance1 = covariance_from_sums(n1, sums1, products1[:, occupied])
     covariance2 = covariance_from_sums(n2, sums2, products2[:, occupied])
-    return assemble_field(settings.grid, voxel, n1, n2, mean1, mean2, settings, covariance1, covariance2)
+    return assemble_field(settings.grid, voxel, n1, n2, mean1, mean2, settings, covariance1, covariance2, origin)
 
 
 def assemble_field(
@@ -105,9 +130,12 @@ def assemble_field(
     settings: FieldSettings,
     covariance1: np.ndarray,
     covariance2: np.ndarray,
+    origin=(0.0, 0.0, 0.0),
 ) -> dict[str, np.ndarray]:
     """The field columns from per-voxel counts, (3, V) means and (6, V) covariances (rows in
-    ``significance.COVARIANCE_ENTRIES`` order): vectors, their se and z, validity, bins."""
+    ``significance.COVARIANCE_ENTRIES`` order): vectors, their se and z, validity, bins, and
+    the local surface (normal and planarity, ``surface``; normals towards ``origin``) of each
+    valid voxel."""
     valid = (n1 >= settings.min_points) & (n2 >= settings.min_points)
     uvw = mean2 - mean1
     if settings.max_component_m is not None:
@@ -124,6 +152,11 @@ def assemble_field(
     columns["se"] = vector_standard_error(uvw, n1, covariance1, n2, covariance2)
     columns["z"] = z_score(columns["magnitude"], columns["se"])
     columns["valid"] = valid
+    centre = 0.5 * (mean1 + mean2) - np.asarray(origin, dtype=np.float64).reshape(3, 1)
+    normal, planarity = surface_normals(n1, covariance1, n2, covariance2, centre)
+    normal[:, ~valid] = np.nan
+    columns["nx"], columns["ny"], columns["nz"] = normal
+    columns["planarity"] = np.where(valid, planarity, np.nan)
     return columns
 
 

@@ -3,7 +3,8 @@ groupby over them.
 
 Slow and obvious on purpose, and independent of ``grid.assign``'s arithmetic and of the
 kernel's sums of products: covariances come from pandas' own ``cov`` and ``se`` from a plain
-loop over voxels with 3x3 matrices. The tests check ``field.discrepancy_field`` (binning,
+loop over voxels with 3x3 matrices, as are the normals and planarity (one ``eigh`` per voxel).
+The tests check ``field.discrepancy_field`` (binning,
 aggregation, se and z) against it and the benchmark times the kernel against it.
 """
 
@@ -14,6 +15,7 @@ import pandas as pd
 
 from .grid import CARTESIAN_BITS, CARTESIAN_OFFSET, CartesianGrid, FieldSettings, SphericalGrid
 from .significance import SPREAD_FLOOR_M, SPREAD_MIN_POINTS
+from .surface import MIN_SPREAD_M2
 
 
 def discrepancy_field_reference(
@@ -22,7 +24,7 @@ def discrepancy_field_reference(
     """Same contract as ``field.discrepancy_field``, computed with a pandas groupby."""
     grid = settings.grid
     return field_from_voxel_ids_reference(
-        plain_voxel_ids(grid, xyz1, origin), xyz1, plain_voxel_ids(grid, xyz2, origin), xyz2, settings
+        plain_voxel_ids(grid, xyz1, origin), xyz1, plain_voxel_ids(grid, xyz2, origin), xyz2, settings, origin
     )
 
 
@@ -53,7 +55,12 @@ def plain_voxel_ids(grid: SphericalGrid | CartesianGrid, xyz: np.ndarray, origin
 
 
 def field_from_voxel_ids_reference(
-    ids1: np.ndarray, xyz1: np.ndarray, ids2: np.ndarray, xyz2: np.ndarray, settings: FieldSettings
+    ids1: np.ndarray,
+    xyz1: np.ndarray,
+    ids2: np.ndarray,
+    xyz2: np.ndarray,
+    settings: FieldSettings,
+    origin=(0.0, 0.0, 0.0),
 ) -> dict[str, np.ndarray]:
     """Same contract as ``field.field_from_voxel_ids``, computed with a pandas groupby."""
     grid = settings.grid
@@ -82,11 +89,36 @@ def field_from_voxel_ids_reference(
     table["se"] = [_standard_error(row, *covariances) if row.valid else np.nan for row in table.itertuples()]
     table["z"] = table["magnitude"] / table["se"]
 
+    surfaces = [_surface(row, *covariances, origin) if row.valid else (np.nan,) * 4 for row in table.itertuples()]
+    table[["nx", "ny", "nz", "planarity"]] = np.array(surfaces, dtype=np.float64).reshape(-1, 4)
+
     voxel = table.index.to_numpy(dtype=np.int64)
     columns = {"voxel": voxel, **grid.bins(voxel)}
     for name in ("n1", "n2", "x1", "y1", "z1", "x2", "y2", "z2", "u", "v", "w", "magnitude", "se", "z", "valid"):
         columns[name] = table[name].to_numpy()
+    for name in ("nx", "ny", "nz", "planarity"):
+        columns[name] = table[name].to_numpy()
     return columns
+
+
+def _surface(row, covariance1: dict, covariance2: dict, origin) -> tuple[float, float, float, float]:
+    """Normal (towards ``origin``) and planarity (l2 - l3) / l2 of one voxel's pooled
+    within-cloud covariance ((n1 - 1) S1 + (n2 - 1) S2) / (n1 + n2 - 2)."""
+    scatter = np.zeros((3, 3))
+    for n, covariance in ((row.n1, covariance1), (row.n2, covariance2)):
+        if n >= 2:
+            scatter += (n - 1) * covariance[row.Index]
+    if row.n1 + row.n2 < 3:
+        return (np.nan,) * 4
+    values, vectors = np.linalg.eigh(scatter / (row.n1 + row.n2 - 2))
+    l3, l2 = max(values[0], 0.0), max(values[1], 0.0)
+    if not l2 > MIN_SPREAD_M2:
+        return (np.nan,) * 4
+    normal = vectors[:, 0]
+    centre = 0.5 * np.array([row.x1 + row.x2, row.y1 + row.y2, row.z1 + row.z2]) - np.asarray(origin)
+    if normal @ centre > 0:
+        normal = -normal
+    return (*normal, (l2 - l3) / l2)
 
 
 def _covariances(frame: pd.DataFrame) -> dict[int, np.ndarray]:

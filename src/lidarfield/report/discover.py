@@ -15,7 +15,7 @@ from ..errors import InputError
 from ..layout import level_of
 from ..study.summary import read_stats, read_summary_frame
 
-LIST_COLUMNS = ("rigid_translation_m",)
+LIST_COLUMNS = ("rigid_translation_m", "rigid_information", "rigid_unconstrained")
 
 
 def read_summary(folder: Path) -> list[dict] | None:

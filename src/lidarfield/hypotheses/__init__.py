@@ -4,7 +4,8 @@ A hypothesis is a pure function ``(pair, params) -> (keep1, keep2)`` of a
 :class:`~lidarfield.pair.RegisteredPair` and a frozen dataclass of typed parameters, returning
 one boolean keep-mask per cloud, or an :class:`~.outcome.Outcome` that also corrects: the
 corrected coordinates of a cloud, sensor 2's corrected pose, and what it fitted (see
-:mod:`.outcome`; ``realign`` is the built-in one). A stack entry is a one-key mapping ``{name: {params}}``;
+:mod:`.outcome`; ``realign`` and ``range_calibration`` are the built-in ones). A stack entry
+is a one-key mapping ``{name: {params}}``;
 :func:`validate_stack` checks every entry before anything runs and returns the normalised
 entries (defaults filled in, the study's grid filled into ``shadow``), which are what stage ids
 are computed from.
@@ -21,7 +22,7 @@ import numpy as np
 
 from ..errors import HypothesisError
 from ..pair import RegisteredPair
-from . import crop, ego_vehicle, field_of_view, outliers, plugin, realign, shadow
+from . import crop, ego_vehicle, field_of_view, outliers, plugin, range_calibration, realign, shadow
 from .outcome import Outcome, checked_outcome
 from .params import describe, params_to_dict, parse_params
 
@@ -49,11 +50,12 @@ BUILTINS: dict[str, Hypothesis] = {
         _builtin(crop, "crop"),
         _builtin(outliers, "outliers"),
         _builtin(realign, "realign"),
+        _builtin(range_calibration, "range_calibration"),
     )
 }
 # The built-ins that correct (move a cloud) rather than remove: not among the default candidates
 # of "what to try next", which ranks removals.
-CORRECTING = frozenset({"realign"})
+CORRECTING = frozenset({"realign", "range_calibration"})
 PLUGIN = Hypothesis("plugin", plugin.run_plugin, plugin.Params, plugin.__doc__.strip().splitlines()[0])
 
 

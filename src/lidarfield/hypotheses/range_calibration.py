@@ -1,0 +1,251 @@
+"""``range_calibration``: fit a range scale and offset of one cloud about its own sensor, and apply it.
+
+A correcting hypothesis: it removes nothing, and moves the points of the chosen cloud (``cloud``,
+1 or 2) along their own lines of sight. The model is the simulator's range fault: a sensor that
+measures ``r = scale * r_true + offset``; a point at measured range ``r`` in unit direction ``u``
+about its sensor origin ``o`` is corrected to ``o + (r - offset) / scale * u``. Sensor 2's pose
+is not changed (the correction is not rigid).
+
+The fit: a sample of at most ``max_points`` points of the chosen cloud (evenly spaced rows), each
+paired with the nearest point ``q`` of the other cloud (SciPy's k-d tree) and that point's
+normal ``n`` (the smallest-eigenvalue direction of the covariance of its ``normal_k`` nearest
+neighbours in the other cloud; neighbourhoods that are not planar, a line along one scan line,
+are not used). With ``alpha = 1 / scale`` and ``beta = offset / scale`` the point-to-plane residual
+``n . (o + (alpha r - beta) u - q)`` is linear in ``(alpha, beta)``: each iteration solves the
+weighted linear least squares, with Huber weights (k = 1.345 times the residuals' MAD scale),
+then pairs the corrected sample anew, until the estimate changes by less than 1e-7 (or
+``max_iterations``). Pairs farther apart than ``max_correspondence_m`` are not used.
+
+``per_ring: true`` fits one offset per ring (the cloud's ``ring`` attribute) and one common
+scale: ``r = scale * r_true + offset_ring``. A ring with fewer than ``MIN_RING_POINTS`` points
+in the fit shares one pooled offset.
+
+What it records (the stage's ``correction``): ``cloud``, ``scale``, ``offset_m``, their standard
+errors ``scale_se``, ``offset_se_m``, ``points`` (pairs used in the last solve), ``residual_rms_m``
+(their point-to-plane residuals' RMS), ``sigma_m`` (the weighted residuals' standard deviation),
+``iterations``; with ``per_ring``, ``ring_offsets_m`` and ``ring_offsets_se_m`` (by ring, as text)
+and ``offset_m`` their mean over the rings. The standard errors are ``sigma^2 (J^T W J)^-1`` of
+the last solve, carried from ``(alpha, beta)`` to ``(scale, offset)`` to first order. They treat
+neighbouring residuals as independent, which on a scan they are not quite: read them as lower
+bounds.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..errors import HypothesisError
+from ..pair import RegisteredPair
+from .outcome import Outcome
+from .params import doc
+
+MIN_POINTS = 20  # pairs in the fit, and points of each cloud
+MIN_RING_POINTS = 30  # a ring's own offset needs this many pairs
+HUBER_K = 1.345
+
+
+@dataclass(frozen=True)
+class Params:
+    cloud: int = field(default=2, metadata=doc("the cloud whose ranges are calibrated: 1 or 2"))
+    per_ring: bool = field(
+        default=False, metadata=doc("one range offset per ring (the cloud's ring attribute), one common scale")
+    )
+    max_correspondence_m: float = field(
+        default=0.5, metadata=doc("pairs of points farther apart than this are not used (m)")
+    )
+    max_points: int = field(default=20000, metadata=doc("at most this many points of the cloud in the fit"))
+    normal_k: int = field(default=12, metadata=doc("the other cloud's normals from this many nearest points"))
+    max_iterations: int = field(default=20, metadata=doc("pairing and solving iterations at most"))
+
+    def __post_init__(self):
+        if self.cloud not in (1, 2):
+            raise ValueError(f"need cloud 1 or 2, got {self.cloud}")
+        if not self.max_correspondence_m > 0 or self.max_points < MIN_POINTS or self.max_iterations < 1:
+            raise ValueError(
+                f"need max_correspondence_m > 0, max_points >= {MIN_POINTS} and max_iterations >= 1, got "
+                f"{self.max_correspondence_m}, {self.max_points} and {self.max_iterations}"
+            )
+        if self.normal_k < 3:
+            raise ValueError(f"need normal_k >= 3, got {self.normal_k}")
+
+
+def range_calibration(pair: RegisteredPair, params: Params) -> Outcome:
+    """The chosen cloud's ranges corrected by a fitted scale and offset; nothing removed."""
+    from scipy.spatial import cKDTree
+
+    name = "range_calibration"
+    if params.cloud == 2:
+        xyz, other, origin, attributes = pair.xyz2, pair.xyz1, pair.origin2, pair.attributes2
+    else:
+        xyz, other, origin, attributes = pair.xyz1, pair.xyz2, pair.origin1, pair.attributes1
+    for cloud, points, need in (
+        (params.cloud, xyz, MIN_POINTS),
+        (3 - params.cloud, other, max(MIN_POINTS, params.normal_k)),
+    ):
+        if len(points) < need:
+            raise HypothesisError(f"{name}: too few points: cloud {cloud} has {len(points)}, it needs at least {need}")
+    ring = None
+    if params.per_ring:
+        if "ring" not in attributes:
+            raise HypothesisError(f"{name}: per_ring needs a ring attribute, and cloud {params.cloud} has none")
+        ring = np.asarray(attributes["ring"])
+        if not np.isfinite(ring).all():
+            raise HypothesisError(f"{name}: per_ring: cloud {params.cloud} has points without a ring")
+        ring = ring.astype(np.int64)
+
+    d = xyz - origin
+    r = np.linalg.norm(d, axis=1)
+    measurable = r > 1e-9
+    u = np.zeros_like(d)
+    u[measurable] = d[measurable] / r[measurable, None]
+    candidates = np.flatnonzero(measurable)
+    if len(candidates) > params.max_points:
+        candidates = candidates[np.linspace(0, len(candidates) - 1, params.max_points).round().astype(np.int64)]
+    groups, group_of = _groups(ring, candidates)
+
+    tree = cKDTree(other)
+    normals = np.full((len(other), 3), np.nan)  # the other cloud's normals, computed where needed
+    rs, us = r[candidates], u[candidates]
+    theta = np.concatenate([[1.0], np.zeros(len(groups))])  # alpha, then beta per group
+    iterations, converged = 0, False
+    while iterations < params.max_iterations and not converged:
+        iterations += 1
+        corrected = origin + (theta[0] * rs - theta[1:][group_of])[:, None] * us
+        distance, nearest = tree.query(corrected, distance_upper_bound=params.max_correspondence_m)
+        paired = np.isfinite(distance)
+        index = nearest[paired]
+        _fill_normals(normals, other, tree, np.unique(index), params.normal_k)
+        n = normals[index]
+        planar = np.isfinite(n).all(axis=1)
+        use = np.flatnonzero(paired)[planar]
+        if len(use) < MIN_POINTS:
+            raise HypothesisError(
+                f"{name}: no overlap: {len(use)} points of cloud {params.cloud} have a point of cloud "
+                f"{3 - params.cloud} on a plane within max_correspondence_m = {params.max_correspondence_m} m, "
+                f"it needs at least {MIN_POINTS}"
+            )
+        n, q = n[planar], other[index[planar]]
+        nu = np.einsum("ij,ij->i", n, us[use])
+        J = np.zeros((len(use), len(theta)))
+        J[:, 0] = rs[use] * nu
+        J[np.arange(len(use)), 1 + group_of[use]] = -nu
+        y = np.einsum("ij,ij->i", n, q - origin)
+        residual = J @ theta - y
+        weight = _huber(residual)
+        information = J.T @ (weight[:, None] * J)
+        try:
+            new = np.linalg.solve(information, J.T @ (weight * y))
+        except np.linalg.LinAlgError:
+            raise HypothesisError(
+                f"{name}: the ranges do not constrain a scale and offset: "
+                f"the {len(use)} pairs' normals and ranges are degenerate"
+            ) from None
+        converged = bool(np.abs(new - theta).max() < 1e-7)
+        theta = new
+
+    residual = J @ theta - y
+    m, p = len(residual), len(theta)
+    sigma2 = float(weight @ residual**2) / max(m - p, 1)
+    try:
+        covariance = sigma2 * np.linalg.inv(information)
+    except np.linalg.LinAlgError:
+        covariance = np.full((p, p), np.nan)
+    alpha, betas = theta[0], theta[1:]
+    scale, offsets = 1.0 / alpha, betas / alpha
+    # first order: scale = 1/alpha, offset_g = beta_g / alpha
+    A = np.zeros((p, p))
+    A[0, 0] = -1.0 / alpha**2
+    A[1:, 0] = -betas / alpha**2
+    A[1:, 1:] = np.eye(p - 1) / alpha
+    se = np.sqrt(np.clip(np.diag(A @ covariance @ A.T), 0, None))
+
+    def number(value) -> float | None:
+        return float(value) if np.isfinite(value) else None
+
+    fitted = {
+        "cloud": params.cloud,
+        "scale": float(scale),
+        "scale_se": number(se[0]),
+        "points": int(m),
+        "residual_rms_m": float(np.sqrt(np.mean(residual**2))),
+        "sigma_m": float(np.sqrt(sigma2)),
+        "iterations": iterations,
+        "method": "point_to_plane_huber",
+    }
+    if ring is None:
+        fitted.update(offset_m=float(offsets[0]), offset_se_m=number(se[1]))
+        offset_of_point = np.full(len(xyz), offsets[0])
+    else:
+        fitted["offset_m"] = float(np.mean([offsets[g] for g in _ring_group(groups, np.unique(ring))]))
+        fitted["ring_offsets_m"] = {str(k): float(offsets[g]) for k, g in _ring_items(groups, np.unique(ring))}
+        fitted["ring_offsets_se_m"] = {str(k): number(se[1 + g]) for k, g in _ring_items(groups, np.unique(ring))}
+        offset_of_point = offsets[_group_index(groups, ring)]
+    corrected_r = np.where(measurable, (r - offset_of_point) / scale, 0.0)
+    new_xyz = np.where(measurable[:, None], origin + corrected_r[:, None] * u, xyz)
+    keep1, keep2 = np.ones(len(pair.xyz1), dtype=bool), np.ones(len(pair.xyz2), dtype=bool)
+    if params.cloud == 2:
+        return Outcome(keep1, keep2, xyz2=new_xyz, fitted=fitted)
+    return Outcome(keep1, keep2, xyz1=new_xyz, fitted=fitted)
+
+
+def _huber(residual: np.ndarray) -> np.ndarray:
+    """Huber weights, k = 1.345 robust standard deviations (MAD) of the residuals."""
+    scale = 1.4826 * float(np.median(np.abs(residual - np.median(residual))))
+    if not scale > 0:
+        return np.ones_like(residual)
+    a = np.abs(residual) / (HUBER_K * scale)
+    return np.where(a <= 1, 1.0, 1.0 / np.maximum(a, 1e-300))
+
+
+def _fill_normals(normals: np.ndarray, points: np.ndarray, tree, index: np.ndarray, k: int) -> None:
+    """Fill ``normals[index]`` where not yet known: the covariance's smallest eigenvector of the
+    ``k`` nearest points; a neighbourhood that is no plane (a line, or a blob) gets -inf (unused).
+    (The plane through the point itself, not through the neighbours' mean: on the simulated
+    intersection the mean, pulled off curved and bent surfaces, doubled the fit's bias.)"""
+    index = index[np.isnan(normals[index, 0])]
+    if len(index) == 0:
+        return
+    _, neighbours = tree.query(points[index], k=k)
+    local = points[neighbours]
+    local = local - local.mean(axis=1, keepdims=True)
+    covariance = np.einsum("nki,nkj->nij", local, local) / k
+    values, vectors = np.linalg.eigh(covariance)  # ascending
+    normal = vectors[:, :, 0]
+    planar = (values[:, 1] > 0.05 * values[:, 2]) & (values[:, 0] < 0.1 * values[:, 1])
+    normal[~planar] = -np.inf
+    normals[index] = normal
+
+
+def _groups(ring: np.ndarray | None, candidates: np.ndarray) -> tuple[dict, np.ndarray]:
+    """The offset groups (``{ring: group}``; -1 the pooled rings) and each candidate's group."""
+    if ring is None:
+        return {None: 0}, np.zeros(len(candidates), dtype=np.int64)
+    values, counts = np.unique(ring[candidates], return_counts=True)
+    own = [int(v) for v, c in zip(values, counts) if c >= MIN_RING_POINTS]
+    groups = {v: g for g, v in enumerate(own)}
+    if len(own) < len(values) or not own:
+        groups[-1] = len(own)
+    return groups, _group_index(groups, ring[candidates])
+
+
+def _group_index(groups: dict, ring: np.ndarray) -> np.ndarray:
+    """Each point's offset group: its ring's own, else the pooled one."""
+    pooled = groups.get(-1, 0)
+    keys = np.array(sorted(k for k in groups if k is not None and k != -1), dtype=np.int64)
+    if len(keys) == 0:
+        return np.full(len(ring), pooled, dtype=np.int64)
+    at = np.clip(np.searchsorted(keys, ring), 0, len(keys) - 1)
+    found = keys[at] == ring
+    own = np.array([groups[int(k)] for k in keys], dtype=np.int64)
+    return np.where(found, own[at], pooled)
+
+
+def _ring_items(groups: dict, rings: np.ndarray):
+    for k in rings:
+        yield int(k), groups.get(int(k), groups.get(-1, 0))
+
+
+def _ring_group(groups: dict, rings: np.ndarray):
+    return [g for _, g in _ring_items(groups, rings)]

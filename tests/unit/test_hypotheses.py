@@ -44,7 +44,16 @@ def _unit_vectors(rng, n):
 
 
 def test_available_and_described():
-    assert available_hypotheses() == ["ego_vehicle", "field_of_view", "shadow", "crop", "outliers", "realign", "plugin"]
+    assert available_hypotheses() == [
+        "ego_vehicle",
+        "field_of_view",
+        "shadow",
+        "crop",
+        "outliers",
+        "realign",
+        "range_calibration",
+        "plugin",
+    ]
     described = describe_hypotheses()
     assert ("radius_m", "number or null", 3.0) == described["ego_vehicle"][0][:3]
     assert all(doc for params in described.values() for *_, doc in params)
@@ -78,7 +87,7 @@ def test_defaults_filled_and_study_grid_injected_into_shadow():
         (
             {"ego_vehicel": {}},
             "hypothesis 1 (ego_vehicel): unknown hypothesis; available: ego_vehicle, field_of_view, shadow, crop, "
-            "outliers, realign, plugin",
+            "outliers, realign, range_calibration, plugin",
         ),
         (
             {"shadow": {"jump": 1}},

@@ -1,0 +1,142 @@
+"""``range_calibration``: a range scale and offset fitted on the simulated intersection, applied, recorded."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pandas as pd
+import pytest
+import yaml
+
+from lidarfield.analysis.field_stats import analyse_field
+from lidarfield.cli import main
+from lidarfield.errors import HypothesisError
+from lidarfield.field.grid import field_settings_from_config
+from lidarfield.hypotheses import BUILTINS, CORRECTING, apply_step
+from lidarfield.io import write_scan
+from lidarfield.pair import RegisteredPair
+from lidarfield.poses import pose_from_xyzrpy
+from lidarfield.registration import register_pair
+from lidarfield.sensors.models import PRESETS
+from lidarfield.simulation.raycast import simulate_scan
+from lidarfield.simulation.scene import load_scene
+from lidarfield.study.stack import apply_stack
+
+SCALE, OFFSET = 1.003, 0.03  # the simulator measures SCALE * true range + OFFSET
+POSES = ([0, 0, 3, 0, 0, 0], [0, 0, 3, 0, 0, 0.0037])
+
+
+def scans(scale: float = 1.0, offset: float = 0.0):
+    """The paper's intersection seen twice by a VLP-16 from about the same place: two independent
+    samplings (2 cm range noise, different seeds), sensor 2 yawed 0.21 deg so that its rays
+    interleave with sensor 1's, scan 2 with the range fault."""
+    scene, sensor = load_scene("paper-intersection"), PRESETS["vlp16"]
+    return [
+        simulate_scan(scene, sensor, pose_from_xyzrpy(POSES[0]), seed=1, range_noise_m=0.02),
+        simulate_scan(
+            scene,
+            sensor,
+            pose_from_xyzrpy(POSES[1]),
+            seed=2,
+            range_noise_m=0.02,
+            range_scale=scale,
+            range_offset_m=offset,
+        ),
+    ]
+
+
+@pytest.fixture(scope="module")
+def faulty():
+    return register_pair(*scans(SCALE, OFFSET), "truth")
+
+
+@pytest.fixture(scope="module")
+def truth():
+    return register_pair(*scans(), "truth")
+
+
+def _field(pair: RegisteredPair) -> dict:
+    return analyse_field(pair, field_settings_from_config({}))[1]
+
+
+def test_registered_as_a_correcting_builtin():
+    assert "range_calibration" in BUILTINS and "range_calibration" in CORRECTING
+
+
+def test_fits_the_simulated_range_fault_and_the_field_returns_to_the_truths(faulty, truth):
+    stage0, stage = apply_stack(faulty, [{"range_calibration": {}}])
+    c = stage.correction
+    assert abs(c["scale"] - SCALE) < 0.0005 and abs(c["offset_m"] - OFFSET) < 0.005, c
+    assert 0 < c["scale_se"] < 0.0005 and 0 < c["offset_se_m"] < 0.005
+    assert c["cloud"] == 2 and c["points"] > 1000 and c["residual_rms_m"] < 0.02
+    # cloud 2 moved along its own lines of sight about sensor 2, cloud 1 and the pose unchanged
+    assert stage.moved2 and not stage.moved1 and stage.removed1 == stage.removed2 == 0
+    assert np.array_equal(stage.pair.xyz1, faulty.xyz1) and np.array_equal(stage.pair.T_1_2, faulty.T_1_2)
+    before, after = faulty.xyz2 - faulty.origin2, stage.pair.xyz2 - faulty.origin2
+    r_before, r_after = np.linalg.norm(before, axis=1), np.linalg.norm(after, axis=1)
+    assert np.allclose(r_after, (r_before - c["offset_m"]) / c["scale"])
+    assert np.allclose(after / r_after[:, None], before / r_before[:, None])
+    # the corrected ranges are the truth's: scan 2 without the fault (same seed, same noise)
+    assert np.abs(stage.pair.xyz2 - truth.xyz2).max() < 0.01
+    # The field: measured 0.0568 m RMS magnitude before, 0.0050 after, 0.0050 without the fault.
+    # The verdict stays 'patterned', as the correctly calibrated pair's field is (the simulated
+    # scene's sampling), not 'random'.
+    f_before, f_after, f_truth = _field(faulty), _field(stage.pair), _field(truth)
+    assert f_after["rms_magnitude"] < 1.2 * f_truth["rms_magnitude"] < 0.2 * f_before["rms_magnitude"]
+    assert f_after["verdict"] == f_truth["verdict"]
+
+
+def test_no_fault_fits_the_identity(truth):
+    c = apply_step(truth, {"range_calibration": {}}).fitted
+    # measured: scale 1.00031, offset -1.6 mm (a bias of the scene's sampling, the same with the fault)
+    assert abs(c["scale"] - 1) < 0.0005 and abs(c["offset_m"]) < 0.005, c
+
+
+def test_cloud_1_fits_the_inverse(faulty):
+    """Both sensors at the same place: cloud 1's ranges are cloud 2's corrected ones."""
+    outcome = apply_step(faulty, {"range_calibration": {"cloud": 1}})
+    c = outcome.fitted
+    assert c["cloud"] == 1 and outcome.xyz2 is None and outcome.xyz1 is not None
+    assert abs(c["scale"] - 1 / SCALE) < 0.0005 and abs(c["offset_m"] + OFFSET / SCALE) < 0.005, c
+
+
+def test_per_ring_offsets(faulty):
+    c = apply_step(faulty, {"range_calibration": {"per_ring": True}}).fitted
+    assert sorted(c["ring_offsets_m"], key=int) == [str(k) for k in range(16)]
+    assert abs(c["scale"] - SCALE) < 0.0005 and abs(c["offset_m"] - OFFSET) < 0.005, c
+    # each ring with fewer points: measured within 4.6 mm of the truth
+    assert all(abs(v - OFFSET) < 0.006 for v in c["ring_offsets_m"].values()), c["ring_offsets_m"]
+    assert all(0 < se < 0.01 for se in c["ring_offsets_se_m"].values())
+
+
+def test_names_what_is_missing(faulty):
+    few = RegisteredPair(faulty.xyz1, faulty.xyz2[:5], faulty.T_1_2)
+    with pytest.raises(
+        HypothesisError, match=r"range_calibration: too few points: cloud 2 has 5, it needs at least 20"
+    ):
+        apply_step(few, {"range_calibration": {}})
+    apart = RegisteredPair(faulty.xyz1, faulty.xyz2 + [100.0, 0, 0], faulty.T_1_2)
+    with pytest.raises(HypothesisError, match=r"range_calibration: no overlap: 0 points of cloud 2"):
+        apply_step(apart, {"range_calibration": {}})
+    bare = RegisteredPair(faulty.xyz1, faulty.xyz2, faulty.T_1_2)
+    with pytest.raises(HypothesisError, match="per_ring needs a ring attribute, and cloud 2 has none"):
+        apply_step(bare, {"range_calibration": {"per_ring": True}})
+    with pytest.raises(HypothesisError, match="need cloud 1 or 2, got 3"):
+        apply_step(faulty, {"range_calibration": {"cloud": 3}})
+
+
+def test_lidarfield_run_records_the_fit_in_the_summary(tmp_path):
+    paths = [tmp_path / "scan1.parquet", tmp_path / "scan2.parquet"]
+    for scan, path in zip(scans(SCALE, OFFSET), paths):
+        write_scan(scan, path)
+    config = tmp_path / "study.yaml"
+    config.write_text(yaml.safe_dump({"hypotheses": [{"range_calibration": {}}]}))
+    out = tmp_path / "out"
+    assert main(["run", *map(str, paths), "--config", str(config), "--out", str(out), "--register", "truth"]) == 0
+    summary = pd.read_parquet(out / "summary.parquet")
+    assert list(summary["hypothesis"]) == ["none", "range_calibration"]
+    assert summary["correction"][0] == ""
+    c = json.loads(summary["correction"][1])
+    assert abs(c["scale"] - SCALE) < 0.0005 and abs(c["offset_m"] - OFFSET) < 0.005, c
+    assert summary["displacement2_median_m"][1] > 0.03 and summary["displacement1_max_m"][1] == 0

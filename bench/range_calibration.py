@@ -1,0 +1,85 @@
+"""Benchmark: ``range_calibration`` and ``realign`` on a pair of 120,000-point clouds (target < 1 s
+each), against the time of computing the field of the same pair in the same run.
+
+The pair: the simulated paper intersection seen twice by the paper's 80-channel sensor at a
+0.14 deg azimuth step (2 cm range noise, different seeds, scan 2 yawed 0.21 deg and measured with
+``range_scale=1.003, range_offset_m=0.03``), registered by the truth, 120,000 points of each
+cloud kept (evenly spaced rows). "The field" is ``analyse_field`` with the default settings
+(binning, aggregation, tags and statistics: the field job's work).
+
+Run: ``python bench/range_calibration.py [--repeat N]``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import os
+
+import numpy as np
+
+from lidarfield.analysis.field_stats import analyse_field
+from lidarfield.field.grid import field_settings_from_config
+from lidarfield.hypotheses import apply_step
+from lidarfield.pair import RegisteredPair
+from lidarfield.poses import pose_from_xyzrpy
+from lidarfield.registration import register_pair
+from lidarfield.sensors.models import PRESETS
+from lidarfield.simulation.raycast import simulate_scan
+from lidarfield.simulation.scene import load_scene
+from timing import best_time, machine  # bench/timing.py
+
+N = 120_000
+
+
+def faulty_pair(n: int = N) -> RegisteredPair:
+    scene = load_scene("paper-intersection")
+    sensor = dataclasses.replace(PRESETS["paper-sim-80"], azimuth_resolution_deg=0.14)
+    scans = [
+        simulate_scan(scene, sensor, pose_from_xyzrpy([0, 0, 3, 0, 0, 0]), seed=1, range_noise_m=0.02),
+        simulate_scan(
+            scene,
+            sensor,
+            pose_from_xyzrpy([0, 0, 3, 0, 0, 0.0037]),
+            seed=2,
+            range_noise_m=0.02,
+            range_scale=1.003,
+            range_offset_m=0.03,
+        ),
+    ]
+    pair = register_pair(*scans, "truth")
+    if min(len(pair.xyz1), len(pair.xyz2)) < n:
+        raise SystemExit(f"the simulated clouds have {len(pair.xyz1)} and {len(pair.xyz2)} points, fewer than {n}")
+    keep = [np.zeros(len(xyz), bool) for xyz in (pair.xyz1, pair.xyz2)]
+    for k in keep:
+        k[np.linspace(0, len(k) - 1, n).round().astype(np.int64)] = True
+    return pair.subset(*keep)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--repeat", type=int, default=3, help="best of this many runs")
+    args = parser.parse_args()
+    pair = faulty_pair()
+    print(machine())
+    print(f"load average {os.getloadavg()[0]:.2f}; two clouds of {len(pair.xyz1):,} and {len(pair.xyz2):,} points")
+    settings = field_settings_from_config({})
+    field, _ = best_time(lambda: analyse_field(pair, settings), args.repeat)
+    print(f"field (analyse_field, default settings): {field:.3f} s")
+    for step in ({"range_calibration": {}}, {"range_calibration": {"per_ring": True}}, {"realign": {}}):
+        seconds, outcome = best_time(lambda: apply_step(pair, step), args.repeat)
+        c = outcome.fitted
+        fit = (
+            f"scale {c['scale']:.5f}, offset {c['offset_m'] * 1e3:.1f} mm, {c['points']} points"
+            if "scale" in c
+            else f"translation {np.round(c['translation_m'], 4).tolist()} m, angle {c['angle_deg']:.4f} deg"
+        )
+        print(
+            f"{list(step)[0]:18s} {str(list(step.values())[0]):18s} {seconds:.3f} s "
+            f"= {seconds / field:.2f} x the field | {fit}"
+        )
+    print(f"load average {os.getloadavg()[0]:.2f}")
+
+
+if __name__ == "__main__":
+    main()

@@ -13,8 +13,8 @@ neighbours in the other cloud; neighbourhoods that are not planar, a line along 
 are not used). With ``alpha = 1 / scale`` and ``beta = offset / scale`` the point-to-plane residual
 ``n . (o + (alpha r - beta) u - q)`` is linear in ``(alpha, beta)``: each iteration solves the
 weighted linear least squares, with Huber weights (k = 1.345 times the residuals' MAD scale),
-then pairs the corrected sample anew, until the estimate changes by less than 1e-7 (or
-``max_iterations``). Pairs farther apart than ``max_correspondence_m`` are not used.
+then pairs the corrected sample anew, until no corrected range of the sample changes by more
+than 0.1 mm (or ``max_iterations``). Pairs farther apart than ``max_correspondence_m`` are not used.
 
 ``per_ring: true`` fits one offset per ring (the cloud's ``ring`` attribute) and one common
 scale: ``r = scale * r_true + offset_ring``. A ring with fewer than ``MIN_RING_POINTS`` points
@@ -44,6 +44,7 @@ from .params import doc
 MIN_POINTS = 20  # pairs in the fit, and points of each cloud
 MIN_RING_POINTS = 30  # a ring's own offset needs this many pairs
 HUBER_K = 1.345
+TOLERANCE_M = 1e-4  # converged when no corrected range of the sample changes by more
 
 
 @dataclass(frozen=True)
@@ -105,9 +106,10 @@ def range_calibration(pair: RegisteredPair, params: Params) -> Outcome:
         candidates = candidates[np.linspace(0, len(candidates) - 1, params.max_points).round().astype(np.int64)]
     groups, group_of = _groups(ring, candidates)
 
-    tree = cKDTree(other)
+    tree = cKDTree(other, balanced_tree=False, compact_nodes=False)  # faster to build, as fast to query
     normals = np.full((len(other), 3), np.nan)  # the other cloud's normals, computed where needed
     rs, us = r[candidates], u[candidates]
+    r_max = float(rs.max())
     theta = np.concatenate([[1.0], np.zeros(len(groups))])  # alpha, then beta per group
     iterations, converged = 0, False
     while iterations < params.max_iterations and not converged:
@@ -142,7 +144,8 @@ def range_calibration(pair: RegisteredPair, params: Params) -> Outcome:
                 f"{name}: the ranges do not constrain a scale and offset: "
                 f"the {len(use)} pairs' normals and ranges are degenerate"
             ) from None
-        converged = bool(np.abs(new - theta).max() < 1e-7)
+        # the largest change of a corrected range in the sample
+        converged = bool(np.abs(new[0] - theta[0]) * r_max + np.abs(new[1:] - theta[1:]).max() < TOLERANCE_M)
         theta = new
 
     residual = J @ theta - y

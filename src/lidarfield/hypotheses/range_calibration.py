@@ -130,15 +130,14 @@ def range_calibration(pair: RegisteredPair, params: Params) -> Outcome:
             )
         n, q = n[planar], other[index[planar]]
         nu = np.einsum("ij,ij->i", n, us[use])
-        J = np.zeros((len(use), len(theta)))
-        J[:, 0] = rs[use] * nu
-        J[np.arange(len(use)), 1 + group_of[use]] = -nu
+        # the Jacobian's rows: r (n . u) for alpha, -(n . u) for the point's group's beta
+        a, b, g = rs[use] * nu, -nu, group_of[use]
         y = np.einsum("ij,ij->i", n, q - origin)
-        residual = J @ theta - y
+        residual = a * theta[0] + b * theta[1:][g] - y
         weight = _huber(residual)
-        information = J.T @ (weight[:, None] * J)
+        information, gradient = _normal_equations(a, b, g, y, weight, len(theta))
         try:
-            new = np.linalg.solve(information, J.T @ (weight * y))
+            new = np.linalg.solve(information, gradient)
         except np.linalg.LinAlgError:
             raise HypothesisError(
                 f"{name}: the ranges do not constrain a scale and offset: "
@@ -148,7 +147,7 @@ def range_calibration(pair: RegisteredPair, params: Params) -> Outcome:
         converged = bool(np.abs(new[0] - theta[0]) * r_max + np.abs(new[1:] - theta[1:]).max() < TOLERANCE_M)
         theta = new
 
-    residual = J @ theta - y
+    residual = a * theta[0] + b * theta[1:][g] - y
     m, p = len(residual), len(theta)
     sigma2 = float(weight @ residual**2) / max(m - p, 1)
     try:
@@ -191,6 +190,20 @@ def range_calibration(pair: RegisteredPair, params: Params) -> Outcome:
     if params.cloud == 2:
         return Outcome(keep1, keep2, xyz2=new_xyz, fitted=fitted)
     return Outcome(keep1, keep2, xyz1=new_xyz, fitted=fitted)
+
+
+def _normal_equations(
+    a: np.ndarray, b: np.ndarray, g: np.ndarray, y: np.ndarray, w: np.ndarray, p: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """``J^T W J`` and ``J^T W y`` for rows ``[a, 0.., b (column 1 + g), ..0]``, without ``J``."""
+    groups = p - 1
+    information = np.zeros((p, p))
+    information[0, 0] = w @ (a * a)
+    cross = np.bincount(g, w * a * b, groups)
+    information[0, 1:] = information[1:, 0] = cross
+    information[np.arange(1, p), np.arange(1, p)] = np.bincount(g, w * b * b, groups)
+    gradient = np.concatenate([[w @ (a * y)], np.bincount(g, w * b * y, groups)])
+    return information, gradient
 
 
 def _huber(residual: np.ndarray) -> np.ndarray:

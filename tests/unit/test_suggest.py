@@ -172,3 +172,44 @@ def test_a_default_correction_that_cannot_apply_is_skipped():
     assert table["fitted"][0] == "{}" and table["displacement_max_m"][0] == 0.0
     with pytest.raises(HypothesisError, match="suggest entry 2: realign: too few points"):
         suggestions(pair, SETTINGS, candidates)
+
+
+def test_a_suggested_correction_shows_its_displacement_and_fit(tmp_path):
+    """The report's table and `lidarfield run`'s line: a correction's row says how far it moved
+    the points and what it fitted, and which tag points to it."""
+    from lidarfield.analysis.suggest import write_suggestions
+    from lidarfield.cli.run import format_next_steps
+    from lidarfield.report.suggestions import describe_fitted, stage_suggestions
+
+    fitted = {"translation_m": [-0.3, 0.0002, 0.0], "rotation_deg": [0, 0, 0.01], "angle_deg": 0.01}
+    row = {
+        "rank": 1,
+        "hypothesis": "realign",
+        "params": "{}",
+        "removed1": 0,
+        "removed2": 0,
+        "removed_share": 0.0,
+        "corrects": True,
+        "displacement_median_m": 0.3,
+        "displacement_max_m": 0.31,
+        "fitted": json.dumps(fitted),
+        "suggested_by": "rigid",
+        "tag_share": 0.63,
+        "voxels_invalidated": 0,
+        "energy_invalidated": 0.0,
+        "max_after": 0.05,
+        "p95_after": 0.02,
+        "energy_after": 1.0,
+        "energy_reduction": 0.95,
+    }
+    table = {name: np.asarray([row[name]]) for name in SUGGESTION_COLUMNS}
+    stage = tmp_path / "stages" / "00-none"
+    stage.mkdir(parents=True)
+    write_suggestions(stage / "suggestions.parquet", table, "00-none", [], GRID)
+    assert describe_fitted(fitted) == "t = (-0.300, 0.000, 0.000) m, rotation 0.010°"
+    assert describe_fitted("{}") == "" and describe_fitted({"scale": 1.0012}) == "scale = 1.001"
+    html = stage_suggestions(stage)
+    assert "moves 0.300 / 0.310 m" in html and "t = (-0.300, 0.000, 0.000) m" in html
+    assert "suggested by the rigid tag (63% of the energy)" in html
+    line = format_next_steps([{"stage": "00-none", "verdict": "patterned"}], tmp_path)
+    assert "realign reduces the energy by 95.0% (fitted t = (-0.300, 0.000, 0.000) m, rotation 0.010°)" in line

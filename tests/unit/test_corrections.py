@@ -330,3 +330,40 @@ def test_the_pair_pages_stage_table_shows_a_correction_only_when_a_stage_correct
     )
     assert "correction" in correcting and "displacement2" in correcting
     assert "angle_deg: 0.5012; translation_m: [-0.3001, 0, 0]" in correcting and "0.31" in correcting
+
+
+# GRID's elevation edges at -15 and 15 deg are exactly two of the simulated VLP-16's beams: a
+# sub-millimetre vertical correction moves a whole ring of scan 2 into the next band (on the
+# correctly registered pair realign's 0.15 mm raises the energy 95-fold). Real beams are not
+# at the edges to the last digit; this grid's edges sit between the beams.
+OFF_BEAM_GRID = {**GRID, "elevation_deg": [-22.0, 16.0], "elevation_bins": 5}
+
+
+def _stage0_suggestions(pair: RegisteredPair, grid: dict = OFF_BEAM_GRID) -> dict:
+    from lidarfield.analysis.suggest import candidate_steps, suggestions
+
+    candidates = candidate_steps(None, [], ".", grid)
+    return suggestions(pair, field_settings_from_config(grid), candidates, ".", grid, defaults=True)
+
+
+def test_the_suggestions_rank_realign_first_for_a_registration_offset(intersection):
+    """Issue 24: the default candidates include the corrections; scan 2 registered 0.3 m off in
+    x puts realign first, its fitted translation shown; the correctly registered pair does not."""
+    import json
+
+    table = _stage0_suggestions(offset_pair(intersection, pose_from_xyzrpy([0.3, 0, 0, 0, 0, 0])))
+    assert "realign" in set(table["hypothesis"]) and table["hypothesis"][0] == "realign"
+    assert table["energy_reduction"][0] > 0.95 and table["corrects"][0]
+    assert table["removed1"][0] == table["removed2"][0] == 0 and table["removed_share"][0] == 0
+    assert table["displacement_median_m"][0] == pytest.approx(0.3, abs=0.02)
+    fitted = json.loads(table["fitted"][0])
+    assert fitted["translation_m"][0] == pytest.approx(-0.3, abs=0.01)
+    assert table["suggested_by"][0] == "rigid" and table["tag_share"][0] > 0.5
+    removal = int(np.flatnonzero(table["hypothesis"] == "ego_vehicle")[0])
+    assert json.loads(table["fitted"][removal]) == {} and not table["corrects"][removal]
+    assert table["displacement_max_m"][removal] == 0.0
+
+    truth = _stage0_suggestions(intersection)
+    row = int(np.flatnonzero(truth["hypothesis"] == "realign")[0])
+    assert not (row == 0 and truth["energy_reduction"][row] > 0.5), truth["energy_reduction"]
+    assert truth["displacement_median_m"][row] < 0.02

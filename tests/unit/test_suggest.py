@@ -63,7 +63,7 @@ def test_emptying_voxels_is_counted_apart_not_as_a_reduction():
 def test_default_candidates_are_the_builtins_not_yet_applied():
     grid = {"kind": "spherical", "azimuth_bins": 12, "elevation_deg": [-30.0, 10.0], "elevation_bins": 4}
     names = [next(iter(step)) for step in candidate_steps(None, [{"field_of_view": {}}], ".", grid)]
-    assert names == ["ego_vehicle", "shadow", "crop", "outliers"]
+    assert names == ["ego_vehicle", "shadow", "crop", "outliers", "realign"]  # the corrections last
     shadow = candidate_steps(None, [], ".", grid)[2]["shadow"]
     assert shadow["grid"]["azimuth_bins"] == 12 and shadow["origins"] == [1, 2]  # the study's grid, defaults
     with pytest.raises(HypothesisError, match="suggest entry 2"):
@@ -78,8 +78,9 @@ def test_study_candidates_per_stage(tmp_path):
         "shadow",
         "crop",
         "outliers",
+        "realign",
     ]
-    assert [next(iter(s)) for s in study.candidates(2)] == ["ego_vehicle", "crop", "outliers"]
+    assert [next(iter(s)) for s in study.candidates(2)] == ["ego_vehicle", "crop", "outliers", "realign"]
     config = tmp_path / "study.yaml"
     config.write_text(
         "hypotheses: [{ego_vehicle: {}}]\nsuggest: [{ego_vehicle: {radius_m: 5}}, {shadow: {origins: [1]}}]\n"
@@ -136,7 +137,7 @@ def test_the_suggest_job_skips_default_candidates_that_cannot_apply(tmp_path, ca
     ]
     assert run_in_process([*argv, "--default-candidates"]) == 0
     table, _ = read_table(tmp_path / "suggestions.parquet")
-    assert set(table["hypothesis"]) == {"ego_vehicle", "shadow", "crop", "outliers"}
+    assert set(table["hypothesis"]) == {"ego_vehicle", "shadow", "crop", "outliers", "realign"}
     assert table["hypothesis"][0] == "ego_vehicle" and table["energy_reduction"][0] > 0.95
     (tmp_path / "suggestions.parquet").unlink()
     assert run_in_process(argv) == 2
@@ -159,3 +160,56 @@ def test_a_candidate_that_removes_nothing_gets_the_row_of_a_recomputed_field():
     assert table["removed1"][0] == table["removed2"][0] == 0
     for name, value in recomputed.items():
         assert table[name][0] == value or (math.isnan(table[name][0]) and math.isnan(value)), name
+
+
+def test_a_default_correction_that_cannot_apply_is_skipped():
+    """realign on a cloud 2 of 5 points: a HypothesisError of a correcting candidate is 'cannot
+    apply' among the default candidates (skipped), an error naming the entry when configured."""
+    pair = RegisteredPair(targets(60, 1), targets(60, 2)[:5])
+    candidates = candidate_steps([{"crop": {}}, {"realign": {}}], [])
+    table = suggestions(pair, SETTINGS, candidates, defaults=True)
+    assert list(table["hypothesis"]) == ["crop"] and not table["corrects"][0]
+    assert table["fitted"][0] == "{}" and table["displacement_max_m"][0] == 0.0
+    with pytest.raises(HypothesisError, match="suggest entry 2: realign: too few points"):
+        suggestions(pair, SETTINGS, candidates)
+
+
+def test_a_suggested_correction_shows_its_displacement_and_fit(tmp_path):
+    """The report's table and `lidarfield run`'s line: a correction's row says how far it moved
+    the points and what it fitted, and which tag points to it."""
+    from lidarfield.analysis.suggest import write_suggestions
+    from lidarfield.cli.run import format_next_steps
+    from lidarfield.report.suggestions import describe_fitted, stage_suggestions
+
+    fitted = {"translation_m": [-0.3, 0.0002, 0.0], "rotation_deg": [0, 0, 0.01], "angle_deg": 0.01}
+    row = {
+        "rank": 1,
+        "hypothesis": "realign",
+        "params": "{}",
+        "removed1": 0,
+        "removed2": 0,
+        "removed_share": 0.0,
+        "corrects": True,
+        "displacement_median_m": 0.3,
+        "displacement_max_m": 0.31,
+        "fitted": json.dumps(fitted),
+        "suggested_by": "rigid",
+        "tag_share": 0.63,
+        "voxels_invalidated": 0,
+        "energy_invalidated": 0.0,
+        "max_after": 0.05,
+        "p95_after": 0.02,
+        "energy_after": 1.0,
+        "energy_reduction": 0.95,
+    }
+    table = {name: np.asarray([row[name]]) for name in SUGGESTION_COLUMNS}
+    stage = tmp_path / "stages" / "00-none"
+    stage.mkdir(parents=True)
+    write_suggestions(stage / "suggestions.parquet", table, "00-none", [], GRID)
+    assert describe_fitted(fitted) == "t = (-0.300, 0.000, 0.000) m, rotation 0.010°"
+    assert describe_fitted("{}") == "" and describe_fitted({"scale": 1.0012}) == "scale = 1.001"
+    html = stage_suggestions(stage)
+    assert "moves 0.300 / 0.310 m" in html and "t = (-0.300, 0.000, 0.000) m" in html
+    assert "suggested by the rigid tag (63% of the energy)" in html
+    line = format_next_steps([{"stage": "00-none", "verdict": "patterned"}], tmp_path)
+    assert "realign reduces the energy by 95.0% (fitted t = (-0.300, 0.000, 0.000) m, rotation 0.010°)" in line

@@ -10,13 +10,24 @@ binned once) and compared with the stage's field:
   ``energy_invalidated``), not in the reduction.
 - ``removed1``, ``removed2`` and ``removed_share`` (of both clouds' points): what it costs. A
   rule that removes half the scan to shrink the field is not an explanation.
+- ``corrects``: whether the candidate moved points (a *correcting* hypothesis such as
+  ``realign``: it removes nothing, its reduction is over the moved points' field), with
+  ``displacement_median_m`` and ``displacement_max_m`` (how far the moved cloud's points moved;
+  the larger over both clouds; 0 for a removal) and ``fitted`` (canonical JSON of what it
+  fitted, e.g. realign's ``translation_m`` and ``rotation_deg``; ``{}`` for a removal).
+- ``suggested_by`` and ``tag_share``: the tag that points to the candidate (``TAG_CORRECTIONS``:
+  ``rigid`` -> ``realign``, ``radial`` -> ``range_calibration``) and that tag's share of the
+  stage's field energy (``tags``); ``""`` and NaN for a candidate no tag points to.
 - ``max_after``, ``p95_after`` (m) and ``energy_after``: the field it leaves, all valid voxels.
 
-``rank`` 1 is the largest energy reduction (ties: fewer points removed; undefined reductions
-last). Candidates are the config's ``suggest`` list, or by default every built-in hypothesis
-the stack has not applied up to that stage, with its defaults. A default candidate that cannot
-apply to the pair (``NotApplicableError``: ``field_of_view`` without sensor models) is skipped
-with a logged line; a configured one is an error naming it.
+``rank`` 1 is the largest energy reduction (ties: fewer points removed, then the larger share
+of the energy in the tag that points to it; undefined reductions last). Candidates are the
+config's ``suggest`` list, or by default every built-in hypothesis the stack has not applied up
+to that stage, with its defaults: the removing ones and every correcting one (``CORRECTING``: a
+correction joins by being registered there). A default candidate that cannot apply to the pair
+(``NotApplicableError``: ``field_of_view`` without sensor models; for a correcting one any
+``HypothesisError``, e.g. ``realign`` with too few points) is skipped with a logged line; a
+configured one is an error naming it.
 """
 
 from __future__ import annotations
@@ -32,11 +43,12 @@ from ..errors import HypothesisError, NotApplicableError
 from ..field.grid import FieldSettings, field_settings_from_config
 from ..field.kernel import field_from_voxel_ids
 from ..hypotheses import BUILTINS, CORRECTING, apply_step, validate_step
+from ..hypotheses.outcome import displacement
 from ..hypotheses.steps import canonical_json, step_name
 from ..io.parquet_table import write_table
 from ..pair import RegisteredPair, read_pair
 from .neighbour_file import carry_to_stage, write_changes
-from .tags import voxel_energy
+from .tags import vector_tags, voxel_energy
 
 log = logging.getLogger(__name__)
 
@@ -47,6 +59,12 @@ SUGGESTION_COLUMNS = (
     "removed1",
     "removed2",
     "removed_share",
+    "corrects",
+    "displacement_median_m",
+    "displacement_max_m",
+    "fitted",
+    "suggested_by",
+    "tag_share",
     "voxels_invalidated",
     "energy_invalidated",
     "max_after",
@@ -55,16 +73,23 @@ SUGGESTION_COLUMNS = (
     "energy_reduction",
 )
 
+# The tag whose voxels each correcting built-in would explain: a field whose energy sits in
+# ``rigid`` voxels is a registration offset (``realign``), in ``radial`` ones a range error
+# (``range_calibration``). Used to break ties and to annotate the tables.
+TAG_CORRECTIONS = {"rigid": "realign", "radial": "range_calibration"}
+
 
 def candidate_steps(
     suggest: list[dict] | None, applied: list[dict], base_dir: str | Path = ".", study_grid: dict | None = None
 ) -> list[dict]:
     """The normalised candidates of a stage whose stack so far is ``applied``: ``suggest``
-    validated, or every built-in not in ``applied`` with its defaults (a correcting one, such as
-    ``realign``, only when ``suggest`` names it)."""
+    validated, or every built-in not in ``applied`` with its defaults: the removing ones, then
+    the correcting ones (``CORRECTING``, in ``BUILTINS`` order)."""
     if suggest is None:
         done = {step_name(step) for step in applied}
-        suggest = [{name: {}} for name in BUILTINS if name not in done and name not in CORRECTING]
+        fresh = [name for name in BUILTINS if name not in done]
+        suggest = [{name: {}} for name in fresh if name not in CORRECTING]
+        suggest += [{name: {}} for name in fresh if name in CORRECTING]
     if not isinstance(suggest, list):
         raise HypothesisError(f"suggest: a list of {{name: {{parameters}}}} entries, got {suggest!r}")
     candidates = []
@@ -91,19 +116,23 @@ def suggestions(
     """
     ids1, ids2 = settings.grid.assign(pair.xyz1), settings.grid.assign(pair.xyz2)
     before = field_from_voxel_ids(ids1, pair.xyz1, ids2, pair.xyz2, settings)
+    shares = tag_energy_shares(before)
     total = len(pair.xyz1) + len(pair.xyz2)
     rows = []
     for k, spec in enumerate(candidates, start=1):
         start = time.perf_counter()
         try:
             outcome = apply_step(pair, spec, base_dir, study_grid)
-        except NotApplicableError as e:
-            if not defaults:
+        except HypothesisError as e:
+            cannot_apply = isinstance(e, NotApplicableError) or step_name(spec) in CORRECTING
+            if not (defaults and cannot_apply):
                 raise HypothesisError(f"suggest entry {k}: {e}") from None
             log.info("candidate %s skipped: it does not apply to this pair (%s)", step_name(spec), e)
             continue
         keep1, keep2 = outcome
         removed1, removed2 = int(np.count_nonzero(~keep1)), int(np.count_nonzero(~keep2))
+        moved = [displacement(pair.xyz1, outcome.xyz1), displacement(pair.xyz2, outcome.xyz2)]
+        tag = next((t for t, name in TAG_CORRECTIONS.items() if name == step_name(spec)), "")
         if outcome.xyz1 is not None or outcome.xyz2 is not None:  # a correction: the moved points' field
             xyz1 = pair.xyz1 if outcome.xyz1 is None else outcome.xyz1
             xyz2 = pair.xyz2 if outcome.xyz2 is None else outcome.xyz2
@@ -119,15 +148,22 @@ def suggestions(
             "removed1": removed1,
             "removed2": removed2,
             "removed_share": (removed1 + removed2) / total if total else math.nan,
+            "corrects": outcome.corrects,
+            "displacement_median_m": max(m[0] for m in moved),
+            "displacement_max_m": max(m[1] for m in moved),
+            "fitted": canonical_json(outcome.fitted),
+            "suggested_by": tag,
+            "tag_share": shares.get(tag, math.nan),
             **compare_fields(before, after),
         }
         log.info(
-            "candidate %s %s: energy reduction %.3f, %d + %d points removed (%.2f s)",
+            "candidate %s %s: energy reduction %.3f, %d + %d points removed, moved up to %.3f m (%.2f s)",
             row["hypothesis"],
             row["params"],
             row["energy_reduction"],
             removed1,
             removed2,
+            row["displacement_max_m"],
             time.perf_counter() - start,
         )
         rows.append(row)
@@ -142,8 +178,11 @@ def suggestions(
         "removed1": np.int64,
         "removed2": np.int64,
         "voxels_invalidated": np.int64,
+        "corrects": bool,
         "hypothesis": str,
         "params": str,
+        "fitted": str,
+        "suggested_by": str,
     }
     return {name: np.asarray(values, dtype=types.get(name, np.float64)) for name, values in columns.items()}
 
@@ -172,10 +211,23 @@ def compare_fields(before: dict[str, np.ndarray], after: dict[str, np.ndarray]) 
     }
 
 
+def tag_energy_shares(columns: dict[str, np.ndarray]) -> dict[str, float]:
+    """The share of the field's energy in the voxels of each tag of ``TAG_CORRECTIONS`` (NaN
+    for a field without energy)."""
+    energy = voxel_energy(columns)
+    total = float(energy.sum())
+    return {
+        tag: float(energy[flags].sum()) / total if total > 0 else math.nan
+        for tag, flags in vector_tags(columns).items()
+        if tag in TAG_CORRECTIONS
+    }
+
+
 def _rank_key(row: dict) -> tuple:
     reduction = row["energy_reduction"]
     defined = math.isfinite(reduction)
-    return (not defined, -reduction if defined else 0.0, row["removed1"] + row["removed2"])
+    share = row["tag_share"] if math.isfinite(row["tag_share"]) else 0.0
+    return (not defined, -reduction if defined else 0.0, row["removed1"] + row["removed2"], -share)
 
 
 def suggest_stage(

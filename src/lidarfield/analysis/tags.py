@@ -84,11 +84,18 @@ def voxel_tags(
         "fov_edge": point_tag(_near_fov_edge(pair)),
         "near_sensor": point_tag([_near_a_sensor(xyz, pair) for xyz in (pair.xyz1, pair.xyz2)]),
         "depth_edge": point_tag(_on_depth_edge(pair, settings)),
-        "rigid": _rigid(columns, valid),
+        **vector_tags(columns),
         "count_imbalance": _imbalanced(columns["n1"], columns["n2"]),
     }
-    tags["radial"] = _radial(columns) & ~tags["rigid"]
     return {tag_column(tag): tags[tag] & valid for tag in TAGS}
+
+
+def vector_tags(columns: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """``{"rigid": bool (V,), "radial": bool (V,)}``: the tags of the vectors alone (no points
+    needed), for a field with the surface columns; invalid voxels carry none."""
+    valid = np.asarray(columns["valid"], dtype=bool)
+    rigid = _rigid(columns, valid)
+    return {"rigid": rigid, "radial": _radial(columns) & ~rigid & valid}
 
 
 def energy_shares(columns: dict[str, np.ndarray]) -> dict[str, float]:

@@ -73,7 +73,7 @@ def format_next_steps(rows: list[dict], out_dir) -> str:
     """Per stage its verdict and the best candidate of its suggestions.parquet."""
     from pathlib import Path
 
-    from ..report.suggestions import read_suggestions
+    from ..report.suggestions import describe_fitted, read_suggestions
 
     lines = ["what to try next (best candidate alone on each stage's survivors):"]
     for row in rows:
@@ -84,9 +84,14 @@ def format_next_steps(rows: list[dict], out_dir) -> str:
         if best is None or not best["energy_reduction"] > 0:
             lines.append(f"  {row['stage']} ({field}): no candidate reduces the energy")
             continue
+        if best.get("corrects"):
+            fitted = describe_fitted(best.get("fitted"))
+            cost = f"(fitted {fitted})" if fitted else f"(moving points {best['displacement_median_m']:.3f} m)"
+        else:
+            cost = f"removing {100 * best['removed_share']:.1f}% of the points"
         lines.append(
             f"  {row['stage']} ({field}): {best['hypothesis']} reduces the energy by "
-            f"{100 * best['energy_reduction']:.1f}% removing {100 * best['removed_share']:.1f}% of the points"
+            f"{100 * best['energy_reduction']:.1f}% {cost}"
         )
     return "\n".join(lines)
 

@@ -140,3 +140,17 @@ def test_lidarfield_run_records_the_fit_in_the_summary(tmp_path):
     c = json.loads(summary["correction"][1])
     assert abs(c["scale"] - SCALE) < 0.0005 and abs(c["offset_m"] - OFFSET) < 0.005, c
     assert summary["displacement2_median_m"][1] > 0.03 and summary["displacement1_max_m"][1] == 0
+
+
+def test_a_fit_beyond_any_calibration_is_refused_not_applied():
+    """Targets with scan 2's own vehicle 1.5 m out: the least-squares fit explains the vehicle by
+    an offset of kilometres, which would move it out of the grid; refused with the fitted values."""
+    from helpers.clouds import targets
+    from lidarfield import HypothesisError, RegisteredPair
+    from lidarfield.hypotheses import apply_step, validate_step
+
+    az = np.radians(np.repeat(np.arange(10) * 10.0 + 5.0, 40))
+    vehicle = np.column_stack([1.5 * np.cos(az), 1.5 * np.sin(az), np.zeros_like(az)])
+    pair = RegisteredPair(targets(60, 1), np.vstack([targets(60, 2), vehicle]))
+    with pytest.raises(HypothesisError, match=r"beyond a range calibration's bounds \(max_scale_change 0.05"):
+        apply_step(pair, validate_step({"range_calibration": {}}))

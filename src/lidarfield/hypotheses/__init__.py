@@ -53,8 +53,8 @@ BUILTINS: dict[str, Hypothesis] = {
         _builtin(range_calibration, "range_calibration"),
     )
 }
-# The built-ins that correct (move a cloud) rather than remove: not among the default candidates
-# of "what to try next", which ranks removals.
+# The built-ins that correct (move a cloud) rather than remove; "what to try next" ranks them
+# after the removals among its default candidates (analysis.suggest).
 CORRECTING = frozenset({"realign", "range_calibration"})
 PLUGIN = Hypothesis("plugin", plugin.run_plugin, plugin.Params, plugin.__doc__.strip().splitlines()[0])
 

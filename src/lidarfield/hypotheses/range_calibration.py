@@ -59,6 +59,12 @@ class Params:
     max_points: int = field(default=20000, metadata=doc("at most this many points of the cloud in the fit"))
     normal_k: int = field(default=12, metadata=doc("the other cloud's normals from this many nearest points"))
     max_iterations: int = field(default=20, metadata=doc("pairing and solving iterations at most"))
+    max_scale_change: float = field(
+        default=0.05, metadata=doc("a fitted scale further than this from 1 is no range calibration (an error)")
+    )
+    max_offset_m: float = field(
+        default=1.0, metadata=doc("a fitted offset larger than this is no range calibration (an error, m)")
+    )
 
     def __post_init__(self):
         if self.cloud not in (1, 2):
@@ -70,6 +76,10 @@ class Params:
             )
         if self.normal_k < 3:
             raise ValueError(f"need normal_k >= 3, got {self.normal_k}")
+        if not self.max_scale_change > 0 or not self.max_offset_m > 0:
+            raise ValueError(
+                f"need max_scale_change > 0 and max_offset_m > 0, got {self.max_scale_change} and {self.max_offset_m}"
+            )
 
 
 def range_calibration(pair: RegisteredPair, params: Params) -> Outcome:
@@ -162,6 +172,14 @@ def range_calibration(pair: RegisteredPair, params: Params) -> Outcome:
     A[1:, 0] = -betas / alpha**2
     A[1:, 1:] = np.eye(p - 1) / alpha
     se = np.sqrt(np.clip(np.diag(A @ covariance @ A.T), 0, None))
+    # A fit far from any sensor's calibration explains the field by moving points out of it (a
+    # vehicle's points thrown kilometres away): refused, so that it is never suggested.
+    if not (abs(scale - 1.0) <= params.max_scale_change and np.all(np.abs(offsets) <= params.max_offset_m)):
+        raise HypothesisError(
+            f"{name}: the fit (scale {scale:.6g}, offset {float(np.max(np.abs(offsets))):.4g} m) is beyond a range "
+            f"calibration's bounds (max_scale_change {params.max_scale_change:g}, max_offset_m "
+            f"{params.max_offset_m:g}): the discrepancy is not a range error"
+        )
 
     def number(value) -> float | None:
         return float(value) if np.isfinite(value) else None

@@ -28,6 +28,8 @@ def type_label(hint: Any) -> str:
     if _is_optional(hint):
         (inner,) = [a for a in args if a is not type(None)]
         return f"{type_label(inner)} or null"
+    if _is_union(hint):
+        return " or ".join(type_label(a) for a in args)
     origin = typing.get_origin(hint)
     if origin is tuple:
         if len(args) == 2 and args[1] is Ellipsis:
@@ -92,6 +94,10 @@ def _is_optional(hint: Any) -> bool:
     return typing.get_origin(hint) in (typing.Union, types.UnionType) and type(None) in typing.get_args(hint)
 
 
+def _is_union(hint: Any) -> bool:
+    return typing.get_origin(hint) in (typing.Union, types.UnionType)
+
+
 def _plural(hint: Any) -> str:
     return {float: "numbers", int: "integers", str: "strings", bool: "true/false values"}.get(hint, type_label(hint))
 
@@ -106,6 +112,13 @@ def _coerce(value: Any, hint: Any, what: str) -> Any:
             return _coerce(value, inner, what)
         except HypothesisError:
             raise HypothesisError(f"{what}: expected {type_label(hint)}, got {value!r}") from None
+    if _is_union(hint):  # the first member that takes the value
+        for member in typing.get_args(hint):
+            try:
+                return _coerce(value, member, what)
+            except HypothesisError:
+                pass
+        raise HypothesisError(f"{what}: expected {type_label(hint)}, got {value!r}")
     origin = typing.get_origin(hint)
     if origin is tuple and isinstance(value, (list, tuple)):
         args = typing.get_args(hint)

@@ -52,6 +52,7 @@ def test_available_and_described():
         "outliers",
         "realign",
         "range_calibration",
+        "deskew",
         "plugin",
     ]
     described = describe_hypotheses()
@@ -87,7 +88,7 @@ def test_defaults_filled_and_study_grid_injected_into_shadow():
         (
             {"ego_vehicel": {}},
             "hypothesis 1 (ego_vehicel): unknown hypothesis; available: ego_vehicle, field_of_view, shadow, crop, "
-            "outliers, realign, range_calibration, plugin",
+            "outliers, realign, range_calibration, deskew, plugin",
         ),
         (
             {"shadow": {"jump": 1}},

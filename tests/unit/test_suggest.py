@@ -63,7 +63,15 @@ def test_emptying_voxels_is_counted_apart_not_as_a_reduction():
 def test_default_candidates_are_the_builtins_not_yet_applied():
     grid = {"kind": "spherical", "azimuth_bins": 12, "elevation_deg": [-30.0, 10.0], "elevation_bins": 4}
     names = [next(iter(step)) for step in candidate_steps(None, [{"field_of_view": {}}], ".", grid)]
-    assert names == ["ego_vehicle", "shadow", "crop", "outliers", "realign", "range_calibration"]  # corrections last
+    assert names == [
+        "ego_vehicle",
+        "shadow",
+        "crop",
+        "outliers",
+        "realign",
+        "range_calibration",
+        "deskew",
+    ]  # corrections last
     shadow = candidate_steps(None, [], ".", grid)[2]["shadow"]
     assert shadow["grid"]["azimuth_bins"] == 12 and shadow["origins"] == [1, 2]  # the study's grid, defaults
     with pytest.raises(HypothesisError, match="suggest entry 2"):
@@ -80,6 +88,7 @@ def test_study_candidates_per_stage(tmp_path):
         "outliers",
         "realign",
         "range_calibration",
+        "deskew",
     ]
     assert [next(iter(s)) for s in study.candidates(2)] == [
         "ego_vehicle",
@@ -87,6 +96,7 @@ def test_study_candidates_per_stage(tmp_path):
         "outliers",
         "realign",
         "range_calibration",
+        "deskew",
     ]
     config = tmp_path / "study.yaml"
     config.write_text(
@@ -144,7 +154,8 @@ def test_the_suggest_job_skips_default_candidates_that_cannot_apply(tmp_path, ca
     ]
     assert run_in_process([*argv, "--default-candidates"]) == 0
     table, _ = read_table(tmp_path / "suggestions.parquet")
-    # range_calibration cannot apply: its fit would throw the vehicle kilometres away
+    # range_calibration cannot apply: its fit would throw the vehicle kilometres away; deskew has
+    # no motion (no velocity given, no scan stamps)
     assert set(table["hypothesis"]) == {"ego_vehicle", "shadow", "crop", "outliers", "realign"}
     assert table["hypothesis"][0] == "ego_vehicle" and table["energy_reduction"][0] > 0.95
     (tmp_path / "suggestions.parquet").unlink()

@@ -22,7 +22,7 @@ import numpy as np
 
 from ..errors import HypothesisError
 from ..pair import RegisteredPair
-from . import crop, ego_vehicle, field_of_view, outliers, plugin, range_calibration, realign, shadow
+from . import crop, deskew, ego_vehicle, field_of_view, outliers, plugin, range_calibration, realign, shadow
 from .outcome import Outcome, checked_outcome
 from .params import describe, params_to_dict, parse_params
 
@@ -51,11 +51,12 @@ BUILTINS: dict[str, Hypothesis] = {
         _builtin(outliers, "outliers"),
         _builtin(realign, "realign"),
         _builtin(range_calibration, "range_calibration"),
+        _builtin(deskew, "deskew"),
     )
 }
 # The built-ins that correct (move a cloud) rather than remove; "what to try next" ranks them
 # after the removals among its default candidates (analysis.suggest).
-CORRECTING = frozenset({"realign", "range_calibration"})
+CORRECTING = frozenset({"realign", "range_calibration", "deskew"})
 PLUGIN = Hypothesis("plugin", plugin.run_plugin, plugin.Params, plugin.__doc__.strip().splitlines()[0])
 
 

@@ -1,0 +1,190 @@
+"""``deskew``: move each point of a cloud to its scan's reference time, with the scan's own motion.
+
+A correcting hypothesis: it removes nothing, and moves the points of the chosen cloud(s)
+(``cloud``: 1, 2 or ``both``). A spinning lidar fires over a sweep (0.1 s at 10 Hz) while its
+vehicle moves; a driver that does not de-skew reports each point in the sensor frame of its own
+firing. With the scan's motion over the sweep taken as constant (linear velocity ``v`` and
+angular velocity ``w``, both in the scan's sensor frame at its reference time), a point ``p``
+fired ``s`` seconds after the reference time is, in the reference frame, ``Rot(w s) p + v s``
+(``Rot`` the rotation vector's rotation): exact for the simulator's rolling shutter.
+
+``reference`` is the time the scan's pose (and so the pair's frame) refers to: ``start`` for the
+simulator and for a Velodyne/Ouster driver's scan stamped at its first packet, ``mid`` or ``end``
+for data stamped otherwise. Cloud 2 is de-skewed in sensor 2's frame (through ``T_1_2``) and
+put back in frame 1; sensor 2's pose is not changed.
+
+Each point's time: the ``time_attribute`` (seconds or nanoseconds, ``time_unit``; counted from
+the sweep start, to the sweep end (negative), or absolute, ``time_zero``); without one, from the
+point's azimuth about its own sensor: the sweep starts at ``start_azimuth_deg`` and turns
+``counter-clockwise`` (the simulator's sense, seen from above) or ``clockwise`` (a Velodyne's),
+once per ``1 / rotation_hz`` of the sensor model.
+
+The motion: ``velocity_mps`` and ``angular_velocity_rps`` as given (the same for every chosen
+cloud: de-skew two scans with different motions in two stages). Deriving it from the pair (the
+constant velocity ``T_1_2`` over the two scans' time difference) needs both scans' stamps, which
+a registered pair does not carry: without the settings it is an error (and as a default
+candidate of "what to try next", skipped).
+
+What it records (the stage's ``correction``): ``reference``, and per cloud (``cloud1``,
+``cloud2``) the ``velocity_mps`` and ``angular_velocity_rps`` used, ``motion_source``,
+``time_source``, the span of the points' times about the reference (``time_min_s``,
+``time_max_s``) and ``max_displacement_m``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..errors import HypothesisError
+from ..pair import RegisteredPair
+from ..sensors.models import SensorModel
+from .outcome import Outcome
+from .params import doc
+
+NAME = "deskew"
+
+
+@dataclass(frozen=True)
+class Params:
+    cloud: int | str = field(default="both", metadata=doc("the cloud(s) to de-skew: 1, 2 or both"))
+    reference: str = field(
+        default="start",
+        metadata=doc(
+            "the time the scan's pose refers to, to which its points are moved: start (the simulator's, "
+            "a driver stamping a scan at its first packet), mid or end of the sweep"
+        ),
+    )
+    velocity_mps: tuple[float, float, float] | None = field(
+        default=None,
+        metadata=doc("the scan's linear velocity over its sweep, [vx, vy, vz] m/s in its own sensor frame"),
+    )
+    angular_velocity_rps: tuple[float, float, float] | None = field(
+        default=None,
+        metadata=doc("the scan's angular velocity over its sweep, rad/s about its own sensor axes (none: 0)"),
+    )
+    time_attribute: str = field(
+        default="time", metadata=doc("the per-point time attribute; without it, times come from azimuth")
+    )
+    time_unit: str = field(default="s", metadata=doc("the time attribute's unit: s or ns"))
+    time_zero: str = field(
+        default="start",
+        metadata=doc(
+            "what the time attribute counts from: start (of the sweep), end (negative to the sweep's end) or "
+            "absolute (the sweep's start and end taken as the cloud's earliest and latest point)"
+        ),
+    )
+    start_azimuth_deg: float = field(
+        default=0.0, metadata=doc("without a time attribute: the azimuth the sweep starts at (deg, from +x)")
+    )
+    rotation: str = field(
+        default="counter-clockwise",
+        metadata=doc("without a time attribute: the sense of rotation seen from above, counter-clockwise or clockwise"),
+    )
+
+    def __post_init__(self):
+        if self.cloud not in (1, 2, "both"):
+            raise ValueError(f"need cloud 1, 2 or both, got {self.cloud!r}")
+        for name, value, allowed in (
+            ("reference", self.reference, ("start", "mid", "end")),
+            ("time_unit", self.time_unit, ("s", "ns")),
+            ("time_zero", self.time_zero, ("start", "end", "absolute")),
+            ("rotation", self.rotation, ("counter-clockwise", "clockwise")),
+        ):
+            if value not in allowed:
+                raise ValueError(f"need {name} {' or '.join(allowed)}, got {value!r}")
+        for name in ("velocity_mps", "angular_velocity_rps"):
+            value = getattr(self, name)
+            if value is not None and not all(math.isfinite(v) for v in value):
+                raise ValueError(f"need a finite {name}, got {list(value)}")
+
+
+def deskew(pair: RegisteredPair, params: Params) -> Outcome:
+    """The chosen clouds moved to their scans' reference time; nothing removed."""
+    clouds = (1, 2) if params.cloud == "both" else (params.cloud,)
+    if params.velocity_mps is None and params.angular_velocity_rps is None:
+        raise HypothesisError(
+            f"{NAME}: no motion for cloud {' and '.join(map(str, clouds))}: give velocity_mps (and "
+            "angular_velocity_rps); the registered pair carries no scan stamps to derive it from T_1_2"
+        )
+    v = np.asarray(params.velocity_mps or (0.0, 0.0, 0.0), dtype=np.float64)
+    w = np.asarray(params.angular_velocity_rps or (0.0, 0.0, 0.0), dtype=np.float64)
+    out = {"keep1": np.ones(len(pair.xyz1), dtype=bool), "keep2": np.ones(len(pair.xyz2), dtype=bool)}
+    fitted: dict = {"reference": params.reference, "method": "constant_velocity"}
+    for cloud in clouds:
+        xyz, attributes, sensor = (
+            (pair.xyz1, pair.attributes1, pair.sensor1) if cloud == 1 else (pair.xyz2, pair.attributes2, pair.sensor2)
+        )
+        pose = np.eye(4) if cloud == 1 else pair.T_1_2
+        local = (xyz - pose[:3, 3]) @ pose[:3, :3]  # the points in their own sensor frame
+        s, time_source = _times_from_reference(local, attributes, sensor, params, cloud)
+        moved = _moved(local, s, v, w)
+        displacement = np.linalg.norm(moved - local, axis=1)
+        out[f"xyz{cloud}"] = moved @ pose[:3, :3].T + pose[:3, 3]
+        fitted[f"cloud{cloud}"] = {
+            "velocity_mps": v.tolist(),
+            "angular_velocity_rps": w.tolist(),
+            "motion_source": "settings",
+            "time_source": time_source,
+            "time_min_s": float(s.min()) if len(s) else 0.0,
+            "time_max_s": float(s.max()) if len(s) else 0.0,
+            "max_displacement_m": float(displacement.max()) if len(s) else 0.0,
+        }
+    return Outcome(**out, fitted=fitted)
+
+
+def _moved(local: np.ndarray, s: np.ndarray, v: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """``Rot(w s) p + v s`` for each point ``p`` fired ``s`` seconds after the reference."""
+    moved = local + s[:, None] * v
+    if np.any(w != 0):
+        from scipy.spatial.transform import Rotation
+
+        moved = Rotation.from_rotvec(s[:, None] * w).apply(local) + s[:, None] * v
+    return moved
+
+
+def _times_from_reference(
+    local: np.ndarray, attributes: dict, sensor: SensorModel | None, params: Params, cloud: int
+) -> tuple[np.ndarray, str]:
+    """Each point's time in seconds after the reference time (negative before), and its source."""
+    period = None if sensor is None or not sensor.rotation_hz > 0 else 1.0 / sensor.rotation_hz
+    if params.time_attribute in attributes:
+        t = np.asarray(attributes[params.time_attribute], dtype=np.float64)
+        if len(t) and not np.isfinite(t).all():
+            raise HypothesisError(
+                f"{NAME}: cloud {cloud}'s {params.time_attribute!r} attribute has points without a time"
+            )
+        if params.time_unit == "ns":
+            t = t * 1e-9
+        if params.time_zero == "absolute":
+            start = float(t.min()) if len(t) else 0.0
+            t = t - start
+            length = period if period is not None else (float(t.max()) if len(t) else 0.0)
+        else:
+            if period is None:
+                if params.time_zero == "end" or params.reference != "start":
+                    raise HypothesisError(
+                        f"{NAME}: cloud {cloud}: the sweep's length is unknown (no sensor model's rotation_hz), "
+                        f"needed for time_zero {params.time_zero} and reference {params.reference}"
+                    )
+                period = 0.0
+            length = period
+            if params.time_zero == "end":
+                t = t + period
+        source = f"attribute {params.time_attribute} ({params.time_unit}, from {params.time_zero})"
+    else:
+        if sensor is None or not sensor.rotation_hz > 0:
+            raise HypothesisError(
+                f"{NAME}: cloud {cloud} has no {params.time_attribute!r} attribute and no sensor model's "
+                "rotation_hz to time its points by azimuth"
+            )
+        sense = 1.0 if params.rotation == "counter-clockwise" else -1.0
+        azimuth = np.degrees(np.arctan2(local[:, 1], local[:, 0]))
+        turned = np.mod(sense * (azimuth - params.start_azimuth_deg), 360.0)
+        length = period
+        t = turned / 360.0 * period
+        source = f"azimuth ({params.rotation} from {params.start_azimuth_deg:g} deg, {sensor.rotation_hz:g} Hz)"
+    reference = {"start": 0.0, "mid": 0.5 * length, "end": length}[params.reference]
+    return t - reference, source

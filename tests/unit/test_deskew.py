@@ -128,3 +128,21 @@ def test_names_what_is_missing(skewed):
         apply_step(skewed, {"deskew": {"cloud": 3, "velocity_mps": V}})
     with pytest.raises(HypothesisError, match=r"need reference start or mid or end, got 'middle'"):
         apply_step(skewed, {"deskew": {"reference": "middle", "velocity_mps": V}})
+
+
+def test_turning_while_driving_is_undone_exactly():
+    """Yawing at 0.5 rad/s while driving 10 m/s (the simulator's linear velocity is in the world,
+    = the start frame here): the de-skewed points are the world's points in the sweep-start frame."""
+    from lidarfield.simulation.trajectory import moved_pose
+
+    w = [0.0, 0.0, 0.5]
+    scene, sensor = load_scene("paper-intersection"), PRESETS["vlp16"]
+    pose = pose_from_xyzrpy([0, 0, 3, 0, 0, 0])
+    s = simulate_scan(scene, sensor, pose, rolling_shutter=True, linear_velocity_mps=V, angular_velocity_rps=w)
+    firing = moved_pose(pose, s.attributes["time"], V, w)  # world-from-sensor at each point's firing
+    world = np.einsum("nij,nj->ni", firing[:, :3, :3], s.xyz) + firing[:, :3, 3]
+    truth = (world - pose[:3, 3]) @ pose[:3, :3]
+    pair = RegisteredPair(s.xyz, s.xyz[:0], np.eye(4), sensor, sensor, dict(s.attributes), {})
+    outcome = apply_step(pair, {"deskew": {"cloud": 1, "velocity_mps": V, "angular_velocity_rps": w}})
+    assert np.abs(outcome.xyz1 - truth).max() < 1e-9
+    assert outcome.fitted["cloud1"]["angular_velocity_rps"] == w and outcome.xyz2 is None

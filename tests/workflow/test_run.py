@@ -197,10 +197,12 @@ def test_run_writes_every_stage_and_prints_the_table(tmp_path, paper_scans, caps
     # What to try next on the paper's simulated pair, before any mitigation: field_of_view or
     # shadow (the adversities the paper builds this pair to show), far ahead of the rest.
     first = pd.read_parquet(out / "stages" / ids[0] / "suggestions.parquet")
-    assert set(first["hypothesis"]) == {"ego_vehicle", "field_of_view", "shadow", "crop", "outliers"}
+    removals = {"ego_vehicle", "field_of_view", "shadow", "crop", "outliers"}
+    # the corrections that apply (deskew needs a velocity, so it is skipped as a default)
+    assert set(first["hypothesis"]) == removals | {"realign", "range_calibration"}
     assert first["hypothesis"][0] in ("field_of_view", "shadow") and first["energy_reduction"][0] > 0.5
     last = pd.read_parquet(out / "stages" / ids[-1] / "suggestions.parquet")
-    assert set(last["hypothesis"]) == {"ego_vehicle", "crop", "outliers"}
+    assert set(last["hypothesis"]) == {"ego_vehicle", "crop", "outliers", "realign", "range_calibration"}
     assert (summary["n1"][1:].to_numpy() + summary["removed1"][1:].to_numpy() == summary["n1"][:-1].to_numpy()).all()
     assert all(
         (out / name).is_file() for name in ("scan1.parquet", "scan2.parquet", "registered.parquet", "summary.csv")
@@ -291,21 +293,14 @@ def test_run_on_text_scans_without_a_sensor_skips_the_defaults_that_need_one(tmp
     argv = ["run", str(texts[0]), str(texts[1]), "--config", str(config), "--out", str(out)]
     with caplog.at_level("INFO", logger="lidarfield.analysis.suggest"):
         assert main(argv) == 0
-    skipped = [r.getMessage() for r in caplog.records if "skipped" in r.getMessage()]
-    assert len(skipped) == 2  # one per stage
-    assert all(m.startswith("candidate field_of_view skipped") and "no sensor model" in m for m in skipped)
+    skipped = [r.getMessage() for r in caplog.records if r.getMessage().startswith("candidate field_of_view skipped")]
+    assert len(skipped) == 2 and all("no sensor model" in m for m in skipped)  # one per stage
     ids = list(pd.read_parquet(out / "summary.parquet")["stage"])
-    assert set(pd.read_parquet(out / "stages" / ids[0] / "suggestions.parquet")["hypothesis"]) == {
-        "ego_vehicle",
-        "shadow",
-        "crop",
-        "outliers",
-    }
-    assert set(pd.read_parquet(out / "stages" / ids[1] / "suggestions.parquet")["hypothesis"]) == {
-        "shadow",
-        "crop",
-        "outliers",
-    }
+    corrections = {"realign", "range_calibration"}  # deskew needs a velocity: skipped as a default
+    stage0 = set(pd.read_parquet(out / "stages" / ids[0] / "suggestions.parquet")["hypothesis"])
+    assert stage0 == {"ego_vehicle", "shadow", "crop", "outliers"} | corrections
+    stage1 = set(pd.read_parquet(out / "stages" / ids[1] / "suggestions.parquet")["hypothesis"])
+    assert stage1 == {"shadow", "crop", "outliers"} | corrections
 
     capsys.readouterr()
     explicit = yaml.safe_load(config.read_text()) | {"suggest": [{"crop": {}}, {"field_of_view": {}}]}

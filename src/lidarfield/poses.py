@@ -176,3 +176,37 @@ def poses_of_attached_frame(poses: np.ndarray, extrinsic: np.ndarray) -> np.ndar
     frame at the poses' origin. KITTI's lidar poses are its camera poses with E = Tr. The exact
     inverse, not the transpose: a dataset's E is often rigid to 1e-7 only."""
     return np.linalg.inv(extrinsic) @ np.asarray(poses) @ extrinsic
+
+
+def skew(v) -> np.ndarray:
+    """The cross-product matrix [v]x of a 3-vector: [v]x @ u = v x u."""
+    x, y, z = np.asarray(v, dtype=np.float64)
+    return np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
+
+
+def rotation_from_vector(omega) -> np.ndarray:
+    """The rotation exp([omega]x) of a rotation vector (axis times angle, rad): Rodrigues."""
+    omega = np.asarray(omega, dtype=np.float64)
+    angle = float(np.linalg.norm(omega))
+    if angle < 1e-15:
+        return np.eye(3)
+    K = skew(omega / angle)
+    return np.eye(3) + np.sin(angle) * K + (1.0 - np.cos(angle)) * K @ K
+
+
+# A quaternion further than this from unit length is a mistake in the data, not rounding.
+QUATERNION_TOLERANCE = 1e-3
+
+
+def poses_from_quaternions(q_wxyz, translations) -> np.ndarray:
+    """(N, 4, 4) poses of (N, 4) quaternions, scalar first (w, x, y, z), normalised here, and
+    (N, 3) translations. The caller checks them (finite, within QUATERNION_TOLERANCE of unit)."""
+    q = np.asarray(q_wxyz, dtype=np.float64).reshape(-1, 4)
+    w, x, y, z = (q / np.linalg.norm(q, axis=1)[:, None]).T
+    poses = np.zeros((len(q), 4, 4))
+    poses[:, 0, :3] = np.column_stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)])
+    poses[:, 1, :3] = np.column_stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)])
+    poses[:, 2, :3] = np.column_stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)])
+    poses[:, :3, 3] = np.asarray(translations, dtype=np.float64).reshape(-1, 3)
+    poses[:, 3, 3] = 1.0
+    return poses

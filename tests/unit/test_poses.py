@@ -199,3 +199,24 @@ def test_apply_pose_matches_homogeneous_coordinates(dtype):
     out = apply_pose(T, xyz)
     assert out.dtype == np.float64 and out.shape == (1000, 3)
     np.testing.assert_allclose(out, reference, rtol=0, atol=1e-12)
+
+
+def test_quaternions_and_rotation_vectors_match_scipy():
+    """The one quaternion and rotation-vector conversion (bags, Argoverse 2, nuScenes, the
+    rigid fit) against SciPy's."""
+    from scipy.spatial.transform import Rotation
+
+    from lidarfield.poses import poses_from_quaternions, rotation_from_vector, skew
+
+    rng = np.random.default_rng(3)
+    q = rng.normal(size=(50, 4))
+    q /= np.linalg.norm(q, axis=1)[:, None]
+    t = rng.normal(size=(50, 3))
+    poses = poses_from_quaternions(q, t)
+    expected = Rotation.from_quat(q[:, [1, 2, 3, 0]]).as_matrix()  # SciPy: scalar last
+    assert np.abs(poses[:, :3, :3] - expected).max() < 1e-12
+    assert np.array_equal(poses[:, :3, 3], t) and (poses[:, 3] == [0, 0, 0, 1]).all()
+    for omega in (rng.normal(size=3), np.array([1e-9, 0.0, 0.0]), np.zeros(3)):
+        assert np.abs(rotation_from_vector(omega) - Rotation.from_rotvec(omega).as_matrix()).max() < 1e-12
+    u, v = rng.normal(size=3), rng.normal(size=3)
+    assert np.allclose(skew(u) @ v, np.cross(u, v))

@@ -54,7 +54,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..poses import rotation_angle
+from ..poses import rotation_angle, rotation_from_vector
 
 UNCONSTRAINED_RATIO = 1e-3
 MIN_INCIDENCE_COSINE = 0.2
@@ -81,16 +81,6 @@ class RigidFit:
 
 def nan_fit() -> RigidFit:
     return RigidFit(np.full((3, 3), np.nan), np.full(3, np.nan), np.full((6, 6), np.nan))
-
-
-def rodrigues(omega: np.ndarray) -> np.ndarray:
-    """The rotation exp([omega]) (omega in rad)."""
-    angle = float(np.linalg.norm(omega))
-    if angle < 1e-15:
-        return np.eye(3)
-    k = omega / angle
-    K = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
-    return np.eye(3) + math.sin(angle) * K + (1.0 - math.cos(angle)) * K @ K
 
 
 def point_to_plane_fit(
@@ -120,8 +110,8 @@ def point_to_plane_fit(
         gradient = jacobian.T @ (weight * residual)
         step, _ = _constrained_solve(hessian, -gradient)
         step = step * scale
-        rotation = rodrigues(step[:3]) @ rotation
-        translation = rodrigues(step[:3]) @ translation + step[3:]
+        rotation = rotation_from_vector(step[:3]) @ rotation
+        translation = rotation_from_vector(step[:3]) @ translation + step[3:]
         if np.linalg.norm(step[:3]) * length + np.linalg.norm(step[3:]) < TOLERANCE * max(length, 1.0):
             break
     moved = m2 @ rotation.T + translation

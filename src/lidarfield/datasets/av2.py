@@ -32,7 +32,7 @@ import numpy as np
 
 from ..errors import ConfigError
 from ..io.formats.av2 import FRAMES, LIDARS, feather_columns
-from ..poses import interpolate_pose, invert_pose
+from ..poses import QUATERNION_TOLERANCE, interpolate_pose, invert_pose, poses_from_quaternions
 from . import DatasetScan, DatasetSequence
 
 SENSOR = "vlp32c"
@@ -89,7 +89,7 @@ def quaternion_poses(columns: dict[str, np.ndarray], path: Path, what: str) -> n
     q = np.column_stack([np.asarray(columns[c], dtype=np.float64) for c in POSE_COLUMNS[:4]])
     t = np.column_stack([np.asarray(columns[c], dtype=np.float64) for c in POSE_COLUMNS[4:]])
     norm = np.linalg.norm(q, axis=1)
-    bad = ~(np.isfinite(q).all(axis=1) & np.isfinite(t).all(axis=1) & (np.abs(norm - 1.0) < 1e-3))
+    bad = ~(np.isfinite(q).all(axis=1) & np.isfinite(t).all(axis=1) & (np.abs(norm - 1.0) < QUATERNION_TOLERANCE))
     if bad.any():
         row = int(np.flatnonzero(bad)[0])
         raise ConfigError(
@@ -97,14 +97,7 @@ def quaternion_poses(columns: dict[str, np.ndarray], path: Path, what: str) -> n
             f"{int(bad.sum())} such row(s)",
             path,
         )
-    w, x, y, z = (q / norm[:, None]).T
-    poses = np.zeros((len(q), 4, 4))
-    poses[:, 0, :3] = np.column_stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)])
-    poses[:, 1, :3] = np.column_stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)])
-    poses[:, 2, :3] = np.column_stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)])
-    poses[:, :3, 3] = t
-    poses[:, 3, 3] = 1.0
-    return poses
+    return poses_from_quaternions(q, t)
 
 
 def sensor_pose(path: Path, sensor: str) -> np.ndarray:

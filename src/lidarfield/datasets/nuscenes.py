@@ -28,13 +28,13 @@ import numpy as np
 
 from ..errors import ConfigError
 from ..io.rows import file_key
+from ..poses import QUATERNION_TOLERANCE, poses_from_quaternions
 from . import DatasetScan, DatasetSequence
 
 SENSOR = "hdl32"
 CHANNEL = "LIDAR_TOP"
 TABLES = ("scene", "sample", "sample_data", "ego_pose", "calibrated_sensor", "sensor")
 _PIECE = 1 << 24  # characters of JSON decoded at a time
-_UNIT_TOLERANCE = 1e-3  # a quaternion further from unit length is a mistake, not rounding
 
 
 def read_index(settings: dict, base_dir: Path) -> DatasetSequence:
@@ -233,17 +233,9 @@ def _matrix(translation, rotation, path: Path, token: str) -> np.ndarray:
     if t.shape != (3,) or q.shape != (4,) or not (np.isfinite(t).all() and np.isfinite(q).all()):
         raise ConfigError(f"dataset: record {token}: translation [x, y, z] and rotation [w, x, y, z] expected", path)
     norm = float(np.linalg.norm(q))
-    if abs(norm - 1.0) > _UNIT_TOLERANCE:
+    if abs(norm - 1.0) > QUATERNION_TOLERANCE:
         raise ConfigError(f"dataset: record {token}: rotation {q.tolist()} is not a unit quaternion", path)
-    w, x, y, z = q / norm
-    T = np.eye(4)
-    T[:3, :3] = [
-        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-    ]
-    T[:3, 3] = t
-    return T
+    return poses_from_quaternions(q, t)[0]
 
 
 def _version_folder(root: Path, version: str | None) -> Path:

@@ -30,6 +30,7 @@ import numpy as np
 
 from ..errors import HypothesisError
 from ..pair import RegisteredPair
+from ..poses import skew
 from .outcome import Outcome
 from .params import doc
 
@@ -125,7 +126,7 @@ def _fitted(T: np.ndarray, mapped: np.ndarray, target: np.ndarray, normals: np.n
         covariance = np.full((6, 6), np.nan)
     t = T[:3, 3]
     # t after a small rotation w and translation v applied after T: t + w x t + v
-    A = np.hstack([-_skew(t), np.eye(3)])
+    A = np.hstack([-skew(t), np.eye(3)])
     translation_cov = A @ covariance @ A.T
     rotvec = Rotation.from_matrix(T[:3, :3]).as_rotvec()
 
@@ -154,7 +155,3 @@ def _rounded(T: np.ndarray) -> np.ndarray:
     rounded[:3, :3] = Rotation.from_rotvec(np.round(Rotation.from_matrix(T[:3, :3]).as_rotvec(), 9)).as_matrix()
     rounded[:3, 3] = np.round(T[:3, 3], 9)
     return rounded
-
-
-def _skew(v: np.ndarray) -> np.ndarray:
-    return np.array([[0, -v[2], v[1]], [v[2], 0, -v[0]], [-v[1], v[0], 0]], dtype=np.float64)

@@ -14,10 +14,9 @@ from __future__ import annotations
 from collections import defaultdict
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from ...errors import InputError
-from ...poses import interpolate_pose
+from ...poses import interpolate_pose, poses_from_quaternions
 from .bag import bag_topics, read_messages, stamp_seconds, topic_connections
 
 POSE_OF = {
@@ -102,7 +101,5 @@ def _compose(tracks: dict, frame: str, stamp_s: float) -> np.ndarray | None:
 
 
 def _matrix(translation, quaternion) -> np.ndarray:
-    T = np.eye(4)
-    T[:3, :3] = Rotation.from_quat([quaternion.x, quaternion.y, quaternion.z, quaternion.w]).as_matrix()
-    T[:3, 3] = translation.x, translation.y, translation.z
-    return T
+    q = [quaternion.w, quaternion.x, quaternion.y, quaternion.z]
+    return poses_from_quaternions(q, [translation.x, translation.y, translation.z])[0]

@@ -9,13 +9,16 @@ from lidarfield.runner import launch, scheduling
 # Not in the Snakemake processes that run one job each (on a cluster node), nor when each job
 # runs in its rule's own software environment (--sdm conda / apptainer): the worker runs the
 # jobs with its own imports, those of the environment Snakemake runs in.
-USE_WORKER = (
-    workflow.is_main_process and not workflow.deployment_settings.deployment_method
-)
+NO_DEPLOYMENT = not workflow.deployment_settings.deployment_method
+USE_WORKER = workflow.is_main_process and NO_DEPLOYMENT
 # Started importing now, while Snakemake plans: the run's first jobs need not wait for it. It
 # warms up for the figures when the study draws enough of them.
 if USE_WORKER:
     launch.spawn(RESULTS, figure_jobs=sum(len(STAGES[pair]) for pair in PLOT_PAIRS))
+# The one Snakemake of a SLURM allocation (profiles/slurm) runs a batch of jobs: its worker
+# starts now, as hooks do not run there.
+elif NO_DEPLOYMENT and launch.in_allocation(workflow.remote_exec):
+    launch.start_in_allocation(RESULTS)
 
 
 onstart:

@@ -10,20 +10,12 @@ cores. Submission, status queries, cancelling and the settings are the SLURM plu
 options are spelled ``--slurm-allocation-...`` here).
 
 One more change: when it polls. The SLURM plugin polls on its own clock, 10 s later after
-every poll that saw no allocation end (up to 180 s): a 10-s allocation submitted after a few
-such polls is seen ended a minute late, and a drive pays that at each of its rounds (scans,
-pairs, study). Here the next poll also comes within ``POLL_FRACTION`` of the age of the oldest
-running allocation (never sooner than ``init-seconds-before-status-checks``): an allocation
-is seen ended at most about a fifth of its age late.
-
-The allocation's command also names the allocation in ``LIDARFIELD_SLURM_ALLOCATION``, so
-that the workflow starts its job worker there (workflow/rules/worker.smk), and keeps going
-after a failed job, so that the other pairs of a batch finish, and prints the failed job's log
-into the allocation's SLURM log.
-
-Snakemake finds executor plugins by the name of their top-level module
-(``snakemake_executor_plugin_<name>``); this one comes with the lidarfield distribution and
-imports nothing of lidarfield: every Snakemake start imports every installed plugin.
+every poll that saw no allocation end (up to 180 s): an allocation is seen ended up to minutes
+late, and a drive pays that at each of its rounds (scans, pairs, study). Here the next poll
+also comes within ``POLL_FRACTION`` of the time since the last change (a submission, or an
+allocation seen ended), but never sooner than ``init-seconds-before-status-checks`` after
+the last: an allocation that started when another ended is seen ended about a tenth of its
+run time late.
 """
 
 from __future__ import annotations
@@ -41,8 +33,8 @@ except ImportError:  # the lidarfield[slurm] extra is not installed
 
 # lidarfield.runner.launch.ALLOCATION_ENV: read by the workflow inside the allocation.
 ALLOCATION_ENV = "LIDARFIELD_SLURM_ALLOCATION"
-# The next poll comes at most this fraction of the oldest running allocation's age later.
-POLL_FRACTION = 0.2
+# The next poll comes at most this fraction of the time since the last change later.
+POLL_FRACTION = 0.1
 
 if slurm is None:
     from snakemake_interface_executor_plugins.executors.remote import RemoteExecutor
@@ -61,6 +53,11 @@ else:
     ExecutorSettings = slurm.ExecutorSettings
 
     class Executor(slurm.Executor):
+        # The SLURM jobs running at the last poll and when they last changed; class attributes,
+        # as polling starts in a thread before __post_init__ runs.
+        polled_jobs: frozenset[str] = frozenset()
+        last_change = 0.0
+
         def __post_init__(self, test_mode: bool = False):
             super().__post_init__(test_mode)
             if self.workflow.executor_settings.array_jobs:
@@ -68,23 +65,16 @@ else:
                     "--slurm-allocation-array-jobs: array jobs run each task through the jobstep "
                     "executor; use job groups (profiles/slurm) instead"
                 )
-            self.submitted_at: dict[str, float] = {}  # SLURM job id -> time.monotonic()
-
-        def report_job_submission(self, job_info, register_job: bool = True) -> None:
-            if job_info.external_jobid is not None:
-                self.submitted_at[job_info.external_jobid] = time.monotonic()
-            super().report_job_submission(job_info, register_job)
 
         async def sleep(self) -> None:
-            ages = [
-                time.monotonic() - self.submitted_at[info.external_jobid]
-                for info in list(self.active_jobs)
-                if info.external_jobid in self.submitted_at
-            ]
+            running = frozenset(info.external_jobid for info in list(self.active_jobs))
+            now = time.monotonic()
+            if running != self.polled_jobs:  # a submission, or an allocation seen ended
+                self.polled_jobs, self.last_change = running, now
             await asyncio.sleep(
                 next_poll_s(
                     self.next_seconds_between_status_checks,
-                    ages,
+                    now - self.last_change,
                     self.workflow.executor_settings.init_seconds_before_status_checks,
                 )
             )
@@ -109,10 +99,8 @@ def allocation_cpus(job: JobExecutorInterface) -> int:
     return max(1, int(cpus))
 
 
-def next_poll_s(plugin_interval_s: float, ages_s: list[float], shortest_s: float) -> float:
+def next_poll_s(plugin_interval_s: float, unchanged_s: float, shortest_s: float) -> float:
     """Seconds to the next poll: the SLURM plugin's interval, or sooner, ``POLL_FRACTION`` of
-    the oldest running allocation's age (``ages_s``: those of the allocations not yet seen
-    ended) but no less than ``shortest_s`` (``init-seconds-before-status-checks``)."""
-    if not ages_s:
-        return plugin_interval_s
-    return min(plugin_interval_s, max(shortest_s, POLL_FRACTION * max(ages_s)))
+    the time the running allocations have been ``unchanged_s``, but no less than ``shortest_s``
+    (``init-seconds-before-status-checks``)."""
+    return min(plugin_interval_s, max(shortest_s, POLL_FRACTION * unchanged_s))

@@ -32,16 +32,16 @@ def test_the_plugin_and_the_workflow_name_the_allocation_alike():
 
 
 @pytest.mark.parametrize(
-    ("plugin_interval", "ages", "expected"),
+    ("plugin_interval", "unchanged", "expected"),
     [
-        (45.0, [], 45.0),  # nothing running: the plugin's interval
-        (45.0, [3.0, 1.0], 2.0),  # young allocations: the shortest interval
-        (45.0, [100.0, 30.0], 20.0),  # a fifth of the oldest one's age
-        (45.0, [1000.0], 45.0),  # never later than the plugin would poll
+        (2.0, 0.0, 2.0),  # an allocation just ended or was submitted: the plugin's shortest interval
+        (45.0, 5.0, 2.0),  # never sooner than the shortest interval
+        (45.0, 300.0, 30.0),  # a tenth of the time nothing changed
+        (45.0, 1000.0, 45.0),  # never later than the plugin would poll
     ],
 )
-def test_the_next_poll_comes_within_a_fifth_of_the_oldest_allocations_age(plugin_interval, ages, expected):
-    assert slurm_allocation.next_poll_s(plugin_interval, ages, shortest_s=2) == pytest.approx(expected)
+def test_the_next_poll_comes_within_a_tenth_of_the_time_nothing_changed(plugin_interval, unchanged, expected):
+    assert slurm_allocation.next_poll_s(plugin_interval, unchanged, shortest_s=2) == pytest.approx(expected)
 
 
 @pytest.mark.parametrize(

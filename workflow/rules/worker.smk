@@ -16,9 +16,12 @@ USE_WORKER = workflow.is_main_process and NO_DEPLOYMENT
 if USE_WORKER:
     launch.spawn(RESULTS, figure_jobs=sum(len(STAGES[pair]) for pair in PLOT_PAIRS))
 # The one Snakemake of a SLURM allocation (profiles/slurm) runs a batch of jobs: its worker
-# starts now, as hooks do not run there.
+# starts now, as hooks do not run there. The batch's jobs are its command line's
+# --target-jobs (RULE:WILDCARDS), which Snakemake has not parsed yet.
 elif NO_DEPLOYMENT and launch.in_allocation(workflow.remote_exec):
-    launch.start_in_allocation(RESULTS)
+    launch.start_in_allocation(
+        RESULTS, figure_jobs=sum(arg.startswith("plot_stage:") for arg in sys.argv)
+    )
 
 
 onstart:

@@ -139,15 +139,16 @@ def in_allocation(remote_exec: bool) -> bool:
     return remote_exec and os.environ.get(ALLOCATION_ENV) == "1"
 
 
-def start_in_allocation(results: str | Path) -> subprocess.Popen | None:
+def start_in_allocation(results: str | Path, figure_jobs: int = 0) -> subprocess.Popen | None:
     """Start the worker of this SLURM allocation's Snakemake and point its jobs at it: socket
     and log in the node's own temporary folder (``TMPDIR``, which SLURM sites often make a
     per-job one), named after the SLURM job. When the Snakemake exits (hooks do not run in an
-    allocation), the worker stops and its log moves to ``results/logs/workers/``."""
+    allocation), the worker stops and its log moves to ``results/logs/workers/``.
+    ``figure_jobs``: the allocation's stage-figure jobs (see ``spawn``)."""
     job = os.environ.get("SLURM_JOB_ID", f"pid{os.getpid()}")
     node_local = Path(tempfile.gettempdir())
     log = node_local / f"lidarfield-slurm-{job}-worker.log"
-    worker = _serve_jobs(_spawn(node_local, f"lidarfield-slurm-{job}", log, IDLE_TIMEOUT_S, 0))
+    worker = _serve_jobs(_spawn(node_local, f"lidarfield-slurm-{job}", log, IDLE_TIMEOUT_S, figure_jobs))
     # Run when the main thread ends, before Python waits for the other threads: the scheduler's
     # pending re-evaluation timers (see runner.scheduling) would hold the exit for their timespan.
     threading._register_atexit(_end_allocation, log, Path(results) / "logs" / "workers" / f"slurm-{job}.log")

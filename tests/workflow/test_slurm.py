@@ -46,7 +46,7 @@ FAILS_BEYOND_M = {limit}
 def remove(pair, params):
     if np.linalg.norm(pair.T_1_2[:3, 3]) > FAILS_BEYOND_M:
         raise RuntimeError("this hypothesis fails on purpose")
-    return np.ones(len(pair.xyz2), dtype=bool)
+    return np.ones(len(pair.xyz1), dtype=bool), np.ones(len(pair.xyz2), dtype=bool)
 '''
 FAILS_FOR_SHIFT, FAILS_FOR_NONE = 0.5, 1e9
 
@@ -158,6 +158,8 @@ def test_a_failing_job_fails_with_its_log_and_the_rerun_completes(slurm_env, slu
         log for log in (results / "logs" / "workers").glob("slurm-*.log") if "pair-report" in log.read_text()
     )
     assert pair_worker_log.read_text().count("pair-report: {'exit': 0}") == 1
+    # ... and Snakemake removed the failed batch's outputs: the rerun runs it again.
+    assert not (results / "turn" / "registered.parquet").exists()
     assert not list(node_tmp.iterdir())
     assert not workers_on(node_tmp)
 

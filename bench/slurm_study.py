@@ -49,17 +49,20 @@ class Allocations:
     def __init__(self, env: dict):
         self.env = env
         self.times: dict[str, tuple[str, str]] = {}
+        self.earlier = {line.split()[0] for line in self.squeue()}  # jobs of earlier runs
         self.done = threading.Event()
         self.thread = threading.Thread(target=self.watch, daemon=True)
 
+    def squeue(self) -> list[str]:
+        return subprocess.run(
+            ["squeue", "-h", "-t", "all", "-o", "%i %S %e %T"], capture_output=True, text=True, env=self.env
+        ).stdout.splitlines()
+
     def watch(self) -> None:
         while not self.done.wait(1.0):
-            out = subprocess.run(
-                ["squeue", "-h", "-t", "all", "-o", "%i %S %e %T"], capture_output=True, text=True, env=self.env
-            ).stdout
-            for line in out.splitlines():
+            for line in self.squeue():
                 job, start, end, state = line.split()
-                if state == "COMPLETED" or state == "FAILED":
+                if state in ("COMPLETED", "FAILED") and job not in self.earlier:
                     self.times[job] = (start, end)
 
     def __enter__(self) -> Allocations:

@@ -1,7 +1,7 @@
 # A local run hands each job to a pre-imported worker (lidarfield.runner.server), started here and
 # stopped when the run ends (or at exit, when the run executes nothing): jobs then skip
-# Python's start and imports. On a cluster, or with
-# LIDARFIELD_WORKER=off, every job is its own process.
+# Python's start and imports. With LIDARFIELD_WORKER=off every job is its own process. On a
+# SLURM cluster (profiles/slurm) each allocation's Snakemake starts one of its own.
 # The end of a run also cancels the scheduler's pending re-evaluation timers (see
 # lidarfield.runner.scheduling), which would otherwise hold the exit for up to a minute.
 from lidarfield.runner import launch, scheduling

@@ -186,7 +186,7 @@ def step_row(
     others = [r for i, r in enumerate(rows) if i != chosen]
     runner_up = f"{others[0]['hypothesis']} {float(others[0]['energy_reduction']):.3f}" if others else ""
     row = rows[chosen]
-    return {
+    values = {
         "step": level,
         "hypothesis": str(row["hypothesis"]),
         "energy_reduction": float(row["energy_reduction"]),
@@ -206,6 +206,7 @@ def step_row(
         "params": str(row["params"]),
         "fitted": str(row["fitted"]),
     }
+    return {name: values[name] for name in STEP_COLUMNS}
 
 
 def format_step(row: dict) -> str:

@@ -21,15 +21,27 @@ from pathlib import Path
 import numpy as np
 
 from .. import __version__
+from ..analysis.explain import explain_settings
 from ..errors import InputError
 from ..field.file import field_meta
-from ..field.grid import FieldSettings
+from ..field.grid import FieldSettings, field_settings_from_config
 from ..io.atomic import write_text
+from ..pair import read_pair
 from ..plots.pair_stats import pair_figure_png
 from ..plots.settings import figure_settings
 from ..plots.stage import draw_stage
 from ..plots.stage_data import StageData, vector_field
-from ..study.explain import STEP_COLUMNS, TABLE_COLUMNS, ExplainedStage, Explanation, format_step, stack_config
+from ..study.config import load_config, validate_config
+from ..study.explain import (
+    STEP_COLUMNS,
+    TABLE_COLUMNS,
+    ExplainedStage,
+    Explanation,
+    explain_pair,
+    format_step,
+    stack_config,
+)
+from ..study.run import check_out_dir, read_and_register, registration_settings
 from .page import esc, image, image_file, link, page, relative_href, table
 from .pair_page import DPI, PAIR_FIGURES
 
@@ -212,10 +224,6 @@ def explain_scans(
     """``lidarfield explain``: two scans read and registered as ``lidarfield run`` does, the loop
     on the grid, ``suggest`` and ``explain`` settings of the config (the schema's defaults
     without one; its ``hypotheses`` are not used), and the explanation's folder written."""
-    from ..analysis.explain import explain_settings
-    from ..study.config import load_config, validate_config
-    from ..study.explain import explain_pair
-    from ..study.run import check_out_dir, read_and_register, registration_settings
 
     out_dir = check_out_dir(out_dir, EXPLAIN_MARKER, "lidarfield explain")
     study = validate_config({}, require_pairs=False) if config_path is None else load_config(config_path, None, False)
@@ -247,10 +255,6 @@ def explain_job(
     out_dir: str | Path,
 ) -> Explanation:
     """A study pair's explain target: the loop on its registered pair, its folder written."""
-    from ..analysis.explain import explain_settings
-    from ..field.grid import field_settings_from_config
-    from ..pair import read_pair
-    from ..study.explain import explain_pair
 
     pair, _ = read_pair(points)
     settings = field_settings_from_config(grid_section)

@@ -25,10 +25,13 @@ from lidarfield.analysis.suggest import suggestions
 from lidarfield.cli import main
 from lidarfield.errors import ConfigError
 from lidarfield.field.grid import field_settings_from_config
-from lidarfield.hypotheses import validate_step
+from lidarfield.hypotheses import BUILTINS, validate_step
 from lidarfield.pair import RegisteredPair
 from lidarfield.poses import pose_from_xyzrpy
 from lidarfield.registration import register_pair
+from lidarfield.sensors.models import PRESETS
+from lidarfield.simulation.raycast import simulate_scan
+from lidarfield.simulation.scene import scene_from_dict
 from lidarfield.study.config import load_config, validate_config
 from lidarfield.study.explain import STEP_COLUMNS, explain_pair
 from lidarfield.study.jobs import simulated_scan
@@ -193,3 +196,37 @@ def _expd_scans(expd: Path):
     from lidarfield.io import read_scan
 
     return [read_scan(expd / name, sensor="vlp16") for name in ("Cloud1_ExpD.txt", "Cloud10_ExpD.txt")]
+
+
+# A car-sized body the sensor carries (its roof 0.3 m below the sensor) and a car driving at
+# 5 m/s that both sensors see, in the method's intersection.
+CARRIED_BODY_AND_MOVING_CAR = {
+    "extends": "paper-intersection",
+    "objects": [
+        {"name": "body", "kind": "box", "size": [4.6, 1.9, 1.4], "center": [-0.3, 0, -1.0], "frame": "sensor"},
+        {"name": "car", "kind": "box", "size": [4.5, 1.8, 1.5], "center": [9, 2, 0.75], "velocity_mps": [-5, 0, 0]},
+    ],
+}
+OFF_BEAM_GRID = {"kind": "spherical", "azimuth_bins": 36, "elevation_deg": [-22.0, 16.0], "elevation_bins": 5}
+
+
+@pytest.mark.skipif("moving_objects" not in BUILTINS, reason="needs the moving_objects built-in (issue 25)")
+def test_explain_finds_realign_ego_vehicle_and_moving_objects_and_ends_random():
+    """Issue 25: a simulated pair registered 0.3 m off, with a carried vehicle body and a moving
+    car. The body is the largest discrepancy (its points sit at one place in each sensor's frame,
+    so at two places in frame 1) and it pulls a rigid fit towards no motion: ego_vehicle comes
+    before realign; the car's leading and trailing parts are left for moving_objects."""
+    scene, sensor = scene_from_dict(CARRIED_BODY_AND_MOVING_CAR, name="body-and-car"), PRESETS["vlp16"]
+    scans = [
+        simulate_scan(scene, sensor, pose_from_xyzrpy(pose), time_s=t, seed=seed, range_noise_m=0.02)
+        for seed, pose, t in ((1, [0, 0, 3, 0, 0, 0], 0.0), (2, [1, 0, 3, 0, 0, 0.0037], 0.5))
+    ]
+    pair = register_pair(scans[0], scans[1], "truth")
+    shift = pose_from_xyzrpy([0.3, 0, 0, 0, 0, 0])  # scan 2 registered 0.3 m off
+    off = dataclasses.replace(pair, xyz2=pair.xyz2 + shift[:3, 3], T_1_2=shift @ pair.T_1_2)
+    study = validate_config({"grid": OFF_BEAM_GRID}, require_pairs=False)
+    explanation = _explain(off, study)
+    names = [row["hypothesis"] for row in explanation.steps]
+    assert {"realign", "ego_vehicle", "moving_objects"} <= set(names), names
+    assert names.index("ego_vehicle") < names.index("realign"), names
+    assert explanation.verdict == "random" and explanation.stop == "verdict random", explanation.stop

@@ -3,33 +3,6 @@
 # loop applies the best suggestion worth it until the field is random or nothing helps (the
 # config's explain settings). Once built, the study report shows what it found.
 
-# The config's suggest list (null: the default candidates) and explain settings.
-SUGGEST = canonical_json(STUDY.suggest)
-EXPLAIN = canonical_json(STUDY.config["explain"])
-
-
-def explain_dir(pair):
-    return f"{RESULTS}/{pair}/explain"
-
-
-@planned
-def this_explain_dir(wildcards):
-    return explain_dir(wildcards.pair)
-
-
-@planned
-def explain_plugin_sources(wildcards):
-    """A plugin candidate's file is an input of explain: editing it explains again."""
-    return [step["plugin"]["file"] for step in STUDY.suggest or [] if "plugin" in step]
-
-
-@planned
-def explain_records(wildcards):
-    """The pairs' explain.json that exist: the study report shows them, and is kept up to date
-    with them, once `snakemake explain` (or one pair's target) has built them."""
-    records = [f"{explain_dir(pair)}/explain.json" for pair in PAIRS]
-    return [record for record in records if Path(record).is_file()]
-
 
 rule explain_pair:
     input:

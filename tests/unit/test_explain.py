@@ -29,6 +29,7 @@ from lidarfield.hypotheses import BUILTINS, validate_step
 from lidarfield.pair import RegisteredPair
 from lidarfield.poses import pose_from_xyzrpy
 from lidarfield.registration import register_pair
+from lidarfield.report.explain import read_explanations, study_explain_parts
 from lidarfield.sensors.models import PRESETS
 from lidarfield.simulation.raycast import simulate_scan
 from lidarfield.simulation.scene import scene_from_dict
@@ -230,3 +231,33 @@ def test_explain_finds_realign_ego_vehicle_and_moving_objects_and_ends_random():
     assert {"realign", "ego_vehicle", "moving_objects"} <= set(names), names
     assert names.index("ego_vehicle") < names.index("realign"), names
     assert explanation.verdict == "random" and explanation.stop == "verdict random", explanation.stop
+
+
+def test_the_study_section_counts_how_often_each_hypothesis_was_chosen(tmp_path):
+    def record(pair, names, reductions, verdict):
+        steps = [
+            {"step": k, "hypothesis": name, "energy_reduction": reduction}
+            for k, (name, reduction) in enumerate(zip(names, reductions), start=1)
+        ]
+        path = tmp_path / pair / "explain" / "explain.json"
+        stop = f"verdict {verdict}" if verdict == "random" else STOP_NOTHING_HELPS
+        path.parent.mkdir(parents=True)
+        path.write_text(
+            json.dumps(
+                {"pair": pair, "stack": [{n: {}} for n in names], "stop": stop, "verdict": verdict, "steps": steps}
+            )
+        )
+        return path
+
+    paths = [
+        record("a", ["ego_vehicle", "shadow"], [0.6, 0.5], "random"),
+        record("b", ["ego_vehicle"], [0.4], "patterned"),
+        record("c", ["field_of_view", "ego_vehicle"], [0.8, 0.2], "random"),
+    ]
+    html = "".join(study_explain_parts(read_explanations(paths), tmp_path))
+    assert 'href="a/explain/explain.html"' in html and "ego_vehicle → shadow" in html
+    assert "random for 2" in html and "patterned for 1" in html
+    # ego_vehicle: 3 pairs (100%), median step 1, median reduction 0.4; shadow and field_of_view: 1 pair each
+    assert "<td>ego_vehicle</td><td>3</td><td>100%</td><td>1</td><td>0.4</td>" in html.replace(' class="text"', "")
+    assert "<td>shadow</td><td>1</td><td>33%</td><td>2</td><td>0.5</td>" in html.replace(' class="text"', "")
+    assert study_explain_parts([], tmp_path) == []

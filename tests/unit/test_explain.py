@@ -32,7 +32,7 @@ from lidarfield.registration import register_pair
 from lidarfield.report.explain import read_explanations, study_explain_parts
 from lidarfield.sensors.models import PRESETS
 from lidarfield.simulation.raycast import simulate_scan
-from lidarfield.simulation.scene import scene_from_dict
+from lidarfield.simulation.scene import load_scene
 from lidarfield.study.config import load_config, validate_config
 from lidarfield.study.explain import STEP_COLUMNS, explain_pair
 from lidarfield.study.jobs import simulated_scan
@@ -199,28 +199,20 @@ def _expd_scans(expd: Path):
     return [read_scan(expd / name, sensor="vlp16") for name in ("Cloud1_ExpD.txt", "Cloud10_ExpD.txt")]
 
 
-# A car-sized body the sensor carries (its roof 0.3 m below the sensor) and a car driving at
-# 5 m/s that both sensors see, in the method's intersection.
-CARRIED_BODY_AND_MOVING_CAR = {
-    "extends": "paper-intersection",
-    "objects": [
-        {"name": "body", "kind": "box", "size": [4.6, 1.9, 1.4], "center": [-0.3, 0, -1.0], "frame": "sensor"},
-        {"name": "car", "kind": "box", "size": [4.5, 1.8, 1.5], "center": [9, 2, 0.75], "velocity_mps": [-5, 0, 0]},
-    ],
-}
 OFF_BEAM_GRID = {"kind": "spherical", "azimuth_bins": 36, "elevation_deg": [-22.0, 16.0], "elevation_bins": 5}
 
 
 @pytest.mark.skipif("moving_objects" not in BUILTINS, reason="needs the moving_objects built-in (issue 25)")
 def test_explain_finds_realign_ego_vehicle_and_moving_objects_and_ends_random():
     """Issue 25: a simulated pair registered 0.3 m off, with a carried vehicle body and a moving
-    car. The body is the largest discrepancy (its points sit at one place in each sensor's frame,
-    so at two places in frame 1) and it pulls a rigid fit towards no motion: ego_vehicle comes
-    before realign; the car's leading and trailing parts are left for moving_objects."""
-    scene, sensor = scene_from_dict(CARRIED_BODY_AND_MOVING_CAR, name="body-and-car"), PRESETS["vlp16"]
+    car (the built-in scene paper-intersection-ego-car; sensor 2 1 m further, 0.5 s later). The
+    body is the largest discrepancy (its points sit at one place in each sensor's frame, so at
+    two places in frame 1) and it pulls a rigid fit towards no motion: ego_vehicle comes before
+    realign; the car's leading and trailing parts are left for moving_objects."""
+    scene, sensor = load_scene("paper-intersection-ego-car"), PRESETS["vlp16"]
     scans = [
         simulate_scan(scene, sensor, pose_from_xyzrpy(pose), time_s=t, seed=seed, range_noise_m=0.02)
-        for seed, pose, t in ((1, [0, 0, 3, 0, 0, 0], 0.0), (2, [1, 0, 3, 0, 0, 0.0037], 0.5))
+        for seed, pose, t in ((1, [0, 0, 2, 0, 0, 0], 0.0), (2, [1, 0, 2, 0, 0, 0.0037], 0.5))
     ]
     pair = register_pair(scans[0], scans[1], "truth")
     shift = pose_from_xyzrpy([0.3, 0, 0, 0, 0, 0])  # scan 2 registered 0.3 m off

@@ -253,3 +253,13 @@ def test_the_study_section_counts_how_often_each_hypothesis_was_chosen(tmp_path)
     assert "<td>ego_vehicle</td><td>3</td><td>100%</td><td>1</td><td>0.4</td>" in html.replace(' class="text"', "")
     assert "<td>shadow</td><td>1</td><td>33%</td><td>2</td><td>0.5</td>" in html.replace(' class="text"', "")
     assert study_explain_parts([], tmp_path) == []
+
+
+def test_a_bad_explain_setting_is_one_error_naming_the_config_and_nothing_is_written(tmp_path, capsys):
+    config = tmp_path / "study.yaml"
+    config.write_text("explain: {min_energy_reduction: 2}\n")
+    out = tmp_path / "out"
+    assert main(["explain", "a.txt", "b.txt", "--config", str(config), "--out", str(out)]) == 2
+    error = capsys.readouterr().err
+    assert "study.yaml" in error and "min_energy_reduction" in error
+    assert not out.exists()

@@ -15,6 +15,7 @@ import csv
 import io
 import json
 import logging
+import shutil
 from collections import Counter
 from pathlib import Path
 
@@ -22,6 +23,7 @@ import numpy as np
 
 from .. import __version__
 from ..analysis.explain import explain_settings
+from ..analysis.field_stats import summary_json_safe
 from ..errors import InputError
 from ..field.file import field_meta
 from ..field.grid import FieldSettings, field_settings_from_config
@@ -66,12 +68,13 @@ def write_explanation(
 ) -> list[Path]:
     """Write an explanation's folder (see the module docstring); returns the files written."""
     out_dir = Path(out_dir)
+    shutil.rmtree(out_dir / FIGURES_DIR, ignore_errors=True)  # an earlier explanation's steps
     figures = draw_explanation(explanation, settings, out_dir / FIGURES_DIR, plots)
     written = [out_dir / name for name in (STACK_FILE, STEPS_FILE, RECORD_FILE, PAGE_FILE)]
     stack = stack_config(explanation, grid_section)
     write_text(written[0], stack)
     write_text(written[1], steps_csv(explanation.steps))
-    write_text(written[2], json.dumps(explanation.record(), indent=1, allow_nan=False) + "\n")
+    write_text(written[2], json.dumps(summary_json_safe(explanation.record()), indent=1, allow_nan=False) + "\n")
     write_text(written[3], explain_page(explanation, stack, figures, out_dir))
     return written + [path for paths in figures for path in paths]
 

@@ -88,20 +88,19 @@ def test_realign_recovers_a_registration_offset(intersection, offset, check):
     # standard errors: finite, small, and the offset is far outside them
     assert all(0 < se < 0.005 for se in c["translation_se_m"]) and all(0 < se < 0.01 for se in c["rotation_se_deg"])
     assert c["fitness"] > 0.9 and c["correspondences"] > 1000
-    # The field: the offset's pattern is gone, back to the correctly registered pair's field.
-    # That field is itself 'patterned' (the simulated scene's sampling: p_coherence 0.001 with no
-    # offset at all), so the verdict after realign is the truth's, not 'random'.
+    # The field: patterned with the offset, random after realign as without the offset.
     before, after, reference = _field(moved), _field(stage.pair), _field(truth)
-    assert after["verdict"] == reference["verdict"]
+    assert before["verdict"] == "patterned" and before["p_direction"] + before["p_coherence"] <= 0.002
+    assert after["verdict"] == reference["verdict"] == "random"
     assert after["rms_magnitude"] < 1.2 * reference["rms_magnitude"] < before["rms_magnitude"]
 
 
 def test_realign_names_what_is_missing(intersection):
     few = RegisteredPair(intersection.xyz1, intersection.xyz2[:5])
-    with pytest.raises(
-        HypothesisError, match=r"realign: too few points: cloud 2 has 2 after 0.2 m voxels, it needs at least 10"
-    ):
+    with pytest.raises(HypothesisError, match=r"realign: too few points: cloud 2 has 5, it needs at least 10"):
         apply_step(few, {"realign": {}})
+    with pytest.raises(HypothesisError, match=r"cloud 2 has 2 after 0.2 m voxels, it needs at least 10"):
+        apply_step(few, {"realign": {"voxel_m": 0.2}})
     apart = RegisteredPair(intersection.xyz1, intersection.xyz2 + [100.0, 0, 0])
     with pytest.raises(HypothesisError, match="too few correspondences: 0 cloud-2 points"):
         apply_step(apart, {"realign": {}})

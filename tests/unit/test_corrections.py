@@ -366,3 +366,25 @@ def test_the_suggestions_rank_realign_first_for_a_registration_offset(intersecti
     row = int(np.flatnonzero(truth["hypothesis"] == "realign")[0])
     assert not (row == 0 and truth["energy_reduction"][row] > 0.5), truth["energy_reduction"]
     assert truth["displacement_median_m"][row] < 0.02
+
+
+@pytest.mark.parametrize(
+    "offset, fitted_index, fitted_value",
+    [([0.3, 0, 0, 0, 0, 0], ("translation_m", 0), -0.3), ([0, 0, 0, 0, 0, np.radians(0.5)], ("rotation_deg", 2), -0.5)],
+    ids=["x 0.3 m", "yaw 0.5 deg"],
+)
+def test_a_registration_offset_is_mostly_rigid_and_realign_comes_first_on_the_default_grid(
+    intersection, offset, fitted_index, fitted_value
+):
+    """Issue 24 on the default 36 x 5 grid: most of the field energy is tagged rigid, realign is
+    the first stage-0 suggestion, its fit shown; on the truth it reduces nothing."""
+    import json
+
+    moved = offset_pair(intersection, pose_from_xyzrpy(offset))
+    assert _field(moved)["energy_share_rigid"] > 0.5
+    table = _stage0_suggestions(moved, {})
+    assert table["hypothesis"][0] == "realign" and table["energy_reduction"][0] > 0.95
+    key, index = fitted_index
+    assert json.loads(table["fitted"][0])[key][index] == pytest.approx(fitted_value, abs=0.01)
+    truth = _stage0_suggestions(intersection, {})
+    assert truth["energy_reduction"][int(np.flatnonzero(truth["hypothesis"] == "realign")[0])] < 0.05

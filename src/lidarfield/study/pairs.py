@@ -16,6 +16,7 @@ import numpy as np
 
 from ..errors import ConfigError, LidarfieldError
 from ..poses import pose_from_xyzrpy, poses_of_attached_frame
+from ..scan import still_sweep
 
 
 @dataclass(frozen=True)
@@ -134,12 +135,14 @@ def recorded_scan_spec(
     poses: dict | None = None,
     options: dict | None = None,
     stamp_s: float | None = None,
+    sweep_motion: dict | None = None,
 ) -> dict:
     """The spec of a recorded scan, as the ingest job reads it and stage ids hash it: the one
     place it is built, for a study's pairs and for ``lidarfield run`` (equal inputs, equal ids).
     ``poses`` ({topic, frame}) takes the scan's pose from a topic of its bag when it is read;
     ``options`` are the format reader's (a dataset's sweep: its frame and lidars); ``stamp_s``
-    the scan's time where its dataset gives it. Keys that are not given stay out of the spec."""
+    the scan's time where its dataset gives it, ``sweep_motion`` the motion its points carry
+    where the dataset says (none: de-skewed). Keys that are not given stay out of the spec."""
     spec = {"path": path, "format": format, "sensor": sensor, "pose": pose}
     if isinstance(poses, dict):
         spec["poses"] = poses
@@ -147,6 +150,8 @@ def recorded_scan_spec(
         spec["options"] = options
     if stamp_s is not None:
         spec["stamp_s"] = float(stamp_s)
+    if sweep_motion is not None:
+        spec["sweep_motion"] = sweep_motion
     return spec
 
 
@@ -284,7 +289,16 @@ def _dataset_sequence(name: str, entry: dict, base_dir: Path) -> list[ScanSpec]:
         ScanSpec(
             f"{name}-s{k:03d}",
             "recorded",
-            recorded_scan_spec(scan.path, scan.format, sensor, scan.pose, None, scan.options, scan.stamp_s),
+            recorded_scan_spec(
+                scan.path,
+                scan.format,
+                sensor,
+                scan.pose,
+                None,
+                scan.options,
+                scan.stamp_s,
+                still_sweep() if dataset.deskewed else None,
+            ),
         )
         for k, scan in enumerate(scans, start=first)
     ]

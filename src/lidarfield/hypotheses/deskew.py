@@ -25,7 +25,9 @@ one of them only):
 
 1. ``record``: the scan's own record of its motion during its sweep (``Scan.sweep_motion``,
    carried by the pair: the simulator writes it; zero for a scan taken still or without rolling
-   shutter, whose points then stay where they are);
+   shutter, whose points then stay where they are); else ``neighbours``: the constant velocity
+   between the poses of the scan's neighbours in its sequence, which a study puts in that
+   record's place for a dataset sequence with poses and stamps (``source: neighbours``);
 2. ``settings``: ``velocity_mps`` and ``angular_velocity_rps`` as given (the same for every
    chosen cloud without a record);
 3. ``pair``: the constant velocity between the pair's two scans, ``T_1_2`` over the difference
@@ -33,7 +35,7 @@ one of them only):
    in each scan's own frame. Right for consecutive scans of one drive; wrong when one of them
    was taken still (a record or the settings say so).
 
-Not used (yet): the poses of the scan's neighbours in a sequence and a bag's odometry twist.
+Not used (yet): a bag's odometry twist.
 Data already de-skewed (KITTI odometry, Argoverse 2 as datasets) records a still sweep on its
 scans, so ``deskew`` moves nothing there unless asked (``motion_source: settings``). A stage
 after ``deskew`` still carries the scans' records: do not de-skew the same cloud twice.
@@ -53,6 +55,7 @@ import numpy as np
 
 from ..errors import HypothesisError
 from ..pair import RegisteredPair
+from ..poses import constant_velocity
 from ..sensors.models import SensorModel
 from .outcome import Outcome
 from .params import doc
@@ -160,7 +163,7 @@ def sweep_motion(pair: RegisteredPair, cloud: int, params: Params) -> tuple[np.n
         return (
             np.asarray(record["velocity_mps"], dtype=np.float64),
             np.asarray(record["angular_velocity_rps"], dtype=np.float64),
-            "record",
+            record.get("source", "record"),
         )
     given = params.velocity_mps is not None or params.angular_velocity_rps is not None
     if wanted in ("auto", "settings") and given:
@@ -185,12 +188,8 @@ def sweep_motion(pair: RegisteredPair, cloud: int, params: Params) -> tuple[np.n
             + (", and " if len(reasons) > 1 else "")
             + reasons[-1]
         )
-    from scipy.spatial.transform import Rotation
-
-    dt = stamp2 - stamp1
+    v1, w1 = constant_velocity(pair.T_1_2, stamp2 - stamp1)  # frame 1 is sensor 1's at its reference time
     rotation = pair.T_1_2[:3, :3]
-    v1 = pair.T_1_2[:3, 3] / dt  # frame 1 is sensor 1's at its reference time
-    w1 = Rotation.from_matrix(rotation).as_rotvec() / dt
     if cloud == 1:
         return v1, w1, "pair"
     return rotation.T @ v1, rotation.T @ w1, "pair"

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import ConfigError, LidarfieldError
-from ..poses import pose_from_xyzrpy, poses_of_attached_frame
+from ..poses import pose_from_xyzrpy, poses_of_attached_frame, velocities_from_neighbours
 from ..scan import still_sweep
 
 
@@ -280,6 +280,7 @@ def _dataset_sequence(name: str, entry: dict, base_dir: Path) -> list[ScanSpec]:
     _sensor(sensor, key, base_dir)
     first, last = _first_last(name, entry, len(dataset.scans))
     scans = dataset.scans[first : last + 1]
+    motions = _sweep_motions(dataset)[first : last + 1]
     if _needs_poses(entry["register"]) and any(scan.pose is None for scan in scans):
         raise ConfigError(
             f"{key}: register {entry['register']!r} needs the scans' poses, and {dataset.what} has none; "
@@ -297,10 +298,31 @@ def _dataset_sequence(name: str, entry: dict, base_dir: Path) -> list[ScanSpec]:
                 None,
                 scan.options,
                 scan.stamp_s,
-                still_sweep() if dataset.deskewed else None,
+                motion,
             ),
         )
-        for k, scan in enumerate(scans, start=first)
+        for (k, scan), motion in zip(enumerate(scans, start=first), motions)
+    ]
+
+
+def _sweep_motions(dataset) -> list[dict | None]:
+    """Each scan's ``sweep_motion`` as the dataset tells it: still for de-skewed sweeps, else the
+    constant velocity between its neighbours' poses where the sequence has poses and stamps."""
+    if dataset.deskewed:
+        return [still_sweep() for _ in dataset.scans]
+    if any(scan.pose is None or scan.stamp_s is None for scan in dataset.scans):
+        return [None] * len(dataset.scans)
+    poses = [np.asarray(scan.pose, dtype=np.float64) for scan in dataset.scans]
+    velocities = velocities_from_neighbours([scan.stamp_s for scan in dataset.scans], poses)
+    return [
+        None
+        if velocity is None
+        else {
+            "velocity_mps": velocity[0].tolist(),
+            "angular_velocity_rps": velocity[1].tolist(),
+            "source": "neighbours",
+        }
+        for velocity in velocities
     ]
 
 

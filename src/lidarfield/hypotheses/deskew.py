@@ -32,8 +32,9 @@ one of them only):
    chosen cloud without a record);
 3. ``pair``: the constant velocity between the pair's two scans, ``T_1_2`` over the difference
    of their stamps (both scans must record ``stamp_s``, as a bag's scans and simulated ones do),
-   in each scan's own frame. Right for consecutive scans of one drive; wrong when one of them
-   was taken still (a record or the settings say so).
+   as a constant twist (``poses.constant_twist``): the same velocities in each scan's frame.
+   Right for consecutive scans of one drive; wrong when one of them was taken still (a record
+   or the settings say so).
 
 Not used (yet): a bag's odometry twist.
 Data already de-skewed (KITTI odometry, Argoverse 2 as datasets) records a still sweep on its
@@ -55,7 +56,7 @@ import numpy as np
 
 from ..errors import HypothesisError
 from ..pair import RegisteredPair
-from ..poses import constant_velocity
+from ..poses import constant_twist
 from ..sensors.models import SensorModel
 from .outcome import Outcome
 from .params import doc
@@ -188,11 +189,9 @@ def sweep_motion(pair: RegisteredPair, cloud: int, params: Params) -> tuple[np.n
             + (", and " if len(reasons) > 1 else "")
             + reasons[-1]
         )
-    v1, w1 = constant_velocity(pair.T_1_2, stamp2 - stamp1)  # frame 1 is sensor 1's at its reference time
-    rotation = pair.T_1_2[:3, :3]
-    if cloud == 1:
-        return v1, w1, "pair"
-    return rotation.T @ v1, rotation.T @ w1, "pair"
+    # A constant twist: the same velocities in each scan's own frame.
+    v, w = constant_twist(pair.T_1_2, stamp2 - stamp1)
+    return v, w, "pair"
 
 
 def _moved(local: np.ndarray, s: np.ndarray, v: np.ndarray, w: np.ndarray) -> np.ndarray:

@@ -26,7 +26,7 @@ from ..scan import Scan
 from ..sensors.models import SensorModel
 from .faults import checked_elevation_offsets, checked_range_fault
 from .scene import Scene
-from .trajectory import moved_pose
+from .trajectory import motion_record, moved_pose
 
 _REFERENCE_CHUNK = 4096  # rays per block of the numpy kernel: bounds its memory
 
@@ -140,6 +140,10 @@ def simulate_scan(
     ``range_scale * true_range + range_offset_m`` plus noise. Range limits and dropout act on
     the true range, so a range fault changes where the points are, not which rays return one.
     The faults applied are written in the scan's ``source``.
+
+    The scan records when and how it was taken: ``stamp_s`` = ``time_s`` and ``sweep_motion``,
+    the motion its points carry in the sensor frame at the sweep start (``motion_record``: the
+    velocities with ``rolling_shutter``, zero without, as the points are then instantaneous).
     """
     pose = np.asarray(pose, dtype=np.float64).reshape(4, 4)
     limit = _checked_max_range(sensor, max_range_m)
@@ -191,7 +195,9 @@ def simulate_scan(
         range_offset_m,
         elevation_offsets_deg,
     )
-    return Scan(xyz, {"ring": ring[keep], "time": time[keep]}, sensor, pose, source)
+    scan = Scan(xyz, {"ring": ring[keep], "time": time[keep]}, sensor, pose, source, stamp_s=float(time_s))
+    scan.sweep_motion = motion_record(pose, linear_velocity_mps, angular_velocity_rps, rolling_shutter)
+    return scan
 
 
 def _scene_hits(

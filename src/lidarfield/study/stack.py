@@ -99,6 +99,7 @@ def with_rows(pair: RegisteredPair) -> RegisteredPair:
         {**pair.attributes2, ROW: np.arange(len(pair.xyz2), dtype=np.int64)},
         pair.registration,
         pair.sensor_fit,
+        pair.sweeps,
         neighbours=pair.neighbours,
     )
 

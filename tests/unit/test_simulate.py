@@ -228,10 +228,10 @@ def test_each_point_is_labelled_with_the_moving_object_it_hit(rolling_shutter):
     point's own time), 0 everywhere else; the static scene is cast as before."""
     scene = load_scene("paper-intersection-traffic")
     numbers = {o.name: n for n, o in scene.labelled_objects()}
-    assert numbers == {"car-east": 6, "car-north": 7}
+    assert numbers == {"car-west": 10, "car-east": 11}
     scan = simulate_scan(scene, SENSOR, POSE2, time_s=0.1, rolling_shutter=rolling_shutter, seed=3)
     label, time, world = scan.attributes["object"], scan.attributes["time"], _world(scan)
-    assert label.dtype == np.int32 and set(np.unique(label)) == {0, 6, 7}
+    assert label.dtype == np.int32 and set(np.unique(label)) == {0, 10, 11}
     for number, obj in scene.labelled_objects():
         moved = time[:, None] * obj.velocity_mps if rolling_shutter else 0.0
         own = world - moved  # where the point is relative to the car at time_s

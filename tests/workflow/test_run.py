@@ -197,12 +197,19 @@ def test_run_writes_every_stage_and_prints_the_table(tmp_path, paper_scans, caps
     # What to try next on the paper's simulated pair, before any mitigation: field_of_view or
     # shadow (the adversities the paper builds this pair to show), far ahead of the rest.
     first = pd.read_parquet(out / "stages" / ids[0] / "suggestions.parquet")
-    removals = {"ego_vehicle", "field_of_view", "shadow", "crop", "outliers"}
+    removals = {"ego_vehicle", "field_of_view", "shadow", "crop", "outliers", "moving_objects"}
     # the corrections that apply (deskew needs a velocity, so it is skipped as a default)
     assert set(first["hypothesis"]) == removals | {"realign", "range_calibration"}
     assert first["hypothesis"][0] in ("field_of_view", "shadow") and first["energy_reduction"][0] > 0.5
     last = pd.read_parquet(out / "stages" / ids[-1] / "suggestions.parquet")
-    assert set(last["hypothesis"]) == {"ego_vehicle", "crop", "outliers", "realign", "range_calibration"}
+    assert set(last["hypothesis"]) == {
+        "ego_vehicle",
+        "crop",
+        "outliers",
+        "moving_objects",
+        "realign",
+        "range_calibration",
+    }
     assert (summary["n1"][1:].to_numpy() + summary["removed1"][1:].to_numpy() == summary["n1"][:-1].to_numpy()).all()
     assert all(
         (out / name).is_file() for name in ("scan1.parquet", "scan2.parquet", "registered.parquet", "summary.csv")

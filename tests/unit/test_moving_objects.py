@@ -1,0 +1,188 @@
+"""moving_objects: free-space evidence against its reference, occlusion, objects, and the
+simulated traffic counted from the simulator's object labels."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from lidarfield.errors import HypothesisError, NotApplicableError
+from lidarfield.hypotheses import apply_step, validate_step
+from lidarfield.hypotheses import moving_objects as mo
+from lidarfield.hypotheses.geometry import in_sensor_frame
+from lidarfield.pair import RegisteredPair
+from lidarfield.poses import pose_from_xyzrpy
+from lidarfield.registration.core import register_pair
+from lidarfield.sensors.models import PRESETS
+from lidarfield.simulation.raycast import simulate_scan
+from lidarfield.simulation.scene import Scene, SceneObject, load_scene, scene_from_dict
+from lidarfield.study.stack import next_stage
+
+SENSOR = PRESETS["paper-sim-80"]
+# Waiting in the south arm, 0.7 m apart, 0.1 s apart: both see the two cars cross in front.
+POSE1 = pose_from_xyzrpy([2, -9, 3, 0, 0, 1.5708])
+POSE2 = pose_from_xyzrpy([2.5, -8.5, 3, 0, 0, 1.62])
+
+
+def _pair(scene: Scene, sensor=SENSOR, pose1=POSE1, pose2=POSE2, time2_s: float = 0.1) -> RegisteredPair:
+    """Two scans with 2 cm range noise, registered by their true poses."""
+    scan1 = simulate_scan(scene, sensor, pose1, time_s=0.0, range_noise_m=0.02, seed=1)
+    scan2 = simulate_scan(scene, sensor, pose2, time_s=time2_s, range_noise_m=0.02, seed=2)
+    return register_pair(scan1, scan2, "truth")
+
+
+def _parked(scene: Scene) -> Scene:
+    return Scene(scene.name, tuple(SceneObject(o.name, o.mesh, np.zeros(3), o.frame) for o in scene.objects), "parked")
+
+
+@pytest.fixture(scope="module")
+def traffic():
+    return load_scene("paper-intersection-traffic")
+
+
+@pytest.fixture(scope="module")
+def traffic_pair(traffic):
+    return _pair(traffic)
+
+
+def _removed_by_label(pair: RegisteredPair, keep1: np.ndarray, keep2: np.ndarray) -> tuple[float, float]:
+    """(share of the moving objects' points removed, share of the static points removed), both clouds."""
+    label = np.concatenate([pair.attributes1["object"], pair.attributes2["object"]])
+    removed = ~np.concatenate([keep1, keep2])
+    return removed[label > 0].mean(), removed[label == 0].mean()
+
+
+def test_two_crossing_cars_are_removed_and_the_static_scene_is_kept(traffic, traffic_pair):
+    outcome = apply_step(traffic_pair, {"moving_objects": {}})
+    moving_removed, static_removed = _removed_by_label(traffic_pair, outcome.keep1, outcome.keep2)
+    assert moving_removed >= 0.90
+    assert static_removed <= 0.01
+    for cloud, keep in ((1, outcome.keep1), (2, outcome.keep2)):  # each car in each scan
+        label = getattr(traffic_pair, f"attributes{cloud}")["object"]
+        for number, _ in traffic.labelled_objects():
+            assert (label == number).sum() > 1000
+            assert (~keep[label == number]).mean() >= 0.9
+    # why each point went: the evidence on the cars, the rest of each car grown from it
+    reasons = np.concatenate([outcome.reason1[~outcome.keep1], outcome.reason2[~outcome.keep2]])
+    assert set(reasons) == {mo.EVIDENCE, mo.GROWN}
+    assert (outcome.reason1[outcome.keep1] == "").all()
+    label = np.concatenate([traffic_pair.attributes1["object"], traffic_pair.attributes2["object"]])
+    evidence = np.concatenate([outcome.reason1, outcome.reason2]) == mo.EVIDENCE
+    assert evidence.sum() > 100 and (label[evidence] > 0).all()
+
+
+def test_the_same_cars_parked_are_kept(traffic):
+    pair = _pair(_parked(traffic))
+    keep1, keep2 = apply_step(pair, {"moving_objects": {}})
+    assert (~np.concatenate([keep1, keep2])).mean() <= 0.01
+
+
+def test_the_static_paper_pair_loses_nothing():
+    pair = _pair(load_scene("paper-intersection"), pose1=pose_from_xyzrpy([0, 0, 3, 0, 0, 0]))
+    keep1, keep2 = apply_step(pair, {"moving_objects": {}})
+    assert keep1.all() and keep2.all()
+
+
+# A wall 15 m ahead and a pole 6 m ahead of sensor 2, which hides the wall behind it; sensor 1,
+# 4 m to the side, sees that part of the wall.
+POLE_SCENE = {
+    "objects": [
+        {"kind": "plane", "size": [60, 60]},
+        {"name": "wall", "kind": "box", "size": [0.5, 30, 6], "center": [15, 0, 3]},
+        {"name": "pole", "kind": "cylinder", "radius": 0.15, "height": 4, "center": [6, 0, 2]},
+    ]
+}
+SIDE, AHEAD = pose_from_xyzrpy([0, 4, 1.8, 0, 0, 0]), pose_from_xyzrpy([0, 0, 1.8, 0, 0, 0])
+
+
+def _behind_the_pole(pair: RegisteredPair) -> np.ndarray:
+    """Mask of cloud 1's wall points that sensor 2 sees the pole in front of: the ray from
+    sensor 2 to them passes within the pole's radius."""
+    local = in_sensor_frame(pair.xyz1, pair.T_1_2)  # sensor 2 at the origin, pole at (6, 0)
+    world_x = pair.xyz1[:, 0]  # frames 1 and 2 differ by a shift along y
+    at_pole = local[:, 1] * 6 / np.maximum(local[:, 0], 1e-9)
+    return (world_x > 14) & (np.abs(at_pole) < 0.15) & (local[:, 2] < 2.2)
+
+
+@pytest.mark.parametrize("sensor", ["paper-sim-80", "vlp16"])
+def test_a_wall_one_sensor_sees_behind_a_pole_the_other_sees_in_front_of_is_not_motion(sensor):
+    pair = _pair(scene_from_dict(POLE_SCENE), PRESETS[sensor], SIDE, AHEAD)
+    behind = _behind_the_pole(pair)
+    assert behind.sum() >= 10  # the case is there
+    outcome = apply_step(pair, {"moving_objects": {}})
+    assert outcome.keep1.all() and outcome.keep2.all()
+    evidence1, evidence2 = mo.pair_evidence(pair, mo.Params())
+    assert not evidence1[behind].any()
+    assert evidence1.mean() < 0.001 and evidence2.mean() < 0.001
+    # the control: the pole moves 0.5 m sideways between the scans, and is removed from both
+    moving = {"objects": [*POLE_SCENE["objects"][:2], {**POLE_SCENE["objects"][2], "velocity_mps": [0, 1, 0]}]}
+    pair = _pair(scene_from_dict(moving), PRESETS[sensor], SIDE, AHEAD, time2_s=0.5)
+    keep1, keep2 = apply_step(pair, {"moving_objects": {}})
+    for keep, attributes in ((keep1, pair.attributes1), (keep2, pair.attributes2)):
+        pole = attributes["object"] == 3
+        assert pole.sum() > 20 and (~keep[pole]).mean() >= 0.9 and keep[~pole].mean() >= 0.99
+
+
+def test_free_space_evidence_agrees_with_the_per_point_reference(traffic_pair):
+    rng = np.random.default_rng(0)
+    own1 = traffic_pair.xyz1  # scan 2's cars moved into where sensor 1 saw through
+    image = mo.range_image(own1, mo.resolution_rad(traffic_pair.sensor1, mo.Params(), 1), 1.0, (-0.384, 0.168))
+    points = traffic_pair.xyz2
+    cars = np.flatnonzero(traffic_pair.attributes2["object"] > 0)
+    chosen = np.concatenate([rng.choice(len(points), 300, replace=False), rng.choice(cars, 300, replace=False)])
+    # and points the other sensor cannot have seen: nearer than its minimum range, out of its view
+    extra = np.array([[0.5, 0.0, 0.0], [5.0, 0.0, 50.0], [0.0, 0.0, -5.0]])
+    sample = np.vstack([points[chosen], extra])
+    fast = mo.free_space_evidence(sample, image, mo.Params())
+    assert np.array_equal(fast, mo.free_space_evidence_loop(sample, own1, image, mo.Params()))
+    assert 20 < fast.sum() < len(chosen) / 2 and not fast[-3:].any()
+
+
+def test_connected_voxels_agrees_with_a_flood_fill():
+    rng = np.random.default_rng(1)
+    blobs = [rng.normal(centre, 0.4, (200, 3)) for centre in ([0, 0, 0], [1.5, 0, 0], [6, 0, 0], [0, 6, 1])]
+    xyz = np.vstack([*blobs, rng.uniform(-10, 10, (100, 3))])
+    (voxels,) = mo.voxel_grid([xyz], 0.3)
+    fast, plain = mo.connected_voxels(voxels), mo.connected_voxels_reference(voxels)
+    # the same partition: labels map one to one
+    pairs = np.unique(np.column_stack([fast, plain]), axis=0)
+    assert len(pairs) == len(np.unique(fast)) == len(np.unique(plain))
+    assert len(np.unique(fast)) > 10  # the scattered points are apart, the blobs not all one
+    assert fast[0] != fast[600]  # the blob 6 m away is its own object
+
+
+def test_the_ground_plane_is_fitted_under_standing_objects():
+    rng = np.random.default_rng(2)
+    xy = rng.uniform(-20, 20, (5000, 2))
+    ground = np.column_stack([xy, -1.7 + 0.02 * xy[:, 0] - 0.01 * xy[:, 1] + rng.normal(0, 0.02, 5000)])
+    box = rng.uniform([3, 3, -1.7], [5, 4, 0.0], (1500, 3))  # a car-sized object standing on it
+    box[:, 2] += 0.02 * box[:, 0] - 0.01 * box[:, 1]
+    xyz = np.vstack([ground, box])
+    height = mo.heights_above_ground(xyz)
+    assert np.abs(height[:5000]).max() < 0.1
+    standing = mo.off_ground(xyz, mo.voxel_grid([xyz], 0.3)[0], 0.3)
+    assert standing[5000:].all()  # the box's foot too
+    assert standing[:5000].mean() < 0.02  # only the ground at its foot
+
+
+def test_errors_name_what_is_missing(traffic_pair):
+    unregistered = RegisteredPair(traffic_pair.xyz1, traffic_pair.xyz2, registration={"method": "identity"})
+    with pytest.raises(NotApplicableError, match="registered by 'identity'"):
+        apply_step(unregistered, {"moving_objects": {}})
+    no_model = RegisteredPair(traffic_pair.xyz1, traffic_pair.xyz2, traffic_pair.T_1_2, None, traffic_pair.sensor2)
+    with pytest.raises(NotApplicableError, match="sensor 1 has no sensor model"):
+        apply_step(no_model, {"moving_objects": {}})
+    keep1, _ = apply_step(no_model, {"moving_objects": {"angular_resolution_deg": [0.2, 0.4]}})
+    assert not keep1.all()
+    for bad in ({"margin_m": -1}, {"voxel_m": 0}, {"min_evidence_share": 2}, {"angular_resolution_deg": [0, 1]}):
+        with pytest.raises(HypothesisError, match="moving_objects"):
+            validate_step({"moving_objects": bad})
+
+
+def test_the_removed_file_says_why_each_point_went(traffic_pair):
+    stage = next_stage(traffic_pair, {"moving_objects": {}}, 1)
+    columns = stage.removed_columns()
+    assert len(columns["reason"]) == stage.removed1 + stage.removed2 > 0
+    assert set(columns["reason"]) == {mo.EVIDENCE, mo.GROWN}
+    assert (columns["object"] > 0).mean() > 0.95
+    assert "reason" not in next_stage(traffic_pair, {"ego_vehicle": {}}, 1).removed_columns()

@@ -4,19 +4,23 @@ simulated traffic counted from the simulator's object labels."""
 from __future__ import annotations
 
 import numpy as np
+import pandas as pd
 import pytest
 
 from lidarfield.errors import HypothesisError, NotApplicableError
 from lidarfield.hypotheses import apply_step, validate_step
 from lidarfield.hypotheses import moving_objects as mo
 from lidarfield.hypotheses.geometry import in_sensor_frame
-from lidarfield.pair import RegisteredPair
+from lidarfield.io.parquet_table import read_table
+from lidarfield.pair import RegisteredPair, write_pair
 from lidarfield.poses import pose_from_xyzrpy
 from lidarfield.registration.core import register_pair
 from lidarfield.sensors.models import PRESETS
 from lidarfield.simulation.raycast import simulate_scan
 from lidarfield.simulation.scene import Scene, SceneObject, load_scene, scene_from_dict
+from lidarfield.study.jobs import field_stage, mitigate_stage
 from lidarfield.study.stack import next_stage
+from lidarfield.study.summary import write_summary
 
 SENSOR = PRESETS["paper-sim-80"]
 # Waiting in the south arm, 0.7 m apart, 0.1 s apart: both see the two cars cross in front.
@@ -186,3 +190,35 @@ def test_the_removed_file_says_why_each_point_went(traffic_pair):
     assert set(columns["reason"]) == {mo.EVIDENCE, mo.GROWN}
     assert (columns["object"] > 0).mean() > 0.95
     assert "reason" not in next_stage(traffic_pair, {"ego_vehicle": {}}, 1).removed_columns()
+
+
+def test_the_summary_scores_each_stage_against_the_labels(tmp_path, traffic_pair):
+    """Stage by stage, from the stage files: the share of the cars' points removed so far and of
+    the static points kept; ego_vehicle (3 m) removes no car point, moving_objects the cars."""
+    write_pair(tmp_path / "registered.parquet", traffic_pair)
+    grid = {"kind": "spherical", "azimuth_bins": 36, "elevation_deg": [-22.5, 15], "elevation_bins": 5}
+    previous, folders = tmp_path / "registered.parquet", []
+    for level, step in enumerate([None, {"ego_vehicle": {}}, {"moving_objects": {}}]):
+        folder = tmp_path / f"0{level}"
+        mitigate_stage(previous, step, f"0{level}-x", level, folder / "points.parquet", folder / "removed.parquet")
+        field_stage(
+            folder / "points.parquet",
+            folder / "removed.parquet",
+            grid,
+            "traffic",
+            folder / "f.parquet",
+            folder / "stats.json",
+        )
+        previous = folder / "points.parquet"
+        folders.append(folder)
+    write_summary([f / "stats.json" for f in folders], tmp_path / "summary.parquet", tmp_path / "summary.csv")
+    table = pd.read_parquet(tmp_path / "summary.parquet")
+    label = np.concatenate([traffic_pair.attributes1["object"], traffic_pair.attributes2["object"]])
+    assert list(table["moving_points"])[0] == np.count_nonzero(label > 0)
+    assert list(table["moving_removed_share"][:2]) == [0.0, 0.0]
+    # ego_vehicle took the static points within 3 m of each sensor; moving_objects keeps the rest
+    assert table["static_kept_share"][1] == table["static_points"][1] / np.count_nonzero(label == 0) < 0.9
+    assert table["moving_removed_share"][2] >= 0.9
+    assert table["static_kept_share"][2] >= 0.99 * table["static_kept_share"][1]
+    removed, _ = read_table(folders[2] / "removed.parquet", columns=("reason", "object"))
+    assert set(removed["reason"]) == {mo.EVIDENCE, mo.GROWN} and (removed["object"] > 0).mean() > 0.9

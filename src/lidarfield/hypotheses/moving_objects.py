@@ -44,6 +44,7 @@ EVIDENCE, GROWN = "evidence", "grown"  # the removed file's reasons
 # guess is the densest 0.25 m layer of the lower half of the cloud.
 _GROUND_BANDS_M = (1.0, 0.5, 0.25)
 _LAYER_M = 0.25
+_GROUND_SAMPLE = 100_000
 
 
 @dataclass(frozen=True)
@@ -137,8 +138,9 @@ class RangeImage:
 
     def cells(self, xyz: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(row, column, in view) of points given in the sensor's frame; row 0 for those out of view."""
-        row, column = _cells(xyz, self.azimuth_step, self.elevation_step, self.elevation_start, self.nearest.shape)
-        _, elevation = _directions(xyz)
+        row, column, elevation = _cells(
+            xyz, self.azimuth_step, self.elevation_step, self.elevation_start, self.nearest.shape
+        )
         lo, hi = self.elevation_limits
         inside = (elevation >= lo) & (elevation <= hi) & (row >= 0) & (row < self.nearest.shape[0])
         return np.where(inside, row, 0), column, inside
@@ -173,10 +175,10 @@ def _directions(xyz: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _cells(xyz: np.ndarray, azimuth_step: float, elevation_step: float, elevation_start: float, shape):
-    """(row, column) of points on a range image's grid; rows may fall outside it."""
+    """(row, column, elevation) of points on a range image's grid; rows may fall outside it."""
     azimuth, elevation = _directions(xyz)
     column = np.floor((azimuth + math.pi + azimuth_step / 2) / azimuth_step).astype(np.int64) % shape[1]
-    return np.floor((elevation - elevation_start) / elevation_step).astype(np.int64), column
+    return np.floor((elevation - elevation_start) / elevation_step).astype(np.int64), column, elevation
 
 
 def range_image(
@@ -195,7 +197,7 @@ def range_image(
     lo, hi = elevation_limits_rad
     step = resolution_rad[1]
     shape = (int((hi - lo) // step) + 2, columns)  # beams in the middle of rows, from half a row below the lowest
-    row, column = _cells(xyz, 2 * math.pi / columns, step, lo - step / 2, shape)
+    row, column, _ = _cells(xyz, 2 * math.pi / columns, step, lo - step / 2, shape)
     nearest = np.full(shape, np.inf)
     np.minimum.at(nearest, (np.clip(row, 0, shape[0] - 1), column), ranges(xyz))
     return RangeImage(2 * math.pi / columns, step, lo - step / 2, (lo, hi), nearest, min_range_m)
@@ -220,10 +222,11 @@ def free_space_evidence(xyz: np.ndarray, image: RangeImage, params: Params) -> n
     margin, across = margins(r[seen], params)
     rows, columns = image.windows(across / r[seen])
     evidence = np.zeros(len(xyz), dtype=bool)
-    sizes, which = np.unique(np.column_stack([rows, columns]), axis=0, return_inverse=True)
-    for index, (k_rows, k_columns) in enumerate(sizes):
-        at = np.flatnonzero(which.ravel() == index)
-        nearest = image.around(int(k_rows), int(k_columns))[row[seen[at]], column[seen[at]]]
+    span = int(columns.max(initial=0)) + 1
+    sizes, which = np.unique(rows * span + columns, return_inverse=True)  # the distinct windows
+    for index, size in enumerate(sizes):
+        at = np.flatnonzero(which == index)
+        nearest = image.around(int(size // span), int(size % span))[row[seen[at]], column[seen[at]]]
         evidence[seen[at]] = r[seen[at]] < nearest - margin[at]
     return evidence
 
@@ -233,7 +236,7 @@ def free_space_evidence_loop(xyz: np.ndarray, other: np.ndarray, image: RangeIma
     ``other`` (the cloud ``image`` was made of, in its sensor's frame), on the same cells and
     windows."""
     rows, columns = image.nearest.shape
-    other_row, other_column = _cells(
+    other_row, other_column, _ = _cells(
         other, image.azimuth_step, image.elevation_step, image.elevation_start, (rows, columns)
     )
     other_row = np.clip(other_row, 0, rows - 1)
@@ -256,22 +259,23 @@ def free_space_evidence_loop(xyz: np.ndarray, other: np.ndarray, image: RangeIma
 def heights_above_ground(xyz: np.ndarray) -> np.ndarray:
     """Each point's height above a plane ``z = a x + b y + c`` fitted by least squares to the
     ground: first the densest 0.25 m layer of the lower half of the cloud, then the points within
-    1, 0.5 and 0.25 m of the plane so far."""
-    z = xyz[:, 2]
-    if len(z) < 3:
-        return np.full(len(z), np.inf)
+    1, 0.5 and 0.25 m of the plane so far; fitted on every k-th point of a large cloud (at most
+    ``_GROUND_SAMPLE``: a plane has three parameters)."""
+    if len(xyz) < 3:
+        return np.full(len(xyz), np.inf)
+    sample = xyz[:: max(1, len(xyz) // _GROUND_SAMPLE)]
+    z = sample[:, 2]
     lower = z[z <= np.median(z)]
     edges = np.arange(lower.min(), lower.max() + 2 * _LAYER_M, _LAYER_M)
     counts, _ = np.histogram(lower, edges)
-    height = z - (edges[np.argmax(counts)] + _LAYER_M / 2)
-    design = np.column_stack([xyz[:, 0], xyz[:, 1], np.ones(len(z))])
+    plane = np.array([0.0, 0.0, edges[np.argmax(counts)] + _LAYER_M / 2])
+    design = np.column_stack([sample[:, 0], sample[:, 1], np.ones(len(z))])
     for band in _GROUND_BANDS_M:
-        near = np.abs(height) < band
+        near = np.abs(z - design @ plane) < band
         if np.count_nonzero(near) < 3:
             break
         plane, *_ = np.linalg.lstsq(design[near], z[near], rcond=None)
-        height = z - design @ plane
-    return height
+    return xyz[:, 2] - (xyz[:, 0] * plane[0] + xyz[:, 1] * plane[1] + plane[2])
 
 
 def voxel_grid(clouds: list[np.ndarray], voxel_m: float) -> list[np.ndarray]:
@@ -452,5 +456,5 @@ def moving_objects(pair: RegisteredPair, params: Params) -> Outcome:
             removed_keys = np.unique(keys[other][evidenced[other]])
             removed |= overlapping_objects(objects[k], keys[k], removed_keys, params.min_overlap_share)
         keeps.append(~removed)
-        reasons.append(np.where(removed, np.where(evidence[k], EVIDENCE, GROWN), "").astype(object))
+        reasons.append(np.where(removed, np.where(evidence[k], EVIDENCE, GROWN), ""))
     return Outcome(keeps[0], keeps[1], reason1=reasons[0], reason2=reasons[1])

@@ -125,10 +125,13 @@ def _checked_reasons(reasons, n: int, name: str, fail) -> np.ndarray | None:
     """One string per point of a cloud (None: no reasons given), else ``fail`` says what is wrong."""
     if reasons is None:
         return None
-    values = np.asarray(reasons, dtype=object)
-    if values.shape != (n,) or not all(isinstance(v, str) for v in values.tolist()):
-        fail(f"{name} must be {n} strings, one per point of the cloud; got shape {values.shape}")
-    return values
+    values = np.asarray(reasons)
+    strings = values.dtype.kind == "U" or (
+        values.dtype.kind == "O" and all(isinstance(v, str) for v in values.ravel().tolist())
+    )
+    if values.shape != (n,) or not strings:
+        fail(f"{name} must be {n} strings, one per point of the cloud; got shape {values.shape}, dtype {values.dtype}")
+    return values.astype(str)
 
 
 def reasons_of_removed(outcome: Outcome) -> np.ndarray | None:
@@ -139,7 +142,7 @@ def reasons_of_removed(outcome: Outcome) -> np.ndarray | None:
     parts = []
     for keep, reasons in ((outcome.keep1, outcome.reason1), (outcome.keep2, outcome.reason2)):
         removed = np.count_nonzero(~keep)
-        parts.append(np.full(removed, "", dtype=object) if reasons is None else reasons[~keep])
+        parts.append(np.full(removed, "") if reasons is None else reasons[~keep])
     return np.concatenate(parts)
 
 

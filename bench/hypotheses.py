@@ -29,11 +29,11 @@ from lidarfield.hypotheses.field_of_view import field_of_view
 from lidarfield.hypotheses.geometry import in_sensor_frame, ranges
 from lidarfield.hypotheses.shadow import first_cluster_keep, first_cluster_keep_loop, shadow
 from lidarfield.pair import RegisteredPair
+from lidarfield.poses import pose_from_xyzrpy
 from lidarfield.registration.core import register_pair
+from lidarfield.sensors.models import PRESETS
 from lidarfield.simulation.raycast import simulate_scan
 from lidarfield.simulation.scene import load_scene
-from lidarfield.poses import pose_from_xyzrpy
-from lidarfield.sensors.models import PRESETS
 from timing import best_time, machine  # bench/timing.py
 
 

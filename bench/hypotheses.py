@@ -124,7 +124,7 @@ def bench_moving_objects(pair: RegisteredPair) -> None:
     params = mo.Params()
     t_fast, (keep1, keep2) = best_time(lambda: tuple(apply_step(pair, {"moving_objects": {}})))
     images = [
-        mo.range_image(xyz, mo.resolution_rad(model, params, k), *mo._view(model))
+        mo.range_image(xyz, mo.resolution_rad(model, params, k), *mo.sensor_view(model))
         for k, (xyz, model) in enumerate(
             ((pair.xyz1, pair.sensor1), (in_sensor_frame(pair.xyz2, pair.T_1_2), pair.sensor2)), 1
         )

@@ -3,6 +3,8 @@ simulated traffic counted from the simulator's object labels."""
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pandas as pd
 import pytest
@@ -11,6 +13,7 @@ from lidarfield.errors import HypothesisError, NotApplicableError
 from lidarfield.hypotheses import apply_step, validate_step
 from lidarfield.hypotheses import moving_objects as mo
 from lidarfield.hypotheses.geometry import in_sensor_frame
+from lidarfield.hypotheses.params import params_to_dict
 from lidarfield.io.parquet_table import read_table
 from lidarfield.pair import RegisteredPair, write_pair
 from lidarfield.poses import pose_from_xyzrpy
@@ -18,10 +21,12 @@ from lidarfield.registration.core import register_pair
 from lidarfield.sensors.models import PRESETS
 from lidarfield.simulation.raycast import simulate_scan
 from lidarfield.simulation.scene import Scene, SceneObject, load_scene, scene_from_dict
+from lidarfield.study.config import load_config
 from lidarfield.study.jobs import field_stage, mitigate_stage
 from lidarfield.study.stack import next_stage
 from lidarfield.study.summary import write_summary
 
+ROOT = Path(__file__).resolve().parents[2]
 SENSOR = PRESETS["paper-sim-80"]
 # Waiting in the south arm, 0.7 m apart, 0.1 s apart: both see the two cars cross in front.
 POSE1 = pose_from_xyzrpy([2, -9, 3, 0, 0, 1.5708])
@@ -222,3 +227,12 @@ def test_the_summary_scores_each_stage_against_the_labels(tmp_path, traffic_pair
     assert table["static_kept_share"][2] >= 0.99 * table["static_kept_share"][1]
     removed, _ = read_table(folders[2] / "removed.parquet", columns=("reason", "object"))
     assert set(removed["reason"]) == {mo.EVIDENCE, mo.GROWN} and (removed["object"] > 0).mean() > 0.9
+
+
+def test_the_traffic_example_config_is_this_pair():
+    study = load_config(ROOT / "config" / "traffic.yaml", base_dir=ROOT)
+    pair = study.pairs["traffic"]
+    for scan, pose, time_s in ((pair.scan1, POSE1, 0.0), (pair.scan2, POSE2, 0.1)):
+        assert np.allclose(scan.spec["pose"], pose, atol=1e-12) and scan.spec["time_s"] == time_s
+        assert scan.spec["scene"] == "paper-intersection-traffic" and scan.spec["range_noise_m"] == 0.02
+    assert study.hypotheses == [{"moving_objects": params_to_dict(mo.Params())}]

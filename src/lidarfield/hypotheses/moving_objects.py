@@ -398,7 +398,7 @@ def resolution_rad(model: SensorModel | None, params: Params, sensor: int) -> tu
     return math.radians(model.azimuth_resolution_deg), math.radians(gap)
 
 
-def _view(model: SensorModel | None) -> tuple[float, tuple[float, float] | None]:
+def sensor_view(model: SensorModel | None) -> tuple[float, tuple[float, float] | None]:
     """A sensor's minimum range and elevation limits (rad) from its model (none known: 0 and None)."""
     if model is None:
         return 0.0, None
@@ -421,7 +421,7 @@ def pair_evidence(pair: RegisteredPair, params: Params) -> tuple[np.ndarray, np.
     own = (pair.xyz1, in_sensor_frame(pair.xyz2, pair.T_1_2))
     models = (pair.sensor1, pair.sensor2)
     images = [
-        range_image(xyz, resolution_rad(model, params, sensor), *_view(model))
+        range_image(xyz, resolution_rad(model, params, sensor), *sensor_view(model))
         for sensor, (xyz, model) in enumerate(zip(own, models), 1)
     ]
     return (

@@ -122,7 +122,7 @@ def bench_moving_objects(pair: RegisteredPair) -> None:
     import moving_cars  # the example plugin
 
     params = mo.Params()
-    t_fast, (keep1, keep2) = best_time(lambda: tuple(apply_step(pair, {"moving_objects": {}})))
+    t_fast = best_time(lambda: apply_step(pair, {"moving_objects": {}}))[0]
     images = [
         mo.range_image(xyz, mo.resolution_rad(model, params, k), *mo.sensor_view(model))
         for k, (xyz, model) in enumerate(
@@ -134,10 +134,11 @@ def bench_moving_objects(pair: RegisteredPair) -> None:
     mo.free_space_evidence_loop(pair.xyz2[sample], pair.xyz1, images[0], params)
     t_loop = (time.perf_counter() - start) / 1000 * (len(pair.xyz1) + len(pair.xyz2))
     t_plugin = best_time(lambda: moving_cars.remove(pair, {}), 1)[0]
-    removed = int((~keep1).sum() + (~keep2).sum())
+    # (what it removes here means nothing: each street cloud is drawn about its own sensor, so
+    # the two do not show one scene)
     print(
         f"moving_objects  {t_fast:7.3f} s   loop reference {t_loop:7.0f} s (scaled from 1,000 points)   speed-up "
-        f"{t_loop / t_fast:6.0f}x   plugin moving_cars {t_plugin:6.3f} s   removed {removed:,}"
+        f"{t_loop / t_fast:6.0f}x   plugin moving_cars {t_plugin:6.3f} s"
     )
 
     scene, sensor = load_scene("paper-intersection-traffic"), PRESETS["paper-sim-80"]

@@ -13,6 +13,7 @@ from lidarfield.errors import HypothesisError, NotApplicableError
 from lidarfield.hypotheses import apply_step, validate_step
 from lidarfield.hypotheses import moving_objects as mo
 from lidarfield.hypotheses.geometry import in_sensor_frame
+from lidarfield.hypotheses.outcome import checked_outcome, reasons_of_removed
 from lidarfield.hypotheses.params import params_to_dict
 from lidarfield.io.parquet_table import read_table
 from lidarfield.pair import RegisteredPair, write_pair
@@ -236,3 +237,13 @@ def test_the_traffic_example_config_is_this_pair():
         assert np.allclose(scan.spec["pose"], pose, atol=1e-12) and scan.spec["time_s"] == time_s
         assert scan.spec["scene"] == "paper-intersection-traffic" and scan.spec["range_noise_m"] == 0.02
     assert study.hypotheses == [{"moving_objects": params_to_dict(mo.Params())}]
+
+
+def test_a_hypothesis_says_why_with_one_string_per_point(traffic_pair):
+    n1, n2 = len(traffic_pair.xyz1), len(traffic_pair.xyz2)
+    keep1, keep2 = np.ones(n1, bool), np.arange(n2) % 2 == 0
+    outcome = checked_outcome({"keep2": keep2, "reason2": np.full(n2, "odd")}, (n1, n2), "h")
+    assert list(reasons_of_removed(outcome)) == ["odd"] * int((~keep2).sum())
+    assert reasons_of_removed(checked_outcome((keep1, keep2), (n1, n2), "h")) is None
+    with pytest.raises(HypothesisError, match=f"reason1 must be {n1} strings"):
+        checked_outcome({"keep1": keep1, "reason1": np.zeros(n1)}, (n1, n2), "h")

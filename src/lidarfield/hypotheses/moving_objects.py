@@ -1,27 +1,29 @@
 """``moving_objects``: remove the objects that moved between the two scans, seen from free space.
 
 With both sensor origins known (``T_1_2``), a point of one cloud is *evidence* of motion when it
-lies where the other sensor's ray in its direction passed through: its range from the other
-sensor is shorter than what that sensor measured in its direction, by more than
-``margin_m + range x tan(beam_width_deg)``. What the other sensor measured in a direction is the
-nearest range of its returns in that direction's cell of an azimuth x elevation grid (its
-angular resolution) and the 8 cells around it, so that an edge which one beam passes and the
-next one hits is not free space. Directions the other sensor did not see give no evidence
-either way: a cell without a return (no return, outside its field of view), a point nearer than
-its minimum range, and a point behind what it measured (occluded).
+lies where the other sensor's rays passed through: in the other sensor's frame, it is nearer
+than every return of that sensor around its direction by more than the margin along the ray
+(``margin_m + range x tan(beam_width_deg)``), "around" being the cells of that sensor's range
+image (its angular resolution) within the margin across the ray (``margin_across_m + range x
+tan(beam_width_deg)``), and at least the beams on either side: an edge that one beam passes
+and the next one hits is not free space. Directions the other sensor did not see give no
+evidence either way: no return in the point's cell, a point outside its elevation limits or
+nearer than its minimum range, and a point behind what it measured (occluded).
 
 A moving object gives such evidence only on its leading and trailing parts, so evidence grows
 to objects: each cloud's points higher than ``ground_height_m`` above a plane fitted to its
 ground (and the lower ones in the same ``voxel_m`` column as such a point less than twice that
 high: an object's foot) are split into objects, the connected components of their occupied
-voxels (``voxel_m``, 26 neighbours); an object is removed whole when at least ``min_evidence_points`` and
-``min_evidence_share`` of its points are evidence. Ground points are never removed. The removed
-file's ``reason`` column says why each point went: ``evidence``, or ``grown`` (the rest of an
-object removed).
+voxels (``voxel_m``, 26 neighbours). An object is removed whole when at least
+``min_evidence_points`` and ``min_evidence_share`` of its points are evidence, and with it
+every object of the other cloud that shares at least ``min_overlap_share`` of its voxels (the
+same object before or after it moved). Ground points are never removed. The removed file's
+``reason`` column says why each point went: ``evidence``, or ``grown`` (the rest of a removed
+object).
 
-:func:`free_space_evidence` is the vectorised kernel (one range image per sensor, a 3 x 3
-minimum filter); :func:`free_space_evidence_loop` is the plain per-point reference it is tested
-against; likewise :func:`connected_voxels` and :func:`connected_voxels_reference`.
+:func:`free_space_evidence` is the vectorised kernel (one range image per sensor, a minimum
+filter per window size); :func:`free_space_evidence_loop` is the plain per-point reference it
+is tested against; likewise :func:`connected_voxels` and :func:`connected_voxels_reference`.
 """
 
 from __future__ import annotations

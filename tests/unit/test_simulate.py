@@ -257,7 +257,7 @@ def test_a_carried_body_is_labelled_with_its_place_in_the_scene():
     lo, hi = np.array([-5.3, -1.1, -2.8]) - 1e-6, np.array([-0.3, 1.1, 0.4]) + 1e-6
     on_body = np.all((scan.xyz >= lo) & (scan.xyz <= hi), axis=1)
     assert on_body.sum() > 10_000
-    assert np.array_equal(scan.attributes["object"], np.where(on_body, len(truck.objects), 0))
+    assert np.array_equal(scan.attributes["object"], np.where(on_body, -len(truck.objects), 0))  # carried: < 0
 
 
 def test_paper_pair_by_true_pose_agrees_on_the_building_faces(paper, scan1):

@@ -123,8 +123,9 @@ def simulate_scan(
     Points are in the sensor frame, ordered by firing (azimuth step, then channel), with
     attributes ``ring`` (index into ``sensor.elevation_deg``), ``time`` (seconds from the
     sweep start; the nominal firing time, also without rolling shutter) and ``object`` (the
-    label of the object hit: its 1-based place in ``scene.objects`` for an object that moves,
-    in the world or with the sensor; 0 for the static scene). Misses, and hits
+    label of the object hit, ``Scene.labelled_objects``: its 1-based place in ``scene.objects``
+    for an object that moves in the world, minus that for one the sensor carries, 0 for the
+    static scene). Misses, and hits
     nearer than the model's minimum or farther than its (or ``max_range_m``'s, if smaller)
     maximum range give no point. Objects with a velocity are where they are at ``time_s``.
 

@@ -79,7 +79,8 @@ LABEL = "object"
 
 def label_counts(pair: RegisteredPair) -> dict:
     """``moving_points`` and ``static_points``: a stage's survivors (both clouds) on a moving
-    object (label > 0) and on the static scene (label 0); {} when the points have no labels."""
+    object (label > 0) and on the static scene (label 0; the sensor's own vehicle, < 0, is neither);
+    {} when the points have no labels."""
     if LABEL not in pair.attributes1 and LABEL not in pair.attributes2:
         return {}
     labels = [

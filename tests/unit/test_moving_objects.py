@@ -81,6 +81,25 @@ def test_two_crossing_cars_are_removed_and_the_static_scene_is_kept(traffic, tra
     assert evidence.sum() > 100 and (label[evidence] > 0).all()
 
 
+def test_a_registration_off_by_less_than_the_margin_keeps_the_static_scene(traffic_pair):
+    """Sensor 2 placed 0.1 m off (its cloud with it): surfaces move by less than the 0.2 m
+    margin, so they show no free space; the cars still do."""
+    T = traffic_pair.T_1_2.copy()
+    T[:3, 3] += [0.1, 0.0, 0.0]
+    off = RegisteredPair(
+        traffic_pair.xyz1,
+        traffic_pair.xyz2 + [0.1, 0.0, 0.0],
+        T,
+        traffic_pair.sensor1,
+        traffic_pair.sensor2,
+        traffic_pair.attributes1,
+        traffic_pair.attributes2,
+    )
+    keep1, keep2 = apply_step(off, {"moving_objects": {}})
+    moving_removed, static_removed = _removed_by_label(off, keep1, keep2)
+    assert moving_removed >= 0.9 and static_removed <= 0.01
+
+
 def test_the_same_cars_parked_are_kept(traffic):
     pair = _pair(_parked(traffic))
     keep1, keep2 = apply_step(pair, {"moving_objects": {}})

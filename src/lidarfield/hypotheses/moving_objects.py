@@ -1,14 +1,15 @@
 """``moving_objects``: remove the objects that moved between the two scans, seen from free space.
 
 With both sensor origins known (``T_1_2``), a point of one cloud is *evidence* of motion when it
-lies where the other sensor's rays passed through: in the other sensor's frame, it is nearer
-than every return of that sensor around its direction by more than the margin along the ray
-(``margin_m + range x tan(beam_width_deg)``), "around" being the cells of that sensor's range
-image (its angular resolution) within the margin across the ray (``margin_across_m + range x
-tan(beam_width_deg)``), and at least the beams on either side: an edge that one beam passes
-and the next one hits is not free space. Directions the other sensor did not see give no
-evidence either way: no return in the point's cell, a point outside its elevation limits or
-nearer than its minimum range, and a point behind what it measured (occluded).
+lies where the other sensor's rays passed through, with a ball of free space around it: in the
+other sensor's frame, it is nearer than every return of that sensor around its direction by
+more than the margin m = ``margin_m + range x tan(beam_width_deg)``, "around" being the cells
+of that sensor's range image (its angular resolution) within m across the ray, and at least
+the beams on either side. So an edge that one beam passes and the next one hits is not free
+space, nor is a surface that the registration's error moved by less than m. Directions the
+other sensor did not see give no evidence either way: no return in the point's cell, a point
+outside its elevation limits or nearer than its minimum range, and a point behind what it
+measured (occluded).
 
 A moving object gives such evidence only on its leading and trailing parts, so evidence grows
 to objects: each cloud's points higher than ``ground_height_m`` above a plane fitted to its
@@ -61,19 +62,12 @@ class Params:
     margin_m: float = field(
         default=0.2,
         metadata=doc(
-            "along the ray: a point is evidence when nearer than every return of the other sensor around its "
-            "direction by more than this (plus the beam term)"
-        ),
-    )
-    margin_across_m: float = field(
-        default=0.05,
-        metadata=doc(
-            "across the ray: the returns compared are those within this distance (plus the beam term) of the "
-            "point's direction, and at least the beams on either side"
+            "a point is evidence when nearer by more than this margin (plus the beam term) than every return of the "
+            "other sensor within the margin across the ray from its direction: a ball of free space around it"
         ),
     )
     beam_width_deg: float = field(
-        default=0.2, metadata=doc("the beam's width: both margins grow by range x tan(beam_width_deg)")
+        default=0.2, metadata=doc("the beam's width: the margin grows by range x tan(beam_width_deg)")
     )
     ground_height_m: float | None = field(
         default=0.3,
@@ -88,7 +82,7 @@ class Params:
     min_evidence_points: int = field(
         default=10, metadata=doc("an object is removed when at least this many of its points are evidence ...")
     )
-    min_evidence_share: float = field(default=0.005, metadata=doc("... and at least this share of its points"))
+    min_evidence_share: float = field(default=0.02, metadata=doc("... and at least this share of its points"))
     min_overlap_share: float | None = field(
         default=0.5,
         metadata=doc(
@@ -100,10 +94,9 @@ class Params:
     def __post_init__(self):
         if self.angular_resolution_deg is not None and not all(0 < v <= 90 for v in self.angular_resolution_deg):
             raise ValueError(f"angular_resolution_deg must be in (0, 90], got {list(self.angular_resolution_deg)}")
-        if not (self.margin_m >= 0 and self.margin_across_m >= 0 and 0 <= self.beam_width_deg < 90):
+        if not (self.margin_m >= 0 and 0 <= self.beam_width_deg < 90):
             raise ValueError(
-                "margin_m and margin_across_m must be >= 0 and beam_width_deg in [0, 90); got "
-                f"{self.margin_m}, {self.margin_across_m}, {self.beam_width_deg}"
+                f"margin_m must be >= 0 and beam_width_deg in [0, 90); got {self.margin_m}, {self.beam_width_deg}"
             )
         if self.ground_height_m is not None and not self.ground_height_m > 0:
             raise ValueError(f"ground_height_m must be > 0 (or null), got {self.ground_height_m}")
@@ -118,7 +111,7 @@ class Params:
             )
 
 
-# The across-ray margin is rounded up to a step of this ratio, so that few windows are filtered.
+# The margin across the ray is rounded up to a step of this ratio, so that few windows are filtered.
 _WINDOW_RATIO = 1.25
 
 
@@ -205,24 +198,23 @@ def range_image(
     return RangeImage(2 * math.pi / columns, step, lo - step / 2, (lo, hi), nearest, min_range_m)
 
 
-def margins(r: np.ndarray, params: Params) -> tuple[np.ndarray, np.ndarray]:
+def margins(r: np.ndarray, params: Params) -> np.ndarray:
     """How far (m) a point at range ``r`` must be inside the other sensor's free space, along
-    the ray and across it: each margin plus range x tan(beam width)."""
-    beam = r * math.tan(math.radians(params.beam_width_deg))
-    return params.margin_m + beam, params.margin_across_m + beam
+    the ray and across it: the margin plus range x tan(beam width)."""
+    return params.margin_m + r * math.tan(math.radians(params.beam_width_deg))
 
 
 def free_space_evidence(xyz: np.ndarray, image: RangeImage, params: Params) -> np.ndarray:
     """Mask of the points (given in the frame of the sensor of ``image``) that lie where its
     rays passed through: in its view (elevation limits, beyond its minimum range), with a
-    return in their cell, and nearer by more than the margin along the ray than every return
-    in the window of cells that covers the margin across the ray (an angle of margin / range)
-    on each side."""
+    return in their cell, and nearer by more than the margin than every return in the window
+    of cells that covers the margin across the ray too (an angle of margin / range on each
+    side)."""
     r = ranges(xyz)
     row, column, inside = image.cells(xyz)
     seen = np.flatnonzero(inside & np.isfinite(image.nearest[row, column]) & (r >= image.min_range_m) & (r > 0))
-    margin, across = margins(r[seen], params)
-    rows, columns = image.windows(across / r[seen])
+    margin = margins(r[seen], params)
+    rows, columns = image.windows(margin / r[seen])
     evidence = np.zeros(len(xyz), dtype=bool)
     span = int(columns.max(initial=0)) + 1
     sizes, which = np.unique(rows * span + columns, return_inverse=True)  # the distinct windows
@@ -249,9 +241,8 @@ def free_space_evidence_loop(xyz: np.ndarray, other: np.ndarray, image: RangeIma
         r = float(np.linalg.norm(p))
         if not ok or r < image.min_range_m or r == 0 or not ((other_row == a) & (other_column == b)).any():
             continue
-        beam = r * math.tan(math.radians(params.beam_width_deg))
-        margin, across = params.margin_m + beam, params.margin_across_m + beam
-        k_rows, k_columns = (int(k[0]) for k in image.windows(np.array([across / r])))
+        margin = params.margin_m + r * math.tan(math.radians(params.beam_width_deg))
+        k_rows, k_columns = (int(k[0]) for k in image.windows(np.array([margin / r])))
         gap = (other_column - b) % columns
         near = (np.abs(other_row - a) <= k_rows) & ((gap <= k_columns) | (gap >= columns - k_columns))
         out[i] = r < other_r[near].min() - margin

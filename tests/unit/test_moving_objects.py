@@ -19,6 +19,7 @@ from lidarfield.io.parquet_table import read_table
 from lidarfield.pair import RegisteredPair, write_pair
 from lidarfield.poses import pose_from_xyzrpy
 from lidarfield.registration.core import register_pair
+from lidarfield.report.pair_page import stages_table
 from lidarfield.sensors.models import PRESETS
 from lidarfield.simulation.raycast import simulate_scan
 from lidarfield.simulation.scene import Scene, SceneObject, load_scene, scene_from_dict
@@ -245,6 +246,10 @@ def test_the_summary_scores_each_stage_against_the_labels(tmp_path, traffic_pair
     assert table["static_kept_share"][1] == table["static_points"][1] / np.count_nonzero(label == 0) < 0.9
     assert table["moving_removed_share"][2] >= 0.9
     assert table["static_kept_share"][2] >= 0.99 * table["static_kept_share"][1]
+    page = stages_table(table.to_dict("records"))  # the pair page's stage table shows the scores
+    assert "moving_<wbr>removed_<wbr>share" in page and "static_<wbr>kept_<wbr>share" in page
+    unlabelled = table.drop(columns=["moving_removed_share", "static_kept_share"]).to_dict("records")
+    assert "moving_<wbr>removed" not in stages_table(unlabelled)
     removed, _ = read_table(folders[2] / "removed.parquet", columns=("reason", "object"))
     assert set(removed["reason"]) == {mo.EVIDENCE, mo.GROWN} and (removed["object"] > 0).mean() > 0.9
 

@@ -75,6 +75,7 @@ def summary_row(pair_name: str, pair: RegisteredPair, meta: dict, removed_cloud:
 
 # Where a pair's points carry the simulator's ``object`` labels (0: the static scene).
 LABEL = "object"
+LABEL_SCORES = ("moving_removed_share", "static_kept_share")  # against the pair's stage 0
 
 
 def label_counts(pair: RegisteredPair) -> dict:
@@ -101,8 +102,8 @@ def with_label_scores(rows: list[dict]) -> list[dict]:
         if start is None or "moving_points" not in row:
             continue
         moving, static = start["moving_points"], start["static_points"]
-        row["moving_removed_share"] = 1 - row["moving_points"] / moving if moving else float("nan")
-        row["static_kept_share"] = row["static_points"] / static if static else float("nan")
+        removed = 1 - row["moving_points"] / moving if moving else float("nan")
+        row.update(zip(LABEL_SCORES, (removed, row["static_points"] / static if static else float("nan"))))
     return rows
 
 

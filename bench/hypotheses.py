@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from lidarfield.hypotheses import apply_step, parse_step
+from lidarfield.hypotheses import apply_step, free_space, parse_step
 from lidarfield.hypotheses import moving_objects as mo
 from lidarfield.hypotheses.field_of_view import field_of_view
 from lidarfield.hypotheses.geometry import in_sensor_frame, ranges
@@ -124,14 +124,14 @@ def bench_moving_objects(pair: RegisteredPair) -> None:
     params = mo.Params()
     t_fast = best_time(lambda: apply_step(pair, {"moving_objects": {}}))[0]
     images = [
-        mo.range_image(xyz, mo.resolution_rad(model, params, k), *mo.sensor_view(model))
+        free_space.range_image(xyz, mo.resolution_rad(model, params, k), *mo.sensor_view(model))
         for k, (xyz, model) in enumerate(
             ((pair.xyz1, pair.sensor1), (in_sensor_frame(pair.xyz2, pair.T_1_2), pair.sensor2)), 1
         )
     ]
     sample = np.random.default_rng(1).choice(len(pair.xyz2), 1000, replace=False)
     start = time.perf_counter()
-    mo.free_space_evidence_loop(pair.xyz2[sample], pair.xyz1, images[0], params)
+    free_space.free_space_evidence_loop(pair.xyz2[sample], pair.xyz1, images[0], params.margin_m, params.beam_width_deg)
     t_loop = (time.perf_counter() - start) / 1000 * (len(pair.xyz1) + len(pair.xyz2))
     t_plugin = best_time(lambda: moving_cars.remove(pair, {}), 1)[0]
     # (what it removes here means nothing: each street cloud is drawn about its own sensor, so

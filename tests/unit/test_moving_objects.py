@@ -11,7 +11,9 @@ import pytest
 
 from lidarfield.errors import HypothesisError, NotApplicableError
 from lidarfield.hypotheses import apply_step, validate_step
+from lidarfield.hypotheses import free_space as fs
 from lidarfield.hypotheses import moving_objects as mo
+from lidarfield.hypotheses import voxel_objects as vo
 from lidarfield.hypotheses.geometry import in_sensor_frame
 from lidarfield.hypotheses.outcome import checked_outcome, reasons_of_removed
 from lidarfield.hypotheses.params import params_to_dict
@@ -156,15 +158,15 @@ def test_a_wall_one_sensor_sees_behind_a_pole_the_other_sees_in_front_of_is_not_
 def test_free_space_evidence_agrees_with_the_per_point_reference(traffic_pair):
     rng = np.random.default_rng(0)
     own1 = traffic_pair.xyz1  # scan 2's cars moved into where sensor 1 saw through
-    image = mo.range_image(own1, mo.resolution_rad(traffic_pair.sensor1, mo.Params(), 1), 1.0, (-0.384, 0.168))
+    image = fs.range_image(own1, mo.resolution_rad(traffic_pair.sensor1, mo.Params(), 1), 1.0, (-0.384, 0.168))
     points = traffic_pair.xyz2
     cars = np.flatnonzero(traffic_pair.attributes2["object"] > 0)
     chosen = np.concatenate([rng.choice(len(points), 300, replace=False), rng.choice(cars, 300, replace=False)])
     # and points the other sensor cannot have seen: nearer than its minimum range, out of its view
     extra = np.array([[0.5, 0.0, 0.0], [5.0, 0.0, 50.0], [0.0, 0.0, -5.0]])
     sample = np.vstack([points[chosen], extra])
-    fast = mo.free_space_evidence(sample, image, mo.Params())
-    assert np.array_equal(fast, mo.free_space_evidence_loop(sample, own1, image, mo.Params()))
+    fast = fs.free_space_evidence(sample, image, 0.2, 0.2)
+    assert np.array_equal(fast, fs.free_space_evidence_loop(sample, own1, image, 0.2, 0.2))
     assert 20 < fast.sum() < len(chosen) / 2 and not fast[-3:].any()
 
 
@@ -172,8 +174,8 @@ def test_connected_voxels_agrees_with_a_flood_fill():
     rng = np.random.default_rng(1)
     blobs = [rng.normal(centre, 0.4, (200, 3)) for centre in ([0, 0, 0], [1.5, 0, 0], [6, 0, 0], [0, 6, 1])]
     xyz = np.vstack([*blobs, rng.uniform(-10, 10, (100, 3))])
-    (voxels,) = mo.voxel_grid([xyz], 0.3)
-    fast, plain = mo.connected_voxels(voxels), mo.connected_voxels_reference(voxels)
+    (voxels,) = vo.voxel_grid([xyz], 0.3)
+    fast, plain = vo.connected_voxels(voxels), vo.connected_voxels_reference(voxels)
     # the same partition: labels map one to one
     pairs = np.unique(np.column_stack([fast, plain]), axis=0)
     assert len(pairs) == len(np.unique(fast)) == len(np.unique(plain))
@@ -188,9 +190,9 @@ def test_the_ground_plane_is_fitted_under_standing_objects():
     box = rng.uniform([3, 3, -1.7], [5, 4, 0.0], (1500, 3))  # a car-sized object standing on it
     box[:, 2] += 0.02 * box[:, 0] - 0.01 * box[:, 1]
     xyz = np.vstack([ground, box])
-    height = mo.heights_above_ground(xyz)
+    height = vo.heights_above_ground(xyz)
     assert np.abs(height[:5000]).max() < 0.1
-    standing = mo.off_ground(xyz, mo.voxel_grid([xyz], 0.3)[0], 0.3)
+    standing = vo.off_ground(xyz, vo.voxel_grid([xyz], 0.3)[0], 0.3)
     assert standing[5000:].all()  # the box's foot too
     assert standing[:5000].mean() < 0.02  # only the ground at its foot
 

@@ -273,3 +273,12 @@ def test_a_hypothesis_says_why_with_one_string_per_point(traffic_pair):
     assert reasons_of_removed(checked_outcome((keep1, keep2), (n1, n2), "h")) is None
     with pytest.raises(HypothesisError, match=f"reason1 must be {n1} strings"):
         checked_outcome({"keep1": keep1, "reason1": np.zeros(n1)}, (n1, n2), "h")
+
+
+@pytest.mark.parametrize("sizes", [(0, 0), (0, 100), (100, 0), (1, 1)])
+def test_empty_and_tiny_clouds_are_kept_whole(sizes):
+    rng = np.random.default_rng(0)
+    xyz1, xyz2 = (rng.normal(scale=10, size=(n, 3)) for n in sizes)
+    pair = RegisteredPair(xyz1, xyz2, np.eye(4), SENSOR, SENSOR, registration={"method": "truth"})
+    keep1, keep2 = apply_step(pair, {"moving_objects": {}})
+    assert keep1.all() and keep2.all() and (len(keep1), len(keep2)) == sizes

@@ -172,7 +172,9 @@ def moving_objects(pair: RegisteredPair, params: Params) -> Outcome:
     clouds = (pair.xyz1, pair.xyz2)
     evidence = pair_evidence(pair, params)
     voxels = voxel_grid(list(clouds), params.voxel_m)
-    size = np.max([v.max(axis=0) for v in voxels if len(v)], axis=0) + 2 if any(map(len, voxels)) else np.ones(3)
+    size = (
+        np.max([v.max(axis=0) for v in voxels if len(v)], axis=0) + 2 if any(map(len, voxels)) else np.ones(3, np.int64)
+    )
     keys = [packed(v, size) for v in voxels]
     objects, evidenced = [], []
     for xyz, v, cloud_evidence in zip(clouds, voxels, evidence):

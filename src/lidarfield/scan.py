@@ -8,8 +8,9 @@ import numpy as np
 
 from .sensors.models import SensorModel
 
-# Attributes the contracts know; readers may add others (kept as they are).
-KNOWN_ATTRIBUTES = ("intensity", "ring", "time")
+# Attributes the contracts know; readers may add others (kept as they are). ``object`` is a
+# simulated point's label: the moving object it hit, 0 for the static scene.
+KNOWN_ATTRIBUTES = ("intensity", "ring", "time", "object")
 
 
 def still_sweep() -> dict:

@@ -197,7 +197,7 @@ def test_run_writes_every_stage_and_prints_the_table(tmp_path, paper_scans, caps
     # What to try next on the paper's simulated pair, before any mitigation: field_of_view or
     # shadow (the adversities the paper builds this pair to show), far ahead of the rest.
     first = pd.read_parquet(out / "stages" / ids[0] / "suggestions.parquet")
-    removals = {"ego_vehicle", "field_of_view", "shadow", "crop", "outliers"}
+    removals = {"ego_vehicle", "field_of_view", "shadow", "crop", "outliers", "moving_objects"}
     # the corrections that apply: deskew too, the simulated scans record their motion (still:
     # it moves nothing and reduces nothing)
     assert set(first["hypothesis"]) == removals | {"realign", "range_calibration", "deskew"}
@@ -205,7 +205,15 @@ def test_run_writes_every_stage_and_prints_the_table(tmp_path, paper_scans, caps
     assert deskew["energy_reduction"] == 0 and deskew["displacement_max_m"] == 0
     assert first["hypothesis"][0] in ("field_of_view", "shadow") and first["energy_reduction"][0] > 0.5
     last = pd.read_parquet(out / "stages" / ids[-1] / "suggestions.parquet")
-    assert set(last["hypothesis"]) == {"ego_vehicle", "crop", "outliers", "realign", "range_calibration", "deskew"}
+    assert set(last["hypothesis"]) == {
+        "ego_vehicle",
+        "crop",
+        "outliers",
+        "moving_objects",
+        "realign",
+        "range_calibration",
+        "deskew",
+    }
     assert (summary["n1"][1:].to_numpy() + summary["removed1"][1:].to_numpy() == summary["n1"][:-1].to_numpy()).all()
     assert all(
         (out / name).is_file() for name in ("scan1.parquet", "scan2.parquet", "registered.parquet", "summary.csv")

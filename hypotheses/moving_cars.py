@@ -1,5 +1,9 @@
 """Example plugin hypothesis: remove the points of objects that moved between the two scans.
 
+The plain example of a plugin file. To remove moving objects, use the built-in
+``moving_objects`` (free-space evidence grown to objects): this rule also removes whatever one
+sensor alone saw.
+
 A plugin is a plain Python file with a function ``(pair, params) -> (keep1, keep2)``. Use it
 from a study config with
 

@@ -69,6 +69,9 @@ _EXPORTS = {
     "apply_stack": "study.stack",
     "Stage": "study.stack",
     "run_pair": "study.run",
+    "explain_pair": "study.explain",
+    "ExplainSettings": "analysis.explain",
+    "explain_scans": "report.explain",
     "stage_ids": "study.stage_ids",
     "load_config": "study.config",
     # figures and reports

@@ -29,6 +29,9 @@ class RegisteredPair:
     registration: dict = field(default_factory=dict)
     # How each scan fitted its sensor model at ingest ({"1": ..., "2": ...}: sensor_fit.sensor_fit).
     sensor_fit: dict = field(default_factory=dict)
+    # When each scan was taken and how its sensor moved during the sweep, as the scans recorded
+    # them ({"1": {"stamp_s": ..., "sweep_motion": ...}, "2": ...}; see Scan; missing: unknown).
+    sweeps: dict = field(default_factory=dict)
     # What hypotheses derived from the clouds and may reuse, e.g. ``outliers``' neighbour
     # distances by (cloud, k). Not written to files, not compared, not carried by subset().
     neighbours: dict = field(default_factory=dict, compare=False, repr=False)
@@ -58,7 +61,16 @@ class RegisteredPair:
             {k: v[keep2] for k, v in self.attributes2.items()},
             self.registration,
             self.sensor_fit,
+            self.sweeps,
         )
+
+    def stamp(self, cloud: int) -> float | None:
+        """When scan ``cloud`` (1 or 2) was taken (s), if it recorded it."""
+        return self.sweeps.get(str(cloud), {}).get("stamp_s")
+
+    def sweep_motion(self, cloud: int) -> dict | None:
+        """Scan ``cloud``'s recorded motion during its sweep (see Scan.sweep_motion), if any."""
+        return self.sweeps.get(str(cloud), {}).get("sweep_motion")
 
     # --- the points table -------------------------------------------------------------
     def to_columns(self) -> dict[str, np.ndarray]:
@@ -85,6 +97,7 @@ class RegisteredPair:
             "sensor2": None if self.sensor2 is None else self.sensor2.to_dict(),
             "registration": self.registration,
             "sensor_fit": self.sensor_fit,
+            "sweeps": self.sweeps,
         }
 
     @classmethod
@@ -109,6 +122,7 @@ class RegisteredPair:
             {k: v[in2] for k, v in attrs.items()},
             meta.get("registration", {}),
             meta.get("sensor_fit", {}),
+            meta.get("sweeps", {}),
         )
 
 

@@ -8,8 +8,14 @@ import numpy as np
 
 from .sensors.models import SensorModel
 
-# Attributes the contracts know; readers may add others (kept as they are).
-KNOWN_ATTRIBUTES = ("intensity", "ring", "time")
+# Attributes the contracts know; readers may add others (kept as they are). ``object`` is a
+# simulated point's label: the moving object it hit, 0 for the static scene.
+KNOWN_ATTRIBUTES = ("intensity", "ring", "time", "object")
+
+
+def still_sweep() -> dict:
+    """The ``sweep_motion`` of a scan whose points carry no motion (taken still, or de-skewed)."""
+    return {"velocity_mps": [0.0, 0.0, 0.0], "angular_velocity_rps": [0.0, 0.0, 0.0]}
 
 
 @dataclass
@@ -21,6 +27,10 @@ class Scan:
     source: str | None = None  # where the scan came from (file path or simulation spec)
     dropped_invalid: int = 0  # rows dropped by the reader for NaN / infinite coordinates
     stamp_s: float | None = None  # when the scan was taken (s since the epoch; a bag's header stamp)
+    # The sensor's motion during the sweep as recorded with the scan, the motion its points carry:
+    # {"velocity_mps": [3], "angular_velocity_rps": [3]}, both in its sensor frame at the sweep
+    # start (zero for a scan taken still or already de-skewed); None when unknown.
+    sweep_motion: dict | None = None
 
     def __post_init__(self):
         self.xyz = np.ascontiguousarray(self.xyz, dtype=np.float64).reshape(-1, 3)
@@ -42,4 +52,5 @@ class Scan:
             self.source,
             self.dropped_invalid,
             self.stamp_s,
+            self.sweep_motion,
         )

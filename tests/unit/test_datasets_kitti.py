@@ -49,6 +49,11 @@ def test_a_study_registers_the_dataset_by_truth_within_1e_9(kitti_folder, tmp_pa
     expected = invert_pose(lidar[1]) @ lidar[2]
     assert np.abs(registered.T_1_2 - expected).max() < 1e-9
     assert pair.scan1.spec["sensor"] == "hdl64" and pair.scan1.spec["stamp_s"] == pytest.approx(0.1)
+    # KITTI's sweeps are de-skewed: deskew leaves them alone (their record, not the stamps' motion)
+    from lidarfield.hypotheses import apply_step
+
+    left = apply_step(registered, {"deskew": {}})
+    assert left.xyz1 is None and left.xyz2 is None and left.fitted["cloud1"]["motion_source"] == "record"
 
 
 def test_the_same_scans_as_files_with_lidar_poses_plan_the_same_jobs(kitti_folder, tmp_path):
@@ -67,7 +72,13 @@ def test_the_same_scans_as_files_with_lidar_poses_plan_the_same_jobs(kitti_folde
     for name in as_files.pairs:
         for k in ("scan1", "scan2"):
             a, b = getattr(as_dataset.pairs[name], k).spec, getattr(as_files.pairs[name], k).spec
-            assert {**a, "stamp_s": None, "format": None} == {**b, "stamp_s": None}
+            # what the dataset knows beyond the files: the stamps, and that its sweeps are de-skewed
+            assert a["sweep_motion"] == {"velocity_mps": [0.0] * 3, "angular_velocity_rps": [0.0] * 3}
+            assert {**a, "stamp_s": None, "format": None, "sweep_motion": None} == {
+                **b,
+                "stamp_s": None,
+                "sweep_motion": None,
+            }
             assert np.abs(np.array(a["pose"]) - np.array(b["pose"])).max() < 1e-12
 
 

@@ -134,7 +134,14 @@ def test_the_same_scans_as_files_with_lidar_poses_plan_the_same_jobs(nuscenes_fo
     for name in as_files.pairs:
         for k in ("scan1", "scan2"):
             a, b = getattr(as_dataset.pairs[name], k).spec, getattr(as_files.pairs[name], k).spec
-            assert {**a, "stamp_s": None, "pose": None} == {**b, "stamp_s": None, "pose": None}
+            # beyond the files: the stamps, and each sweep's motion from its neighbours' poses
+            assert a["sweep_motion"]["source"] == "neighbours" and "sweep_motion" not in b
+            assert {**a, "stamp_s": None, "pose": None, "sweep_motion": None} == {
+                **b,
+                "stamp_s": None,
+                "pose": None,
+                "sweep_motion": None,
+            }
             assert np.abs(np.array(a["pose"]) - np.array(b["pose"])).max() < 1e-12
 
 

@@ -93,11 +93,11 @@ def test_the_field_after_deskew(skewed):
     shutter 0.0050 m, scan 1 taken still from mid-sweep (0.5 m on) 0.1393 m. The de-skewed scan
     is exact (above), but its points were fired from along the 1 m its sensor drove: the field
     compares samplings from different viewpoints, which the still scan from mid-sweep shares."""
-    stage0, stage = apply_stack(skewed, [{"deskew": {"cloud": 1, "velocity_mps": V}}])
+    stage0, stage = apply_stack(skewed, [{"deskew": {"cloud": 1}}])
     c = stage.correction
     assert c["reference"] == "start" and "cloud2" not in c
     one = c["cloud1"]
-    assert one["velocity_mps"] == V and one["motion_source"] == "settings"
+    assert one["velocity_mps"] == V and one["motion_source"] == "record"  # the simulated scan's own
     assert one["time_source"] == "attribute time (s, from start)"
     assert 0.99 < one["max_displacement_m"] <= 1.0 and one["time_min_s"] == 0 and 0.099 < one["time_max_s"] <= 0.1
     assert stage.moved1 and not stage.moved2 and stage.removed1 == stage.removed2 == 0
@@ -109,16 +109,45 @@ def test_the_field_after_deskew(skewed):
 
 def test_a_still_scan_is_unchanged():
     still = register_pair(scan(0, 0, 1, False), scan(0, 0.0037, 2, False), "truth")
-    outcome = apply_step(still, {"deskew": {"velocity_mps": [0, 0, 0], "angular_velocity_rps": [0, 0, 0]}})
-    assert np.abs(outcome.xyz1 - still.xyz1).max() < 1e-9 and np.abs(outcome.xyz2 - still.xyz2).max() < 1e-9
-    assert outcome.fitted["cloud2"]["max_displacement_m"] < 1e-9
+    for step in ({}, {"velocity_mps": [1, 0, 0]}):  # the scans' records (still) come before settings
+        outcome = apply_step(still, {"deskew": step})
+        assert outcome.xyz1 is None and outcome.xyz2 is None  # nothing moved, not even by rounding
+        assert (
+            outcome.fitted["cloud2"]["max_displacement_m"] == 0
+            and outcome.fitted["cloud1"]["motion_source"] == "record"
+        )
+    bare = RegisteredPair(
+        still.xyz1, still.xyz2, still.T_1_2, still.sensor1, still.sensor2, still.attributes1, still.attributes2
+    )
+    outcome = apply_step(bare, {"deskew": {"velocity_mps": [0, 0, 0], "angular_velocity_rps": [0, 0, 0]}})
+    assert outcome.xyz1 is None and outcome.fitted["cloud1"]["motion_source"] == "settings"
 
 
 def test_names_what_is_missing(skewed):
+    unrecorded = RegisteredPair(skewed.xyz1, skewed.xyz2, skewed.T_1_2, skewed.sensor1, skewed.sensor2)
     with pytest.raises(
-        HypothesisError, match=r"deskew: no motion for cloud 1 and 2: give velocity_mps.*no scan stamps"
+        HypothesisError,
+        match=r"deskew: no motion for cloud 1 \(motion_source auto\): its scan recorded none, no velocity_mps nor "
+        r"angular_velocity_rps is given, and the pair's "
+        r"scans do not both record a stamp to derive it from T_1_2",
     ):
-        apply_step(skewed, {"deskew": {}})
+        apply_step(unrecorded, {"deskew": {}})
+    same_time = RegisteredPair(
+        skewed.xyz1,
+        skewed.xyz2,
+        skewed.T_1_2,
+        skewed.sensor1,
+        skewed.sensor2,
+        sweeps={"1": {"stamp_s": 0.0}, "2": {"stamp_s": 0.0}},
+    )
+    with pytest.raises(HypothesisError, match=r"the pair's scans have one stamp"):
+        apply_step(same_time, {"deskew": {}})
+    with pytest.raises(
+        HypothesisError, match=r"no motion for cloud 1 \(motion_source record\): its scan recorded none$"
+    ):
+        apply_step(same_time, {"deskew": {"motion_source": "record", "velocity_mps": V}})
+    with pytest.raises(HypothesisError, match=r"need motion_source auto or record or settings or pair, got 'odometry'"):
+        apply_step(skewed, {"deskew": {"motion_source": "odometry"}})
     bare = RegisteredPair(skewed.xyz1, skewed.xyz2, skewed.T_1_2)
     with pytest.raises(
         HypothesisError, match=r"deskew: cloud 1 has no 'time' attribute and no sensor model's rotation_hz"
@@ -146,3 +175,102 @@ def test_turning_while_driving_is_undone_exactly():
     outcome = apply_step(pair, {"deskew": {"cloud": 1, "velocity_mps": V, "angular_velocity_rps": w}})
     assert np.abs(outcome.xyz1 - truth).max() < 1e-9
     assert outcome.fitted["cloud1"]["angular_velocity_rps"] == w and outcome.xyz2 is None
+
+
+# --- where the motion comes from (issue 24) ----------------------------------------------------
+
+
+def test_a_simulated_scan_records_its_stamp_and_the_motion_its_points_carry(tmp_path):
+    """The record is in the sensor frame at the sweep start (the world velocity turned by the
+    pose's yaw), zero without rolling shutter; it survives the scan file and the pair file."""
+    from lidarfield.io import read_scan, write_scan
+    from lidarfield.pair import read_pair, write_pair
+
+    scene, sensor = load_scene("paper-intersection"), PRESETS["vlp16"]
+    pose = pose_from_xyzrpy([0, 0, 3, 0, 0, np.pi / 2])  # heading +y
+    moving = simulate_scan(
+        scene,
+        sensor,
+        pose,
+        time_s=2.5,
+        rolling_shutter=True,
+        linear_velocity_mps=[0, 10, 0],
+        angular_velocity_rps=[0, 0, 0.3],
+    )
+    assert moving.stamp_s == 2.5
+    assert np.allclose(moving.sweep_motion["velocity_mps"], [10, 0, 0]) and moving.sweep_motion[
+        "angular_velocity_rps"
+    ] == [0, 0, 0.3]
+    instantaneous = simulate_scan(scene, sensor, pose, linear_velocity_mps=[0, 10, 0])
+    assert instantaneous.sweep_motion == {"velocity_mps": [0.0, 0.0, 0.0], "angular_velocity_rps": [0.0, 0.0, 0.0]}
+    write_scan(moving, tmp_path / "moving.parquet")
+    back = read_scan(tmp_path / "moving.parquet")
+    assert back.stamp_s == 2.5 and back.sweep_motion == moving.sweep_motion
+    pair = register_pair(back, instantaneous, "truth")
+    write_pair(tmp_path / "pair.parquet", pair)
+    read, _ = read_pair(tmp_path / "pair.parquet")
+    assert read.sweeps == pair.sweeps and read.stamp(1) == 2.5 and read.stamp(2) == 0.0
+    assert (
+        read.sweep_motion(1) == moving.sweep_motion
+        and read.subset(np.ones(len(read.xyz1), bool), np.ones(len(read.xyz2), bool)).sweeps == read.sweeps
+    )
+
+
+def test_deskew_is_the_first_suggestion_for_a_moving_scan_against_a_still_one(skewed):
+    from lidarfield.analysis.suggest import candidate_steps, suggestions
+
+    table = suggestions(
+        skewed, field_settings_from_config({}), candidate_steps(None, [], ".", {}), ".", {}, defaults=True
+    )
+    assert table["hypothesis"][0] == "deskew" and table["corrects"][0] and table["energy_reduction"][0] > 0.9
+
+
+def test_the_constant_velocity_between_the_pairs_stamps_when_no_scan_recorded_its_motion():
+    """Two consecutive sweeps of one drive at 10 m/s (0.1 s apart, both with rolling shutter):
+    without their records, the motion is T_1_2 over the stamps' difference, in each scan's frame,
+    and de-skews both clouds as their records do."""
+    drive = register_pair(
+        simulate_scan(
+            load_scene("paper-intersection"),
+            PRESETS["vlp16"],
+            pose_from_xyzrpy([0, 0, 3, 0, 0, 0.2]),
+            seed=1,
+            rolling_shutter=True,
+            linear_velocity_mps=[10 * np.cos(0.2), 10 * np.sin(0.2), 0],
+        ),
+        simulate_scan(
+            load_scene("paper-intersection"),
+            PRESETS["vlp16"],
+            pose_from_xyzrpy([np.cos(0.2), np.sin(0.2), 3, 0, 0, 0.2]),
+            time_s=0.1,
+            seed=2,
+            rolling_shutter=True,
+            linear_velocity_mps=[10 * np.cos(0.2), 10 * np.sin(0.2), 0],
+        ),
+        "truth",
+    )
+    by_record = apply_step(drive, {"deskew": {}})
+    stamps_only = {k: {"stamp_s": record["stamp_s"]} for k, record in drive.sweeps.items()}
+    unrecorded = RegisteredPair(
+        drive.xyz1,
+        drive.xyz2,
+        drive.T_1_2,
+        drive.sensor1,
+        drive.sensor2,
+        drive.attributes1,
+        drive.attributes2,
+        sweeps=stamps_only,
+    )
+    by_pair = apply_step(unrecorded, {"deskew": {}})
+    for cloud in ("cloud1", "cloud2"):
+        assert by_pair.fitted[cloud]["motion_source"] == "pair" and by_record.fitted[cloud]["motion_source"] == "record"
+        assert np.allclose(by_pair.fitted[cloud]["velocity_mps"], [10, 0, 0], atol=1e-9)
+        assert np.allclose(by_pair.fitted[cloud]["angular_velocity_rps"], 0, atol=1e-9)
+    assert np.abs(by_pair.xyz1 - by_record.xyz1).max() < 1e-9 and np.abs(by_pair.xyz2 - by_record.xyz2).max() < 1e-9
+    # settings come after a record: a scan's own record wins, unless they are asked for
+    assert apply_step(drive, {"deskew": {"velocity_mps": [1, 0, 0]}}).fitted["cloud1"]["motion_source"] == "record"
+    asked = apply_step(drive, {"deskew": {"velocity_mps": [1, 0, 0], "motion_source": "settings"}}).fitted["cloud1"]
+    assert asked["motion_source"] == "settings" and asked["velocity_mps"] == [1, 0, 0]
+    assert (
+        apply_step(unrecorded, {"deskew": {"velocity_mps": [1, 0, 0]}}).fitted["cloud1"]["motion_source"] == "settings"
+    )

@@ -37,6 +37,7 @@ def columns_from_vectors(uvw: np.ndarray, weight=None, valid=None) -> dict[str, 
     columns["magnitude"] = np.linalg.norm(u, axis=1)
     columns["se"] = np.where(valid, 0.01, np.nan)
     columns["z"] = columns["magnitude"] / columns["se"]
+    columns["wu"], columns["wv"], columns["ww"] = u.T / columns["se"]  # an isotropic C = se^2 I
     columns["valid"] = valid
     return columns
 

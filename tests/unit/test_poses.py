@@ -220,3 +220,20 @@ def test_quaternions_and_rotation_vectors_match_scipy():
         assert np.abs(rotation_from_vector(omega) - Rotation.from_rotvec(omega).as_matrix()).max() < 1e-12
     u, v = rng.normal(size=3), rng.normal(size=3)
     assert np.allclose(skew(u) @ v, np.cross(u, v))
+
+
+def test_velocities_from_neighbours_on_a_turning_drive():
+    """The default simulated drive (a 5.5 m arc at 5 m/s, 5 scans a second): each scan's velocity
+    in its own frame from its neighbours' poses is the drive's, to the chord's first order (0.6%
+    over the two frames' 33 deg), its yaw rate the arc's; at the ends, from the pose itself."""
+    from lidarfield.poses import velocities_from_neighbours
+    from lidarfield.simulation.trajectory import PAPER_TURN, paper_turn_trajectory
+
+    frames = paper_turn_trajectory(6)
+    stamps = [k / PAPER_TURN["rate_hz"] for k in range(len(frames))]
+    found = velocities_from_neighbours(stamps, [f.pose for f in frames])
+    for frame, (v, w) in zip(frames, found):
+        expected = frame.pose[:3, :3].T @ np.asarray(frame.linear_velocity_mps)
+        assert np.linalg.norm(v - expected) < 0.01 * 5.0 and abs(v[1]) < 0.01
+        assert np.allclose(w, frame.angular_velocity_rps, atol=1e-9)
+    assert velocities_from_neighbours([0.0, None], [frames[0].pose, frames[1].pose]) == [None, None]

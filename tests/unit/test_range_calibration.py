@@ -79,12 +79,25 @@ def test_fits_the_simulated_range_fault_and_the_field_returns_to_the_truths(faul
     assert np.allclose(after / r_after[:, None], before / r_before[:, None])
     # the corrected ranges are the truth's: scan 2 without the fault (same seed, same noise)
     assert np.abs(stage.pair.xyz2 - truth.xyz2).max() < 0.01
-    # The field: measured 0.0568 m RMS magnitude before, 0.0050 after, 0.0050 without the fault.
-    # The verdict stays 'patterned', as the correctly calibrated pair's field is (the simulated
-    # scene's sampling), not 'random'.
+    # The field: measured 0.0568 m RMS magnitude before, 0.0050 after, 0.0050 without the fault;
+    # patterned and radial (not rigid) before, random after as without the fault.
     f_before, f_after, f_truth = _field(faulty), _field(stage.pair), _field(truth)
     assert f_after["rms_magnitude"] < 1.2 * f_truth["rms_magnitude"] < 0.2 * f_before["rms_magnitude"]
-    assert f_after["verdict"] == f_truth["verdict"]
+    assert f_before["verdict"] == "patterned" and f_before["p_coherence"] <= 0.002
+    assert f_before["energy_share_radial"] > 0.5 > f_before["energy_share_rigid"]
+    assert f_after["verdict"] == f_truth["verdict"] == "random"
+
+
+def test_range_calibration_is_the_first_suggestion_for_a_range_fault(faulty):
+    from lidarfield.analysis.suggest import candidate_steps, suggestions
+
+    grid = {"kind": "spherical", "azimuth_bins": 36, "elevation_bins": 5, "min_points": 30}
+    table = suggestions(
+        faulty, field_settings_from_config(grid), candidate_steps(None, [], ".", grid), ".", grid, defaults=True
+    )
+    assert table["hypothesis"][0] == "range_calibration" and table["suggested_by"][0] == "radial"
+    fitted = json.loads(table["fitted"][0])
+    assert abs(fitted["scale"] - SCALE) < 0.0005 and abs(fitted["offset_m"] - OFFSET) < 0.005
 
 
 def test_no_fault_fits_the_identity(truth):

@@ -14,7 +14,7 @@ import pytest
 
 from helpers.clouds import targets
 from lidarfield.analysis.field_stats import field_statistics
-from lidarfield.analysis.randomness import LEVEL, neighbour_pairs, randomness_tests, unit_vectors
+from lidarfield.analysis.randomness import LEVEL, neighbour_pairs, randomness_tests
 from lidarfield.analysis.tags import tag_column, voxel_tags
 from lidarfield.field.grid import CartesianGrid, FieldSettings, SphericalGrid
 from lidarfield.field.kernel import discrepancy_field
@@ -142,15 +142,21 @@ def test_neighbour_pairs_of_full_grids():
     assert len(neighbour_pairs(grid, np.array([0, 35]))[0]) == 1
 
 
-def test_sign_flip_p_values_match_their_exact_values():
-    # Three equal vectors: |sum|^2 = 9 is reached by 2 of the 8 sign patterns, p = 1/4.
-    units = unit_vectors(np.tile([0.0, 0.0, 2.0], (3, 1)))
-    result = randomness_tests(units, (np.array([0, 1]), np.array([1, 2])))
-    assert result["p_direction"] == pytest.approx(0.25, abs=0.04)
-    # Neighbour sum 2 needs signs (+,+,+) or (-,-,-): also 1/4.
-    assert result["p_coherence"] == pytest.approx(0.25, abs=0.04)
-    assert result["verdict"] == "random"  # three voxels cannot show a pattern at 5%
-    assert randomness_tests(units[:2], (np.array([0]), np.array([1])))["verdict"] == "undetermined"
+def test_p_values_match_their_values_under_the_normal_null():
+    from scipy.stats import chi2
+
+    # Three whitened vectors (0, 0, 1): |sum|^2 / 3 = 3 is chi^2(3) under the null, p = 0.39.
+    whitened = np.tile([0.0, 0.0, 1.0], (3, 1))
+    result = randomness_tests(whitened, (np.array([0, 1]), np.array([1, 2])))
+    assert result["p_direction"] == pytest.approx(chi2.sf(3.0, 3), abs=0.04)
+    # Neighbour sum 2: the sum of two independent products g0.g1 + g1.g2 of normal vectors.
+    g = np.random.default_rng(5).standard_normal((200_000, 3, 3))
+    expected = np.mean(np.einsum("kj,kj->k", g[:, 0], g[:, 1]) + np.einsum("kj,kj->k", g[:, 1], g[:, 2]) >= 2.0)
+    assert result["p_coherence"] == pytest.approx(expected, abs=0.04)
+    assert result["verdict"] == "random"  # three noise-sized vectors show no pattern
+    # Ten times larger: far outside the noise, one way.
+    assert randomness_tests(10 * whitened, (np.array([0, 1]), np.array([1, 2])))["verdict"] == "patterned"
+    assert randomness_tests(whitened[:2], (np.array([0]), np.array([1])))["verdict"] == "undetermined"
 
 
 def test_without_a_grid_the_verdict_rests_on_the_directions():
@@ -182,3 +188,58 @@ def test_point_tags_mark_the_voxels_built_to_carry_them():
     assert tagged["count_imbalance"] == {row[5]}
     # VLP-16 limits are +-15 deg: the targets at +-16 deg (bands 0 and 4) lie beyond them.
     assert tagged["fov_edge"] == set(np.flatnonzero(np.isin(field["el_bin"], [0, 4])))
+
+
+# --- the scan pattern's phase (issue 24) --------------------------------------------------------
+
+
+def test_pattern_covariance_of_a_wall_facing_the_sensor_and_of_an_oblique_one():
+    from lidarfield.field.significance import ScanPattern, pattern_covariance
+
+    pattern = ScanPattern(np.zeros(3), np.array([0.0, 0.0, 1.0]), 0.2, np.array([-1.0, 1.0, 3.0]))
+    # Straight ahead along x at 10 m, a wall facing the sensor: the cell is 10 * 0.2 deg along y
+    # (the azimuth) by 10 * 2 deg along z (the beam gap), a uniform phase has variance side^2 / 12.
+    mean = np.array([[10.0], [0.0], [0.0]])
+    facing = pattern_covariance(mean, np.array([[-1.0], [0.0], [0.0]]), pattern)[:, 0]
+    side_y, side_z = 10 * np.radians(0.2), 10 * np.radians(2.0)
+    assert facing == pytest.approx([0.0, side_y**2 / 12, side_z**2 / 12, 0.0, 0.0, 0.0], abs=1e-12)
+    # The same wall turned 60 deg about z: the azimuth side stretches along it by 1 / cos 60 deg.
+    normal = np.array([[-np.cos(np.radians(60))], [np.sin(np.radians(60))], [0.0]])
+    turned = pattern_covariance(mean, normal, pattern)[:, 0]
+    along_wall = np.array([np.sin(np.radians(60)), np.cos(np.radians(60)), 0.0])
+    matrix = np.array(
+        [[turned[0], turned[3], turned[4]], [turned[3], turned[1], turned[5]], [turned[4], turned[5], turned[2]]]
+    )
+    assert along_wall @ matrix @ along_wall == pytest.approx((2 * side_y) ** 2 / 12, rel=1e-9)
+    assert normal[:, 0] @ matrix @ normal[:, 0] == pytest.approx(0.0, abs=1e-15)  # in the wall's plane
+
+
+def _intersection_pair(sensor: str, yaw: float, seeds: tuple[int, int]) -> RegisteredPair:
+    from lidarfield.poses import pose_from_xyzrpy
+    from lidarfield.registration import register_pair
+    from lidarfield.simulation.raycast import simulate_scan
+    from lidarfield.simulation.scene import load_scene
+
+    scene, model = load_scene("paper-intersection"), PRESETS[sensor]
+    scans = [
+        simulate_scan(scene, model, pose_from_xyzrpy([0, 0, 3, 0, 0, a]), seed=s, range_noise_m=0.02)
+        for a, s in ((0.0, seeds[0]), (yaw, seeds[1]))
+    ]
+    return register_pair(*scans, "truth")
+
+
+@pytest.mark.parametrize("sensor", ["vlp16", "paper-sim-80"])
+@pytest.mark.parametrize("yaw, seeds", [(0.0037, (1, 2)), (0.0011, (11, 21))])
+def test_samplings_of_the_simulated_intersection_from_one_place_are_random_and_3_mm_is_not(sensor, yaw, seeds):
+    """Two independent samplings (2 cm range noise, different seeds, sensor 2 yawed so that its
+    rays fall between sensor 1's) of the simulated intersection on the default 36 x 5 grid:
+    random (the direction-only tests called them patterned, p_coherence 0.001-0.02); 3 mm of
+    shift, or a range scale of 1.003, patterned."""
+    from lidarfield.analysis.field_stats import analyse_field
+
+    pair = _intersection_pair(sensor, yaw, seeds)
+    settings = FieldSettings(SphericalGrid())
+    assert analyse_field(pair, settings)[1]["verdict"] == "random"
+    for moved in (pair.xyz2 + [0.003, 0.0, 0.0], 1.003 * (pair.xyz2 - pair.origin2) + pair.origin2):
+        shifted = RegisteredPair(pair.xyz1, moved, pair.T_1_2, pair.sensor1, pair.sensor2)
+        assert analyse_field(shifted, settings)[1]["verdict"] == "patterned"

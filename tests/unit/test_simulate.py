@@ -8,7 +8,7 @@ import pytest
 import trimesh
 
 from lidarfield.errors import ConfigError
-from lidarfield.io import write_scan
+from lidarfield.io import read_scan, write_scan
 from lidarfield.poses import pose_from_xyzrpy as pose_from_values
 from lidarfield.sensors.models import PRESETS, SensorModel
 from lidarfield.simulation.raycast import azimuth_steps, first_hits, first_hits_reference, simulate_scan
@@ -220,6 +220,44 @@ def test_moving_object_is_displaced_by_velocity_times_dt():
     rolled, time = _car_points(simulate_scan(scene, SENSOR, POSE1, time_s=0.2, rolling_shutter=True))
     front = np.abs(rolled[:, 0] - (5.75 - 5 * time)) < 1e-9
     assert front.sum() > 50 and time[front].min() > 0
+
+
+@pytest.mark.parametrize("rolling_shutter", [False, True])
+def test_each_point_is_labelled_with_the_moving_object_it_hit(rolling_shutter):
+    """object = the car's place in the scene's objects on the car's surface (where it is at the
+    point's own time), 0 everywhere else; the static scene is cast as before."""
+    scene = load_scene("paper-intersection-traffic")
+    numbers = {o.name: n for n, o in scene.labelled_objects()}
+    assert numbers == {"car-west": 10, "car-east": 11}
+    scan = simulate_scan(scene, SENSOR, POSE2, time_s=0.1, rolling_shutter=rolling_shutter, seed=3)
+    label, time, world = scan.attributes["object"], scan.attributes["time"], _world(scan)
+    assert label.dtype == np.int32 and set(np.unique(label)) == {0, 10, 11}
+    for number, obj in scene.labelled_objects():
+        moved = time[:, None] * obj.velocity_mps if rolling_shutter else 0.0
+        own = world - moved  # where the point is relative to the car at time_s
+        lo, hi = obj.mesh_at(0.1).bounds
+        on_car = np.all((own >= lo - 1e-6) & (own <= hi + 1e-6), axis=1)
+        assert (label == number).sum() > 100
+        assert np.array_equal(on_car, label == number)
+    static = simulate_scan(load_scene("paper-intersection"), SENSOR, POSE2, time_s=0.1, seed=3)
+    assert not static.attributes["object"].any()
+
+
+@pytest.mark.parametrize("suffix", ["parquet", "pcd", "ply", "csv", "npy", "las"])
+def test_the_object_label_survives_the_scan_files(tmp_path, suffix):
+    scan = simulate_scan(load_scene("paper-intersection-traffic"), PRESETS["vlp16"], POSE1)
+    assert scan.attributes["object"].any()
+    write_scan(scan, tmp_path / f"scan.{suffix}")
+    assert np.array_equal(read_scan(tmp_path / f"scan.{suffix}").attributes["object"], scan.attributes["object"])
+
+
+def test_a_carried_body_is_labelled_with_its_place_in_the_scene():
+    truck = load_scene("paper-intersection-ego-truck")
+    scan = simulate_scan(truck, SENSOR, POSE1)
+    lo, hi = np.array([-5.3, -1.1, -2.8]) - 1e-6, np.array([-0.3, 1.1, 0.4]) + 1e-6
+    on_body = np.all((scan.xyz >= lo) & (scan.xyz <= hi), axis=1)
+    assert on_body.sum() > 10_000
+    assert np.array_equal(scan.attributes["object"], np.where(on_body, -len(truck.objects), 0))  # carried: < 0
 
 
 def test_paper_pair_by_true_pose_agrees_on_the_building_faces(paper, scan1):

@@ -9,6 +9,7 @@ from pathlib import Path
 import pytest
 
 import lidarfield
+from lidarfield.analysis.explain import ExplainSettings
 from lidarfield.defaults import default, section
 from lidarfield.field.grid import CartesianGrid, FieldSettings, SphericalGrid
 from lidarfield.plots.settings import STAGE_FIGURES, PlotSettings
@@ -108,7 +109,13 @@ def code_defaults(cls) -> dict:
 
 @pytest.mark.parametrize(
     ("cls", "schema_section"),
-    [(SphericalGrid, "grid"), (CartesianGrid, "grid"), (FieldSettings, "grid"), (PlotSettings, "plots")],
+    [
+        (SphericalGrid, "grid"),
+        (CartesianGrid, "grid"),
+        (FieldSettings, "grid"),
+        (PlotSettings, "plots"),
+        (ExplainSettings, "explain"),
+    ],
 )
 def test_every_code_default_is_the_schema_default(cls, schema_section):
     properties = section(schema_section)["properties"]

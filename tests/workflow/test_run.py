@@ -197,12 +197,23 @@ def test_run_writes_every_stage_and_prints_the_table(tmp_path, paper_scans, caps
     # What to try next on the paper's simulated pair, before any mitigation: field_of_view or
     # shadow (the adversities the paper builds this pair to show), far ahead of the rest.
     first = pd.read_parquet(out / "stages" / ids[0] / "suggestions.parquet")
-    removals = {"ego_vehicle", "field_of_view", "shadow", "crop", "outliers"}
-    # the corrections that apply (deskew needs a velocity, so it is skipped as a default)
-    assert set(first["hypothesis"]) == removals | {"realign", "range_calibration"}
+    removals = {"ego_vehicle", "field_of_view", "shadow", "crop", "outliers", "moving_objects"}
+    # the corrections that apply: deskew too, the simulated scans record their motion (still:
+    # it moves nothing and reduces nothing)
+    assert set(first["hypothesis"]) == removals | {"realign", "range_calibration", "deskew"}
+    deskew = first[first["hypothesis"] == "deskew"].iloc[0]
+    assert deskew["energy_reduction"] == 0 and deskew["displacement_max_m"] == 0
     assert first["hypothesis"][0] in ("field_of_view", "shadow") and first["energy_reduction"][0] > 0.5
     last = pd.read_parquet(out / "stages" / ids[-1] / "suggestions.parquet")
-    assert set(last["hypothesis"]) == {"ego_vehicle", "crop", "outliers", "realign", "range_calibration"}
+    assert set(last["hypothesis"]) == {
+        "ego_vehicle",
+        "crop",
+        "outliers",
+        "moving_objects",
+        "realign",
+        "range_calibration",
+        "deskew",
+    }
     assert (summary["n1"][1:].to_numpy() + summary["removed1"][1:].to_numpy() == summary["n1"][:-1].to_numpy()).all()
     assert all(
         (out / name).is_file() for name in ("scan1.parquet", "scan2.parquet", "registered.parquet", "summary.csv")
@@ -296,7 +307,7 @@ def test_run_on_text_scans_without_a_sensor_skips_the_defaults_that_need_one(tmp
     skipped = [r.getMessage() for r in caplog.records if r.getMessage().startswith("candidate field_of_view skipped")]
     assert len(skipped) == 2 and all("no sensor model" in m for m in skipped)  # one per stage
     ids = list(pd.read_parquet(out / "summary.parquet")["stage"])
-    corrections = {"realign", "range_calibration"}  # deskew needs a velocity: skipped as a default
+    corrections = {"realign", "range_calibration"}  # deskew needs a motion (text scans record none): skipped
     stage0 = set(pd.read_parquet(out / "stages" / ids[0] / "suggestions.parquet")["hypothesis"])
     assert stage0 == {"ego_vehicle", "shadow", "crop", "outliers"} | corrections
     stage1 = set(pd.read_parquet(out / "stages" / ids[1] / "suggestions.parquet")["hypothesis"])

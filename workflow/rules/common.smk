@@ -283,3 +283,32 @@ def rematch_files(wildcards=None):
 GRID = canonical_json(STUDY.grid_section)
 REMATCH = canonical_json(STUDY.rematch)
 PLOTS = canonical_json(figure_settings(STUDY.config["plots"]))
+
+
+# explain (workflow/rules/explain.smk): the config's suggest list (null: the default
+# candidates) and explain settings.
+SUGGEST = canonical_json(STUDY.suggest)
+EXPLAIN = canonical_json(STUDY.config["explain"])
+
+
+def explain_dir(pair):
+    return f"{RESULTS}/{pair}/explain"
+
+
+@planned
+def this_explain_dir(wildcards):
+    return explain_dir(wildcards.pair)
+
+
+@planned
+def explain_plugin_sources(wildcards):
+    """A plugin candidate's file is an input of explain: editing it explains again."""
+    return [step["plugin"]["file"] for step in STUDY.suggest or [] if "plugin" in step]
+
+
+@planned
+def explain_records(wildcards):
+    """The pairs' explain.json that exist: the study report shows them, and is kept up to date
+    with them, once `snakemake explain` (or one pair's target) has built them."""
+    records = [f"{explain_dir(pair)}/explain.json" for pair in PAIRS]
+    return [record for record in records if Path(record).is_file()]

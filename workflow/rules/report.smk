@@ -66,6 +66,7 @@ rule report:
         pairs=f"{RESULTS}/study/pairs.parquet",
         figures=f"{RESULTS}/study/figures",
         suggestions=last_stage_suggestions,
+        explain=explain_records,
     output:
         report(
             f"{RESULTS}/report.html",
@@ -90,4 +91,4 @@ rule report:
         "printf '%s' {params.config:q} | lidarfield job report --config - --summary {input.summary:q}"
         " --study-dir {params.study_dir:q} --figures {input.figures:q}"
         " --plotted {params.plotted:q} --suggestions {input.suggestions:q}"
-        " --out {output:q} > {log:q} 2>&1"
+        " --explain {input.explain:q} --out {output:q} > {log:q} 2>&1"

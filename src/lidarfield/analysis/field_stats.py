@@ -31,10 +31,11 @@ import numpy as np
 
 from ..defaults import default
 from ..field.grid import FieldSettings
-from ..field.kernel import field_from_voxel_ids
+from ..field.kernel import WHITENED_COLUMNS, field_from_voxel_ids
+from ..field.significance import ScanPattern
 from ..pair import RegisteredPair
 from ..poses import weighted_rigid_transform  # noqa: F401 (re-exported: the tests' Kabsch)
-from .randomness import neighbour_pairs, randomness_tests, unit_vectors
+from .randomness import neighbour_pairs, randomness_tests
 from .rigid_fit import field_rigid_part
 from .tags import energy_shares, voxel_energy, voxel_tags
 
@@ -64,9 +65,20 @@ STATISTIC_KEYS = (
 def analyse_field(pair: RegisteredPair, settings: FieldSettings) -> tuple[dict[str, np.ndarray], dict]:
     """The field of a pair (binned about sensor 1) with its tag columns, and its statistics."""
     ids = settings.grid.assign(pair.xyz1), settings.grid.assign(pair.xyz2)  # binned once: the tags need them too
-    columns = field_from_voxel_ids(ids[0], pair.xyz1, ids[1], pair.xyz2, settings)
+    columns = field_from_voxel_ids(ids[0], pair.xyz1, ids[1], pair.xyz2, settings, patterns=scan_patterns(pair))
     columns.update(voxel_tags(columns, pair, settings, ids))
     return columns, field_statistics(columns, settings)
+
+
+def scan_patterns(pair: RegisteredPair) -> tuple[ScanPattern | None, ScanPattern | None]:
+    """Each cloud's lattice of rays in frame 1, from its sensor model (None without one)."""
+    poses = (np.eye(4), pair.T_1_2)
+    return tuple(
+        None
+        if sensor is None
+        else ScanPattern(pose[:3, 3], pose[:3, 2], sensor.azimuth_resolution_deg, np.asarray(sensor.elevation_deg))
+        for sensor, pose in zip((pair.sensor1, pair.sensor2), poses)
+    )
 
 
 def field_statistics(columns: dict[str, np.ndarray], settings: FieldSettings | None = None) -> dict:
@@ -105,7 +117,8 @@ def field_statistics(columns: dict[str, np.ndarray], settings: FieldSettings | N
         neighbours = (np.zeros(0, np.int64), np.zeros(0, np.int64))
     else:
         neighbours = neighbour_pairs(settings.grid, np.asarray(columns["voxel"])[valid])
-    stats.update(randomness_tests(unit_vectors(uvw), neighbours))
+    whitened = np.column_stack([columns[c][valid] for c in WHITENED_COLUMNS]).astype(np.float64)
+    stats.update(randomness_tests(whitened, neighbours))
     stats["field_energy"] = float(voxel_energy(columns).sum())
     stats.update(energy_shares(columns))
     return stats

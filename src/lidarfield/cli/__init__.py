@@ -9,7 +9,7 @@ from __future__ import annotations
 import functools
 import sys
 
-SUBCOMMANDS = ("field", "simulate", "register", "run", "plot", "report", "compare", "info", "job")
+SUBCOMMANDS = ("field", "simulate", "register", "run", "explain", "plot", "report", "compare", "info", "job")
 
 
 @functools.cache  # 20 ms of argparse: built once in the job worker, which its jobs inherit

@@ -113,7 +113,9 @@ def run(args) -> int:
         raise InputError("--out exists and is not a folder", args.out)
 
     xyz2 = apply_pose(T_1_2, scan2.xyz)
-    columns, statistics = analyse_field(RegisteredPair(scan1.xyz, xyz2, T_1_2), settings)
+    # the sensors too: their scan patterns are part of each vector's sampling noise
+    pair = RegisteredPair(scan1.xyz, xyz2, T_1_2, scan1.sensor, scan2.sensor)
+    columns, statistics = analyse_field(pair, settings)
     summary = {
         "scan1": str(args.scan1),
         "scan2": str(args.scan2),

@@ -149,8 +149,19 @@ def add_parser(subparsers) -> None:
     p.add_argument("--figures", required=True, help="the study figures' folder")
     p.add_argument("--plotted", type=_json, required=True, help="the pairs whose stage figures are drawn (JSON list)")
     p.add_argument("--suggestions", nargs="+", required=True, help="each pair's suggestions.parquet at its last stage")
+    p.add_argument("--explain", nargs="*", default=[], help="the pairs' explain.json (those built)")
     p.add_argument("--out", required=True)
     p.set_defaults(func=_report)
+
+    p = jobs.add_parser("explain")
+    p.add_argument("--points", required=True, help="the pair's registered.parquet")
+    p.add_argument("--pair", required=True)
+    p.add_argument("--grid", type=_json, required=True)
+    p.add_argument("--suggest", type=_json, required=True, help="the config's suggest list (JSON; null: the defaults)")
+    p.add_argument("--settings", type=_json, required=True, help="the config's explain section (JSON)")
+    p.add_argument("--plots", type=_json, required=True)
+    p.add_argument("--out-dir", required=True)
+    p.set_defaults(func=_explain)
 
 
 def _scan(args: argparse.Namespace) -> None:
@@ -275,9 +286,17 @@ def _report(args: argparse.Namespace) -> None:
     from pathlib import Path
 
     from ..report import write_overview
+    from ..report.explain import read_explanations
     from ..study.tables import read_study_tables
 
     tables = read_study_tables(args.summary, args.study_dir)
     # .../{pair}/stages/{stage}/suggestions.parquet
     last_stages = {Path(p).parents[2].name: Path(p).parent for p in args.suggestions}
-    write_overview(args.config, tables, args.out, args.figures, set(args.plotted), last_stages)
+    explained = read_explanations(args.explain)
+    write_overview(args.config, tables, args.out, args.figures, set(args.plotted), last_stages, explained=explained)
+
+
+def _explain(args: argparse.Namespace) -> None:
+    from ..report.explain import explain_job
+
+    explain_job(args.points, args.pair, args.grid, args.suggest, args.settings, args.plots, args.out_dir)

@@ -26,12 +26,19 @@ def add_parser(subparsers) -> None:
         "per stage, the points, the removed points, the field, a summary row and, with rematch:, the pose error "
         "of rematching the stage (rematch.parquet), plus DIR/summary.parquet/.csv.",
     )
-    parser.add_argument("scan1", help="scan 1 (its sensor frame is the frame of the results)")
-    parser.add_argument("scan2", help="scan 2")
+    add_pair_arguments(parser)
     parser.add_argument("--config", required=True, help="study YAML: its grid, hypotheses and rematch section are used")
     parser.add_argument(
         "--out", required=True, metavar="DIR", help="output folder (new, empty, or from an earlier run)"
     )
+    parser.set_defaults(func=_run)
+
+
+def add_pair_arguments(parser) -> None:
+    """The two scans and how they are read and registered (``lidarfield run`` and ``explain``);
+    ``pair_inputs`` reads them back."""
+    parser.add_argument("scan1", help="scan 1 (its sensor frame is the frame of the results)")
+    parser.add_argument("scan2", help="scan 2")
     how = parser.add_mutually_exclusive_group()
     how.add_argument(
         "--register", metavar="METHOD", help="identity (default), truth, icp, icp_point_to_plane, gicp or ndt"
@@ -44,17 +51,21 @@ def add_parser(subparsers) -> None:
         help="ROS bag scans: take their poses from this topic (Odometry, PoseStamped, TF) for --register truth",
     )
     parser.add_argument("--pose-frame", metavar="FRAME", help="with --poses on a TF topic: the sensor's child frame")
-    parser.set_defaults(func=_run)
+
+
+def pair_inputs(args: argparse.Namespace) -> dict:
+    """The keyword arguments of ``add_pair_arguments``' options: register, transform, sensor, poses."""
+    poses = (
+        None if args.poses is None else {"topic": args.poses, **({"frame": args.pose_frame} if args.pose_frame else {})}
+    )
+    return {"register": args.register, "transform": args.transform, "sensor": args.sensor, "poses": poses}
 
 
 def _run(args: argparse.Namespace) -> int:
     from ..analysis.rematch import METHOD_COLUMNS, method_rows
     from ..study.run import run_pair
 
-    poses = (
-        None if args.poses is None else {"topic": args.poses, **({"frame": args.pose_frame} if args.pose_frame else {})}
-    )
-    rows = run_pair(args.scan1, args.scan2, args.config, args.out, args.register, args.transform, args.sensor, poses)
+    rows = run_pair(args.scan1, args.scan2, args.config, args.out, **pair_inputs(args))
     print(format_table(rows))
     for line in findings_lines(rows):
         print(line)

@@ -50,6 +50,9 @@ class DatasetSequence:
     scans: list[DatasetScan]
     sensor: str | dict | None = None  # the default sensor model (a preset name or a model dict)
     what: str = ""  # one line for messages: "KITTI odometry sequence 07"
+    # The dataset's sweeps are already motion-compensated (KITTI odometry, Argoverse 2): their
+    # scans record no motion (``Scan.sweep_motion`` zero), so ``deskew`` leaves them alone.
+    deskewed: bool = False
 
 
 def read_dataset(settings: dict, base_dir: str | Path = ".") -> DatasetSequence:

@@ -71,7 +71,9 @@ def read_index(settings: dict, base_dir: Path) -> DatasetSequence:
         for stamp, path in sweeps
     ]
     sensor = SENSOR if lidars == [frame] else None
-    return DatasetSequence(scans, sensor, f"Argoverse 2 log {root.name} ({' + '.join(lidars)} in the {frame} frame)")
+    return DatasetSequence(
+        scans, sensor, f"Argoverse 2 log {root.name} ({' + '.join(lidars)} in the {frame} frame)", deskewed=True
+    )
 
 
 def _sweeps(folder: Path) -> list[tuple[int, Path]]:

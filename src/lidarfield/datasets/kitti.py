@@ -55,6 +55,7 @@ def read_index(settings: dict, base_dir: Path) -> DatasetSequence:
         ],
         SENSOR,
         f"KITTI odometry sequence {sequence}" + ("" if poses is not None else " (no poses)"),
+        deskewed=True,
     )
 
 

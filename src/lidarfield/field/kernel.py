@@ -14,7 +14,16 @@ from __future__ import annotations
 import numpy as np
 
 from .grid import CARTESIAN_BITS, FieldSettings, Grid, SphericalGrid, relative_columns
-from .significance import COVARIANCE_ENTRIES, covariance_from_sums, vector_standard_error, z_score
+from .significance import (
+    COVARIANCE_ENTRIES,
+    ScanPattern,
+    covariance_from_sums,
+    pattern_covariance,
+    vector_covariance,
+    vector_standard_error,
+    whitened_vectors,
+    z_score,
+)
 from .surface import surface_normals
 
 GRID_COLUMNS = {"spherical": ("az_bin", "el_bin", "r_bin"), "cartesian": ("ix", "iy", "iz")}
@@ -22,6 +31,9 @@ VALUE_COLUMNS = ("n1", "n2", "x1", "y1", "z1", "x2", "y2", "z2", "u", "v", "w", 
 # The local surface of each valid voxel (``surface``): written after VALUE_COLUMNS, optional
 # when a field file is read (files written before them lack them).
 SURFACE_COLUMNS = ("nx", "ny", "nz", "planarity")
+# Each valid vector in units of its own sampling noise, C^-1/2 d (``significance``): what the
+# randomness tests read. Optional when a field file is read, like the surface columns.
+WHITENED_COLUMNS = ("wu", "wv", "ww")
 
 # A Cartesian bounding box with more cells than this (and than a few per point) falls back to
 # np.unique for compaction: the dense bincount arrays would cost more than the sort.
@@ -30,7 +42,7 @@ _MAX_DENSE_CELLS = 1 << 24
 
 def field_columns(grid: Grid) -> tuple[str, ...]:
     """The column names of the field Parquet for ``grid``, in order."""
-    return ("voxel", *GRID_COLUMNS[grid.kind], *VALUE_COLUMNS, *SURFACE_COLUMNS)
+    return ("voxel", *GRID_COLUMNS[grid.kind], *VALUE_COLUMNS, *SURFACE_COLUMNS, *WHITENED_COLUMNS)
 
 
 def discrepancy_field(
@@ -65,12 +77,14 @@ def field_from_voxel_ids(
     xyz2: np.ndarray,
     settings: FieldSettings,
     origin=(0.0, 0.0, 0.0),
+    patterns: tuple[ScanPattern | None, ScanPattern | None] = (None, None),
 ) -> dict[str, np.ndarray]:
     """The field from voxel ids already assigned by ``settings.grid`` (-1 = out of grid).
 
     For callers that bin once and aggregate several subsets (e.g. the survivors of each
     stage); same result as ``discrepancy_field`` when ``origin`` is the one the ids were
-    assigned about (it only orients the normals).
+    assigned about (it only orients the normals). ``patterns``: each cloud's lattice of rays,
+    when known (its sampling noise then includes the lattice's phase, see ``significance``).
     """
     grid = settings.grid
     ids1, ids2 = np.asarray(ids1, dtype=np.int64), np.asarray(ids2, dtype=np.int64)
@@ -80,7 +94,7 @@ def field_from_voxel_ids(
     else:
         dense = _cartesian_dense_index(ids1, ids2)
     zero = (0.0, 0.0, 0.0)
-    field = _aggregate(dense, relative_columns(xyz1, zero), relative_columns(xyz2, zero), zero, settings)
+    field = _aggregate(dense, relative_columns(xyz1, zero), relative_columns(xyz2, zero), zero, settings, patterns)
     if any(origin):
         _orient_normals(field, origin)
     return field
@@ -101,7 +115,7 @@ def _identity(occupied: np.ndarray) -> np.ndarray:
     return occupied
 
 
-def _aggregate(dense, columns1, columns2, origin, settings: FieldSettings) -> dict[str, np.ndarray]:
+def _aggregate(dense, columns1, columns2, origin, settings: FieldSettings, patterns=(None, None)) -> dict:
     """Counts, sums and means per dense index, then the field columns (see module docstring)."""
     index1, index2, n, to_voxel = dense
     counts1, sums1, products1 = _bin_sums(index1, columns1, n)
@@ -117,7 +131,9 @@ def _aggregate(dense, columns1, columns2, origin, settings: FieldSettings) -> di
     mean2 = _means(sums2, n2) + offset
     covariance1 = covariance_from_sums(n1, sums1, products1[:, occupied])
     covariance2 = covariance_from_sums(n2, sums2, products2[:, occupied])
-    return assemble_field(settings.grid, voxel, n1, n2, mean1, mean2, settings, covariance1, covariance2, origin)
+    return assemble_field(
+        settings.grid, voxel, n1, n2, mean1, mean2, settings, covariance1, covariance2, origin, patterns
+    )
 
 
 def assemble_field(
@@ -131,11 +147,12 @@ def assemble_field(
     covariance1: np.ndarray,
     covariance2: np.ndarray,
     origin=(0.0, 0.0, 0.0),
+    patterns: tuple[ScanPattern | None, ScanPattern | None] = (None, None),
 ) -> dict[str, np.ndarray]:
     """The field columns from per-voxel counts, (3, V) means and (6, V) covariances (rows in
-    ``significance.COVARIANCE_ENTRIES`` order): vectors, their se and z, validity, bins, and
-    the local surface (normal and planarity, ``surface``; normals towards ``origin``) of each
-    valid voxel."""
+    ``significance.COVARIANCE_ENTRIES`` order): vectors, their se, z and whitened vectors
+    (with each cloud's scan ``patterns`` where given), validity, bins, and the local surface
+    (normal and planarity, ``surface``; normals towards ``origin``) of each valid voxel."""
     valid = (n1 >= settings.min_points) & (n2 >= settings.min_points)
     uvw = mean2 - mean1
     if settings.max_component_m is not None:
@@ -149,8 +166,6 @@ def assemble_field(
             columns[f"{axis}{k}"] = mean[i]
     columns["u"], columns["v"], columns["w"] = uvw
     columns["magnitude"] = np.sqrt(np.einsum("ij,ij->j", uvw, uvw))
-    columns["se"] = vector_standard_error(uvw, n1, covariance1, n2, covariance2)
-    columns["z"] = z_score(columns["magnitude"], columns["se"])
     columns["valid"] = valid
     # Normals of the valid voxels only: an eigen-decomposition per occupied voxel cost a fine
     # Cartesian grid more than the rest of the kernel.
@@ -160,9 +175,19 @@ def assemble_field(
     normal[:, valid], planarity[valid] = surface_normals(
         n1[valid], covariance1[:, valid], n2[valid], covariance2[:, valid], centre
     )
+    lattices = []
+    for pattern, mean in zip(patterns, (mean1, mean2)):
+        if pattern is not None:
+            lattice = np.zeros((6, len(valid)))
+            lattice[:, valid] = pattern_covariance(mean[:, valid], normal[:, valid], pattern)
+            lattices.append(lattice)
+    combined = vector_covariance(n1, covariance1, n2, covariance2, tuple(lattices))
+    columns["se"] = vector_standard_error(uvw, combined)
+    columns["z"] = z_score(columns["magnitude"], columns["se"])
     columns["nx"], columns["ny"], columns["nz"] = normal
     columns["planarity"] = planarity
-    return columns
+    columns["wu"], columns["wv"], columns["ww"] = whitened_vectors(uvw, combined)
+    return {name: columns[name] for name in field_columns(grid)}
 
 
 def _bin_sums(index: np.ndarray, columns: tuple[np.ndarray, ...], n: int):

@@ -98,6 +98,8 @@ def field_from_voxel_ids_reference(
         columns[name] = table[name].to_numpy()
     for name in ("nx", "ny", "nz", "planarity"):
         columns[name] = table[name].to_numpy()
+    whitened = [_whitened(row, *covariances) if row.valid else (np.nan,) * 3 for row in table.itertuples()]
+    columns["wu"], columns["wv"], columns["ww"] = np.array(whitened, dtype=np.float64).reshape(-1, 3).T
     return columns
 
 
@@ -134,17 +136,35 @@ def _covariances(frame: pd.DataFrame) -> dict[int, np.ndarray]:
     return dict(zip(covariance.index, covariance.to_numpy().reshape(-1, 3, 3)))
 
 
-def _standard_error(row, covariance1: dict, covariance2: dict) -> float:
-    """se of one voxel's vector along its direction: sqrt(d^T (S1/n1 + S2/n2) d) / |d|, with a
-    cloud of fewer than SPREAD_MIN_POINTS points borrowing the other's S, plus the floor."""
-    d = np.array([row.u, row.v, row.w])
+def _vector_covariance(row, covariance1: dict, covariance2: dict) -> np.ndarray | None:
+    """S1/n1 + S2/n2 of one voxel, a cloud of fewer than SPREAD_MIN_POINTS points borrowing the
+    other's S, plus the floor on the diagonal; None where neither cloud has enough points."""
     own = [row.n1 >= SPREAD_MIN_POINTS, row.n2 >= SPREAD_MIN_POINTS]
-    if not np.all(np.isfinite(d)) or not any(own):
-        return np.nan
+    if not any(own):
+        return None
     spreads = [c[row.Index] if ok else None for c, ok in zip((covariance1, covariance2), own)]
     spread1 = spreads[0] if own[0] else spreads[1]
     spread2 = spreads[1] if own[1] else spreads[0]
-    combined = spread1 / row.n1 + spread2 / row.n2
+    floor = SPREAD_FLOOR_M**2 * (1 / row.n1 + 1 / row.n2)
+    return spread1 / row.n1 + spread2 / row.n2 + floor * np.eye(3)
+
+
+def _standard_error(row, covariance1: dict, covariance2: dict) -> float:
+    """se of one voxel's vector along its direction: sqrt(d^T C d) / |d|."""
+    d = np.array([row.u, row.v, row.w])
+    combined = _vector_covariance(row, covariance1, covariance2)
+    if not np.all(np.isfinite(d)) or combined is None:
+        return np.nan
     length = np.linalg.norm(d)
     along = d @ combined @ d / length**2 if length > 0 else np.trace(combined) / 3
-    return float(np.sqrt(max(along, 0.0) + SPREAD_FLOOR_M**2 * (1 / row.n1 + 1 / row.n2)))
+    return float(np.sqrt(max(along, 0.0)))
+
+
+def _whitened(row, covariance1: dict, covariance2: dict) -> tuple[float, float, float]:
+    """C^-1/2 d of one voxel (the symmetric root)."""
+    d = np.array([row.u, row.v, row.w])
+    combined = _vector_covariance(row, covariance1, covariance2)
+    if not np.all(np.isfinite(d)) or combined is None:
+        return (np.nan,) * 3
+    values, vectors = np.linalg.eigh(combined)
+    return tuple(vectors @ ((vectors.T @ d) / np.sqrt(values)))

@@ -16,16 +16,38 @@ valid voxel never needs this. Every per-axis variance has a floor of ``SPREAD_FL
 that a noise-free simulation (points exactly on a plane, a vector exactly in it) or rounding
 in the sums cannot give se = 0.
 
-What this does not know: a lidar's points in a voxel are not independent draws (the scan
-pattern is regular, and the two sensors see a surface from different places), so se measures
-sampling spread only; a real discrepancy with a consistent cause has z far above any threshold.
+The scan pattern. A lidar's points in a voxel are not independent draws: they sit on the
+sensor's lattice of rays (one azimuth step by one beam spacing), and where that lattice falls on
+the surface (its phase) decides which points the voxel holds. Two samplings of the same surface
+with different phases have means that differ by up to a lattice cell along the surface, whatever
+the number of points (measured on the simulated intersection, two VLP-16 scans from the same
+place: single-ring voxels whose means differ by 1-2 cm vertically along a wall, where S/n says
+2 mm). So, given each cloud's ``ScanPattern`` (its sensor's origin, axis and angular steps),
+C gains that cloud's **pattern covariance**: the lattice phase uniform over one cell, the
+cell's two sides (r cos(el) d_az along the azimuth, r d_el along the elevation, at the cloud's
+mean range r) carried onto the voxel's surface along the ray (longer on a surface seen
+obliquely), variance side^2 / 12 along each. It lies in the surface's plane, so the part of d
+along the normal, which a misregistration or a range error moves, keeps its own standard error.
+
+``whitened_vectors`` gives w = C^-1/2 d (symmetric root): under the null each w has mean 0 and
+covariance at most I (C is an upper estimate), which is what the randomness tests assume.
+
+What this still does not know: voxels mixing surfaces (a wall's foot on the ground) whose mix
+changes with the sensor's place (measured: two VLP-16 scans 5 cm or more apart). There the mean
+moves off the surface too, and the verdict can say ``patterned`` for the sampling itself.
 """
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 
 SPREAD_MIN_POINTS = 5
+# Rays meeting a surface at a grazing angle: the lattice cell's stretch along the surface is
+# capped at 1 / GRAZING_MIN times its side (84 deg incidence); beyond that the voxel's in-plane
+# mean says nothing either way.
+GRAZING_MIN = 0.1
 SPREAD_FLOOR_M = 0.001
 # The order of the six distinct entries of a 3x3 covariance, as rows of a (6, V) array.
 COVARIANCE_ENTRIES = ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))
@@ -48,17 +70,95 @@ def covariance_from_sums(counts: np.ndarray, sums: np.ndarray, products: np.ndar
     return covariance
 
 
-def vector_standard_error(
-    uvw: np.ndarray, n1: np.ndarray, covariance1: np.ndarray, n2: np.ndarray, covariance2: np.ndarray
+class ScanPattern(NamedTuple):
+    """Where a cloud's lattice of rays comes from, in the field's frame: the sensor's origin (3,)
+    and rotation axis (3,, unit), its azimuth step and its beam elevations (degrees)."""
+
+    origin: np.ndarray
+    axis: np.ndarray
+    azimuth_step_deg: float
+    elevation_deg: np.ndarray
+
+
+def beam_spacing_deg(elevation_deg: np.ndarray, at_deg: np.ndarray) -> np.ndarray:
+    """The gap between neighbouring beams at elevations ``at_deg`` (interpolated between the
+    gaps' centres; the nearest gap beyond the outermost beams); 0 for a single beam."""
+    beams = np.sort(np.asarray(elevation_deg, dtype=np.float64))
+    if len(beams) < 2:
+        return np.zeros_like(at_deg)
+    return np.interp(at_deg, 0.5 * (beams[1:] + beams[:-1]), np.diff(beams))
+
+
+def pattern_covariance(mean: np.ndarray, normal: np.ndarray, pattern: ScanPattern) -> np.ndarray:
+    """(6, V) covariance of a cloud's voxel means (3, V) from the phase of its lattice of rays,
+    carried onto the surfaces with normals (3, V) (NaN normal: no surface, the cell's sides as
+    they are, across the ray). See the module docstring."""
+    relative = mean - np.asarray(pattern.origin, dtype=np.float64).reshape(3, 1)
+    r = np.linalg.norm(relative, axis=0)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        ray = relative / r
+        axis = np.asarray(pattern.axis, dtype=np.float64).reshape(3, 1)
+        across = np.cross(axis, ray, axis=0)  # along the azimuth: |across| = cos(elevation)
+        cos_el = np.linalg.norm(across, axis=0)
+        along_azimuth = across / cos_el
+        along_elevation = np.cross(ray, along_azimuth, axis=0)
+        elevation = np.degrees(np.arctan2(np.einsum("ij,ij->j", axis, ray), cos_el))
+        has_surface = np.all(np.isfinite(normal), axis=0)
+        surface = np.where(has_surface, normal, 0.0)
+        facing = np.einsum("ij,ij->j", ray, surface)
+        facing = np.where(np.abs(facing) < GRAZING_MIN, np.copysign(GRAZING_MIN, facing), facing)
+        sides = []
+        for tangent, side_m in (
+            (along_azimuth, r * cos_el * np.radians(pattern.azimuth_step_deg)),
+            (along_elevation, r * np.radians(beam_spacing_deg(pattern.elevation_deg, elevation))),
+        ):
+            # A ray turned by the angle moves its hit point along the surface: t - (t.n / ray.n) ray.
+            onto = tangent - np.where(has_surface, np.einsum("ij,ij->j", tangent, surface) / facing, 0.0) * ray
+            sides.append(np.nan_to_num(onto * side_m))
+    return np.stack([sum(side[a] * side[b] for side in sides) / 12.0 for a, b in COVARIANCE_ENTRIES])
+
+
+def vector_covariance(
+    n1: np.ndarray, covariance1: np.ndarray, n2: np.ndarray, covariance2: np.ndarray, patterns: tuple = ()
 ) -> np.ndarray:
-    """se (V,) of each vector (3, V) along its own direction; NaN where it is undefined (a NaN
-    vector, or both counts below ``SPREAD_MIN_POINTS``). See the module docstring."""
+    """(6, V) covariance C of each vector: S1/n1 + S2/n2 (a cloud below ``SPREAD_MIN_POINTS``
+    borrows the other's spread), the per-axis floor, and the ``patterns``' covariances ((6, V)
+    each, ``pattern_covariance``). NaN where both counts are below ``SPREAD_MIN_POINTS``."""
     n1, n2 = n1.astype(np.float64), n2.astype(np.float64)
     own1, own2 = n1 >= SPREAD_MIN_POINTS, n2 >= SPREAD_MIN_POINTS
     spread1 = np.where(own1, covariance1, covariance2)
     spread2 = np.where(own2, covariance2, covariance1)
     with np.errstate(invalid="ignore", divide="ignore"):
         combined = spread1 / n1 + spread2 / n2
+        combined[:3] += SPREAD_FLOOR_M**2 * (1.0 / n1 + 1.0 / n2)
+    for pattern in patterns:
+        combined = combined + pattern
+    combined[:, ~(own1 | own2)] = np.nan
+    return combined
+
+
+def whitened_vectors(uvw: np.ndarray, combined: np.ndarray) -> np.ndarray:
+    """C^-1/2 d (3, V) of vectors (3, V) with covariances (6, V, ``vector_covariance``); NaN
+    where either is."""
+    out = np.full(uvw.shape, np.nan)
+    # Only where both are finite (a fine Cartesian grid has far more voxels than valid ones).
+    good = np.flatnonzero(np.all(np.isfinite(uvw), axis=0) & np.all(np.isfinite(combined), axis=0))
+    if len(good):
+        matrix = np.empty((len(good), 3, 3))
+        for row, (a, b) in enumerate(COVARIANCE_ENTRIES):
+            matrix[:, a, b] = matrix[:, b, a] = combined[row, good]
+        values, vectors = np.linalg.eigh(matrix)
+        # C^-1/2 d = V diag(1 / sqrt(l)) V^T d, as matrix products (einsum's loops cost 4x more)
+        along = (vectors.transpose(0, 2, 1) @ uvw[:, good].T[:, :, None])[:, :, 0]
+        along /= np.sqrt(np.maximum(values, 1e-30))
+        out[:, good] = (vectors @ along[:, :, None])[:, :, 0].T
+    return out
+
+
+def vector_standard_error(uvw: np.ndarray, combined: np.ndarray) -> np.ndarray:
+    """se (V,) of each vector (3, V) along its own direction from its covariance (6, V,
+    ``vector_covariance``); NaN where it is undefined. See the module docstring."""
+    with np.errstate(invalid="ignore", divide="ignore"):
         length2 = np.einsum("ij,ij->j", uvw, uvw)
         # d^T C d / |d|^2 from the six distinct entries (off-diagonal ones count twice).
         quadratic = np.zeros(uvw.shape[1])
@@ -67,9 +167,8 @@ def vector_standard_error(
         along = quadratic / length2
         # A zero vector has no direction: its se is the mean of the three axes' variances.
         along = np.where(length2 > 0, along, (combined[0] + combined[1] + combined[2]) / 3.0)
-        floor = SPREAD_FLOOR_M**2 * (1.0 / n1 + 1.0 / n2)
-        se = np.sqrt(np.maximum(along, 0.0) + floor)
-    se[~(own1 | own2) | ~np.isfinite(length2)] = np.nan
+        se = np.sqrt(np.maximum(along, 0.0))
+    se[~np.isfinite(length2)] = np.nan
     return se
 
 

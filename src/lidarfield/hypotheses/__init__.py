@@ -22,7 +22,18 @@ import numpy as np
 
 from ..errors import HypothesisError
 from ..pair import RegisteredPair
-from . import crop, deskew, ego_vehicle, field_of_view, outliers, plugin, range_calibration, realign, shadow
+from . import (
+    crop,
+    deskew,
+    ego_vehicle,
+    field_of_view,
+    moving_objects,
+    outliers,
+    plugin,
+    range_calibration,
+    realign,
+    shadow,
+)
 from .outcome import Outcome, checked_outcome
 from .params import describe, params_to_dict, parse_params
 
@@ -49,6 +60,7 @@ BUILTINS: dict[str, Hypothesis] = {
         _builtin(shadow, "shadow"),
         _builtin(crop, "crop"),
         _builtin(outliers, "outliers"),
+        _builtin(moving_objects, "moving_objects"),
         _builtin(realign, "realign"),
         _builtin(range_calibration, "range_calibration"),
         _builtin(deskew, "deskew"),

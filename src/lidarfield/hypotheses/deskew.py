@@ -19,11 +19,27 @@ point's azimuth about its own sensor: the sweep starts at ``start_azimuth_deg`` 
 ``counter-clockwise`` (the simulator's sense, seen from above) or ``clockwise`` (a Velodyne's),
 once per ``1 / rotation_hz`` of the sensor model.
 
-The motion: ``velocity_mps`` and ``angular_velocity_rps`` as given (the same for every chosen
-cloud: de-skew two scans with different motions in two stages). Deriving it from the pair (the
-constant velocity ``T_1_2`` over the two scans' time difference) needs both scans' stamps, which
-a registered pair does not carry: without the settings it is an error (and as a default
-candidate of "what to try next", skipped).
+Each cloud's motion comes from what is known of its scan, in this order (the first that is
+known; ``motion_source`` in the record says which, and the parameter of that name can ask for
+one of them only):
+
+1. ``record``: the scan's own record of its motion during its sweep (``Scan.sweep_motion``,
+   carried by the pair: the simulator writes it; zero for a scan taken still or without rolling
+   shutter, whose points then stay where they are); else ``neighbours``: the constant velocity
+   between the poses of the scan's neighbours in its sequence, which a study puts in that
+   record's place for a dataset sequence with poses and stamps (``source: neighbours``);
+2. ``settings``: ``velocity_mps`` and ``angular_velocity_rps`` as given (the same for every
+   chosen cloud without a record);
+3. ``pair``: the constant velocity between the pair's two scans, ``T_1_2`` over the difference
+   of their stamps (both scans must record ``stamp_s``, as a bag's scans and simulated ones do),
+   as a constant twist (``poses.constant_twist``): the same velocities in each scan's frame.
+   Right for consecutive scans of one drive; wrong when one of them was taken still (a record
+   or the settings say so).
+
+Not used (yet): a bag's odometry twist.
+Data already de-skewed (KITTI odometry, Argoverse 2 as datasets) records a still sweep on its
+scans, so ``deskew`` moves nothing there unless asked (``motion_source: settings``). A stage
+after ``deskew`` still carries the scans' records: do not de-skew the same cloud twice.
 
 What it records (the stage's ``correction``): ``reference``, and per cloud (``cloud1``,
 ``cloud2``) the ``velocity_mps`` and ``angular_velocity_rps`` used, ``motion_source``,
@@ -40,6 +56,7 @@ import numpy as np
 
 from ..errors import HypothesisError
 from ..pair import RegisteredPair
+from ..poses import constant_twist
 from ..sensors.models import SensorModel
 from .outcome import Outcome
 from .params import doc
@@ -64,6 +81,13 @@ class Params:
     angular_velocity_rps: tuple[float, float, float] | None = field(
         default=None,
         metadata=doc("the scan's angular velocity over its sweep, rad/s about its own sensor axes (none: 0)"),
+    )
+    motion_source: str = field(
+        default="auto",
+        metadata=doc(
+            "where each scan's motion comes from: auto (its record, else the settings, else the pair's stamps), "
+            "record, settings or pair"
+        ),
     )
     time_attribute: str = field(
         default="time", metadata=doc("the per-point time attribute; without it, times come from azimuth")
@@ -92,6 +116,7 @@ class Params:
             ("time_unit", self.time_unit, ("s", "ns")),
             ("time_zero", self.time_zero, ("start", "end", "absolute")),
             ("rotation", self.rotation, ("counter-clockwise", "clockwise")),
+            ("motion_source", self.motion_source, ("auto", "record", "settings", "pair")),
         ):
             if value not in allowed:
                 raise ValueError(f"need {name} {' or '.join(allowed)}, got {value!r}")
@@ -104,16 +129,10 @@ class Params:
 def deskew(pair: RegisteredPair, params: Params) -> Outcome:
     """The chosen clouds moved to their scans' reference time; nothing removed."""
     clouds = (1, 2) if params.cloud == "both" else (params.cloud,)
-    if params.velocity_mps is None and params.angular_velocity_rps is None:
-        raise HypothesisError(
-            f"{NAME}: no motion for cloud {' and '.join(map(str, clouds))}: give velocity_mps (and "
-            "angular_velocity_rps); the registered pair carries no scan stamps to derive it from T_1_2"
-        )
-    v = np.asarray(params.velocity_mps or (0.0, 0.0, 0.0), dtype=np.float64)
-    w = np.asarray(params.angular_velocity_rps or (0.0, 0.0, 0.0), dtype=np.float64)
     out = {"keep1": np.ones(len(pair.xyz1), dtype=bool), "keep2": np.ones(len(pair.xyz2), dtype=bool)}
     fitted: dict = {"reference": params.reference, "method": "constant_velocity"}
     for cloud in clouds:
+        v, w, motion_source = sweep_motion(pair, cloud, params)
         xyz, attributes, sensor = (
             (pair.xyz1, pair.attributes1, pair.sensor1) if cloud == 1 else (pair.xyz2, pair.attributes2, pair.sensor2)
         )
@@ -122,17 +141,57 @@ def deskew(pair: RegisteredPair, params: Params) -> Outcome:
         s, time_source = _times_from_reference(local, attributes, sensor, params, cloud)
         moved = _moved(local, s, v, w)
         displacement = np.linalg.norm(moved - local, axis=1)
-        out[f"xyz{cloud}"] = moved @ pose[:3, :3].T + pose[:3, 3]
+        if np.any(v) or np.any(w):  # a still scan stays exactly where it is (no round trip of frames)
+            out[f"xyz{cloud}"] = moved @ pose[:3, :3].T + pose[:3, 3]
         fitted[f"cloud{cloud}"] = {
             "velocity_mps": v.tolist(),
             "angular_velocity_rps": w.tolist(),
-            "motion_source": "settings",
+            "motion_source": motion_source,
             "time_source": time_source,
             "time_min_s": float(s.min()) if len(s) else 0.0,
             "time_max_s": float(s.max()) if len(s) else 0.0,
             "max_displacement_m": float(displacement.max()) if len(s) else 0.0,
         }
     return Outcome(**out, fitted=fitted)
+
+
+def sweep_motion(pair: RegisteredPair, cloud: int, params: Params) -> tuple[np.ndarray, np.ndarray, str]:
+    """Scan ``cloud``'s linear (m/s) and angular (rad/s) velocity in its own sensor frame, and
+    where they came from: its record, the settings, or the pair's two stamps (module docstring)."""
+    wanted = params.motion_source
+    record = pair.sweep_motion(cloud)
+    if wanted in ("auto", "record") and record is not None:
+        return (
+            np.asarray(record["velocity_mps"], dtype=np.float64),
+            np.asarray(record["angular_velocity_rps"], dtype=np.float64),
+            record.get("source", "record"),
+        )
+    given = params.velocity_mps is not None or params.angular_velocity_rps is not None
+    if wanted in ("auto", "settings") and given:
+        return (
+            np.asarray(params.velocity_mps or (0.0, 0.0, 0.0), dtype=np.float64),
+            np.asarray(params.angular_velocity_rps or (0.0, 0.0, 0.0), dtype=np.float64),
+            "settings",
+        )
+    stamp1, stamp2 = pair.stamp(1), pair.stamp(2)
+    if wanted not in ("auto", "pair") or stamp1 is None or stamp2 is None or stamp1 == stamp2:
+        missing = {
+            "record": "its scan recorded none",
+            "settings": "no velocity_mps nor angular_velocity_rps is given",
+            "pair": "the pair's scans "
+            + ("have one stamp" if stamp1 is not None and stamp1 == stamp2 else "do not both record a stamp")
+            + " to derive it from T_1_2",
+        }
+        reasons = list(missing.values()) if wanted == "auto" else [missing[wanted]]
+        raise HypothesisError(
+            f"{NAME}: no motion for cloud {cloud} (motion_source {wanted}): "
+            + ", ".join(reasons[:-1])
+            + (", and " if len(reasons) > 1 else "")
+            + reasons[-1]
+        )
+    # A constant twist: the same velocities in each scan's own frame.
+    v, w = constant_twist(pair.T_1_2, stamp2 - stamp1)
+    return v, w, "pair"
 
 
 def _moved(local: np.ndarray, s: np.ndarray, v: np.ndarray, w: np.ndarray) -> np.ndarray:

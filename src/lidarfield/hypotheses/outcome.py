@@ -5,8 +5,10 @@ A hypothesis (built-in or plugin) returns either
 - ``(keep1, keep2)``: one boolean keep-mask per cloud (a *removing* hypothesis), or
 - a mapping (or an :class:`Outcome`) with the keys ``keep1``, ``keep2`` (optional: all kept),
   ``xyz1``, ``xyz2`` (optional: the cloud is not moved), ``T_1_2`` (optional: sensor 2's
-  corrected pose in frame 1) and ``fitted`` (optional: a JSON-able mapping of what was fitted
-  and applied). A hypothesis that returns a corrected cloud or pose is a *correcting* one.
+  corrected pose in frame 1), ``fitted`` (optional: a JSON-able mapping of what was fitted
+  and applied) and ``reason1``, ``reason2`` (optional: one string per point of the cloud, why
+  it was removed; read for the removed points only, written in the removed file's ``reason``
+  column). A hypothesis that returns a corrected cloud or pose is a *correcting* one.
 
 ``xyz1`` / ``xyz2`` are the corrected coordinates of **every** point of the cloud it was given,
 ``(N, 3)`` in frame 1, row for row (so a plugin can write ``pair.xyz2 + shift``); the stage
@@ -26,7 +28,7 @@ import numpy as np
 
 from ..errors import HypothesisError
 
-KEYS = ("keep1", "keep2", "xyz1", "xyz2", "T_1_2", "fitted")
+KEYS = ("keep1", "keep2", "xyz1", "xyz2", "T_1_2", "fitted", "reason1", "reason2")
 
 
 @dataclass(frozen=True)
@@ -39,6 +41,8 @@ class Outcome:
     xyz2: np.ndarray | None = None  # (N2, 3) corrected cloud 2, every row; None: not moved
     T_1_2: np.ndarray | None = None  # corrected pose of sensor 2 in frame 1; None: unchanged
     fitted: dict = field(default_factory=dict)  # what was fitted and applied (JSON-able)
+    reason1: np.ndarray | None = None  # (N1,) strings: why each removed point of cloud 1 went; None: not said
+    reason2: np.ndarray | None = None
 
     def __iter__(self):
         return iter((self.keep1, self.keep2))
@@ -96,6 +100,7 @@ def checked_outcome(result, lengths: tuple[int, int], what: str, path: str | Pat
             if bad.any():
                 fail(f"xyz{cloud} has {np.count_nonzero(bad)} row(s) not finite (first: row {np.flatnonzero(bad)[0]})")
         values[f"xyz{cloud}"] = xyz
+        values[f"reason{cloud}"] = _checked_reasons(raw.get(f"reason{cloud}"), n, f"reason{cloud}", fail)
     T = raw.get("T_1_2")
     if T is not None:
         try:
@@ -114,6 +119,31 @@ def checked_outcome(result, lengths: tuple[int, int], what: str, path: str | Pat
         fail(f"fitted must be JSON-able with finite numbers ({e})")
     values["fitted"] = fitted
     return Outcome(**values)
+
+
+def _checked_reasons(reasons, n: int, name: str, fail) -> np.ndarray | None:
+    """One string per point of a cloud (None: no reasons given), else ``fail`` says what is wrong."""
+    if reasons is None:
+        return None
+    values = np.asarray(reasons)
+    strings = values.dtype.kind == "U" or (
+        values.dtype.kind == "O" and all(isinstance(v, str) for v in values.ravel().tolist())
+    )
+    if values.shape != (n,) or not strings:
+        fail(f"{name} must be {n} strings, one per point of the cloud; got shape {values.shape}, dtype {values.dtype}")
+    return values.astype(str)
+
+
+def reasons_of_removed(outcome: Outcome) -> np.ndarray | None:
+    """Why each removed point went, cloud 1's then cloud 2's ('' where not said); None when the
+    outcome says nothing."""
+    if outcome.reason1 is None and outcome.reason2 is None:
+        return None
+    parts = []
+    for keep, reasons in ((outcome.keep1, outcome.reason1), (outcome.keep2, outcome.reason2)):
+        removed = np.count_nonzero(~keep)
+        parts.append(np.full(removed, "") if reasons is None else reasons[~keep])
+    return np.concatenate(parts)
 
 
 def _json_default(value):

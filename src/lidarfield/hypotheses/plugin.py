@@ -107,4 +107,5 @@ def _read_only(pair: RegisteredPair) -> RegisteredPair:
         {k: frozen(v) for k, v in pair.attributes2.items()},
         dict(pair.registration),
         dict(pair.sensor_fit),
+        dict(pair.sweeps),
     )

@@ -1,9 +1,10 @@
 """``realign``: re-estimate the rigid transform of cloud 2 onto cloud 1 from the survivors, and apply it.
 
 A correcting hypothesis: it removes nothing, and moves cloud 2. Point-to-plane ICP (Open3D, as
-the registration uses it), source = cloud 2, target = cloud 1, both voxel-downsampled, normals
-of cloud 1 from its neighbours within ``normal_radius_m``, starting from the identity (the
-pair is already registered: what is fitted is the correction). The fitted transform ``T``
+the registration uses it), source = cloud 2, target = cloud 1, on all their points (or
+voxel-downsampled, with ``voxel_m``), normals of cloud 1 from its neighbours within
+``normal_radius_m``, starting from the identity (the pair is already registered: what is fitted
+is the correction). The fitted transform ``T``
 (a point ``p`` of cloud 2 becomes ``R p + t``) is applied to every point of cloud 2 and to
 sensor 2's pose (``T_1_2`` becomes ``T @ T_1_2``), so later stages and figures see the
 corrected pose. ``T``'s rotation vector and translation are rounded to 1e-9 (rad, m), so that a
@@ -20,6 +21,14 @@ at ``T``: with one residual ``r_i = n_i . (T s_i - q_i)`` per correspondence and
 covariance is ``sigma^2 (J^T J)^-1`` with ``sigma^2 = sum r_i^2 / (m - 6)``, propagated to ``t``
 to first order. They treat the residuals as independent, which neighbouring points of a scan
 are not quite: read them as a lower bound.
+
+Why not downsampled by default: a downsampling voxel's centroid moves with which of the scan's
+points fall in it (the same partial-volume effect as the field's means), and that biases the
+fit. Measured on the simulated intersection (two VLP-16 samplings, 2 cm noise, 0.5 deg of yaw
+added): with 0.2 m voxels the fit stops 0.005 deg and 0.9 mm from the truth (four of its own
+standard errors; the field after it is ``patterned``), with 0.1 m voxels 0.003 deg and 1.4 mm,
+on all points 0.0015 deg and 0.4 mm from either start (the field after it ``random``), for
+0.06 s instead of 0.02 s.
 """
 
 from __future__ import annotations
@@ -43,7 +52,7 @@ class Params:
         default=1.0, metadata=doc("ICP ignores pairs of points farther apart than this (m)")
     )
     voxel_m: float = field(
-        default=0.2, metadata=doc("both clouds are voxel-downsampled to this size first (m; 0: not)")
+        default=0.0, metadata=doc("both clouds are voxel-downsampled to this size first (m; 0: not, the default)")
     )
     max_iterations: int = field(default=50, metadata=doc("ICP iterations at most"))
     normal_radius_m: float = field(
@@ -75,8 +84,9 @@ def realign(pair: RegisteredPair, params: Params) -> Outcome:
     for cloud, points in ((2, source), (1, target)):
         if len(points.points) < MIN_POINTS:
             raise HypothesisError(
-                f"realign: too few points: cloud {cloud} has {len(points.points)} after {params.voxel_m} m voxels, "
-                f"it needs at least {MIN_POINTS}"
+                f"realign: too few points: cloud {cloud} has {len(points.points)}"
+                + (f" after {params.voxel_m} m voxels" if params.voxel_m else "")
+                + f", it needs at least {MIN_POINTS}"
             )
     target.estimate_normals(
         o3d.geometry.KDTreeSearchParamHybrid(radius=params.normal_radius_m, max_nn=params.normal_max_nn)

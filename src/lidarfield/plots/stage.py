@@ -20,7 +20,7 @@ from .field_views import magnified_tips, plot_field_perspective, plot_field_top
 from .interactive import plot_interactive
 from .removed import plot_removed
 from .settings import PlotSettings, plot_settings
-from .stage_data import background, load_stage, removed_xyz
+from .stage_data import StageData, background, load_stage, removed_xyz
 from .style import magnitude_norm, resolve_magnification, view_limits
 from .top_voxels import plot_top_voxels
 
@@ -51,12 +51,22 @@ def plot_stage(
     a shared plotly.js file for the 3-D view (embedded when None). Magnification "auto" fits
     the stage's figures to its own largest vector and ``before_after`` to the larger of both.
     """
+    stage = load_stage(stage_dir)
+    prev = load_stage(prev_stage_dir) if prev_stage_dir is not None else None
+    return draw_stage(stage, prev, out_dir, settings, plotly_js)
+
+
+def draw_stage(
+    stage: StageData,
+    prev: StageData | None,
+    out_dir: str | Path,
+    settings: dict | None = None,
+    plotly_js: str | Path | None = None,
+) -> list[Path]:
+    """``plot_stage`` of a stage (and the one before it) already in memory."""
     start = time.perf_counter()
     s = plot_settings(settings)
     out_dir = Path(out_dir)
-    stage = load_stage(stage_dir)
-    prev = load_stage(prev_stage_dir) if prev_stage_dir is not None else None
-
     reference = prev if prev is not None else stage
     scene = np.vstack(
         [background(reference.pair, s.background_points), removed_xyz(stage.removed, 1), removed_xyz(stage.removed, 2)]

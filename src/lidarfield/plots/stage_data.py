@@ -86,7 +86,11 @@ class StageData:
 
 def read_vector_field(path: str | Path) -> VectorField:
     """The valid rows of a field Parquet file (contract columns required)."""
-    columns, meta = read_table(path, required=FIELD_COLUMNS)
+    return vector_field(*read_table(path, required=FIELD_COLUMNS))
+
+
+def vector_field(columns: dict[str, np.ndarray], meta: dict) -> VectorField:
+    """The valid rows of a field's columns (those of ``field.parquet``) and its metadata."""
     valid = np.asarray(columns["valid"], dtype=bool) & np.isfinite(columns["magnitude"])
     columns = {k: np.asarray(v)[valid] for k, v in columns.items()}
     tails = np.column_stack([columns["x1"], columns["y1"], columns["z1"]]).astype(np.float64)

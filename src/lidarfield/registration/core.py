@@ -65,7 +65,17 @@ def register_pair(
         dict(scan2.attributes),
         record,
         {"1": sensor_fit(scan1.xyz, scan1.sensor), "2": sensor_fit(scan2.xyz, scan2.sensor)},
+        {str(k): sweep_record(scan) for k, scan in ((1, scan1), (2, scan2)) if sweep_record(scan)},
     )
+
+
+def sweep_record(scan: Scan) -> dict:
+    """What a scan recorded of when and how it was taken (``RegisteredPair.sweeps``)."""
+    return {
+        key: value
+        for key, value in (("stamp_s", scan.stamp_s), ("sweep_motion", scan.sweep_motion))
+        if value is not None
+    }
 
 
 def _reference(scan1: Scan, scan2: Scan) -> np.ndarray | None:

@@ -16,6 +16,7 @@ import logging
 from pathlib import Path
 
 from ..study.tables import compute_study_tables
+from .explain import RECORD_FILE, read_explanations
 from .overview import PAIR_PAGE, write_overview
 from .pair_page import write_pair_page
 
@@ -59,4 +60,8 @@ def write_report(
         )
     tables = compute_study_tables(pairs, summary_rows)
     last_stages = {name: dirs[-1] for name, dirs in pairs.items() if dirs}
-    return write_overview(study, tables, out_html, stage_figures=plotted, last_stages=last_stages, max_mb=max_mb)
+    records = [dirs[0].parent.parent / "explain" / RECORD_FILE for dirs in pairs.values() if dirs]
+    explained = read_explanations([path for path in records if path.is_file()])
+    return write_overview(
+        study, tables, out_html, stage_figures=plotted, last_stages=last_stages, max_mb=max_mb, explained=explained
+    )

@@ -22,6 +22,7 @@ from ..io.atomic import write_text
 from ..plots.study import StudyFigure, study_figures
 from ..study.tables import StudyTables
 from .budget import MB, budget_mb, utf8_len
+from .explain import study_explain_parts
 from .page import esc, image, image_file, link, page, table
 from .pair_page import DPI, findings_parts, registration_problem
 from .rematch import study_rematch_parts
@@ -204,6 +205,8 @@ def overview_parts(
     figures_dir: Path | None,
     stage_figures: set[str],
     last_stages: dict[str, Path],
+    explained: list[dict] = (),
+    out_dir: Path = Path("."),
 ) -> list[str]:
     rows = tables.summary.to_dict("records")
     return [
@@ -212,6 +215,7 @@ def overview_parts(
         *study_level_parts(tables, figures_dir),
         *study_rematch_parts(rows, DPI),
         *next_steps_parts(tables, last_stages),
+        *study_explain_parts(list(explained), out_dir),
         *ranking_parts(tables, stage_figures),
         *config_parts(config),
     ]
@@ -225,14 +229,15 @@ def write_overview(
     stage_figures: set[str] = frozenset(),
     last_stages: dict[str, Path] | None = None,
     max_mb: float | None = None,
+    explained: list[dict] = (),
 ) -> Path:
     """Write the study overview; returns its path. ``figures_dir``: the study figures drawn by
     the workflow (drawn here when absent); ``stage_figures``: the pairs whose stage figures are
-    drawn; ``last_stages``: each pair's last stage folder (for what to try next)."""
+    drawn; ``last_stages``: each pair's last stage folder (for what to try next); ``explained``:
+    the pairs' explain records (``report.explain.read_explanations``), for what explain found."""
     out_html = Path(out_html)
-    parts = overview_parts(
-        config, tables, None if figures_dir is None else Path(figures_dir), set(stage_figures), last_stages or {}
-    )
+    figures = None if figures_dir is None else Path(figures_dir)
+    parts = overview_parts(config, tables, figures, set(stage_figures), last_stages or {}, explained, out_html.parent)
     html = page(TITLE, parts)
     write_text(out_html, html)
     size, max_mb = utf8_len(html), budget_mb(config, max_mb)

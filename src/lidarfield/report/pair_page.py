@@ -11,6 +11,7 @@ The page is built from small functions, each returning a list of parts (HTML tex
 from __future__ import annotations
 
 import json
+import math
 from functools import partial
 from pathlib import Path
 
@@ -21,6 +22,7 @@ from ..plots import stage_figures
 from ..plots.pair_stats import pair_figure_png
 from ..plots.png import compact_png
 from ..plots.settings import PlotSettings, plot_settings
+from ..study.summary import LABEL_SCORES
 from .budget import Figure, Note, budget_mb, file_figure, write_within_budget
 from .page import esc, relative_href, table
 from .rematch import pair_rematch_table
@@ -85,6 +87,10 @@ def registration_problem(row: dict) -> str:
     return "; ".join(problems)
 
 
+def _is_number(value) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+
+
 # A correcting stage's columns, shown when a stage of the pair corrects (the correction last, wrapped).
 CORRECTION_COLUMNS = (
     "displacement1_median_m",
@@ -121,6 +127,7 @@ def stages_table(rows: list[dict]) -> str:
     """One row per stage (rows in red: the registration did not converge or warned); with a
     correcting stage, also each stage's displacements and what it fitted."""
     headers = [c for c in SUMMARY_COLUMNS if any(c in r for r in rows)]
+    headers += [c for c in LABEL_SCORES if any(_is_number(r.get(c)) for r in rows)]  # where labelled
     corrects = any(isinstance(r.get("correction"), str) and r["correction"] for r in rows)
     extra = list(CORRECTION_COLUMNS) if corrects else []
     body, classes = [], []

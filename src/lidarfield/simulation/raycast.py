@@ -26,7 +26,7 @@ from ..scan import Scan
 from ..sensors.models import SensorModel
 from .faults import checked_elevation_offsets, checked_range_fault
 from .scene import Scene
-from .trajectory import moved_pose
+from .trajectory import motion_record, moved_pose
 
 _REFERENCE_CHUNK = 4096  # rays per block of the numpy kernel: bounds its memory
 
@@ -121,8 +121,11 @@ def simulate_scan(
     """One sweep of ``sensor`` at ``pose`` (4x4 world-from-sensor at the sweep start) in ``scene``.
 
     Points are in the sensor frame, ordered by firing (azimuth step, then channel), with
-    attributes ``ring`` (index into ``sensor.elevation_deg``) and ``time`` (seconds from the
-    sweep start; the nominal firing time, also without rolling shutter). Misses, and hits
+    attributes ``ring`` (index into ``sensor.elevation_deg``), ``time`` (seconds from the
+    sweep start; the nominal firing time, also without rolling shutter) and ``object`` (the
+    label of the object hit, ``Scene.labelled_objects``: its 1-based place in ``scene.objects``
+    for an object that moves in the world, minus that for one the sensor carries, 0 for the
+    static scene). Misses, and hits
     nearer than the model's minimum or farther than its (or ``max_range_m``'s, if smaller)
     maximum range give no point. Objects with a velocity are where they are at ``time_s``.
 
@@ -140,6 +143,10 @@ def simulate_scan(
     ``range_scale * true_range + range_offset_m`` plus noise. Range limits and dropout act on
     the true range, so a range fault changes where the points are, not which rays return one.
     The faults applied are written in the scan's ``source``.
+
+    The scan records when and how it was taken: ``stamp_s`` = ``time_s`` and ``sweep_motion``,
+    the motion its points carry in the sensor frame at the sweep start (``motion_record``: the
+    velocities with ``rolling_shutter``, zero without, as the points are then instantaneous).
     """
     pose = np.asarray(pose, dtype=np.float64).reshape(4, 4)
     limit = _checked_max_range(sensor, max_range_m)
@@ -161,8 +168,10 @@ def simulate_scan(
     origins = np.repeat(poses[:, :3, 3], sensor.channels, axis=0)
     ray_time = np.repeat(motion_time, sensor.channels)
 
-    distance = _scene_hits(scene, time_s, origins, world_dirs, ray_time)
-    distance = np.minimum(distance, _carried_hits(scene, local.reshape(-1, 3)))
+    distance, label = _scene_hits(scene, time_s, origins, world_dirs, ray_time)
+    carried_distance, carried_label = _carried_hits(scene, local.reshape(-1, 3))
+    nearer = carried_distance < distance
+    distance[nearer], label[nearer] = carried_distance[nearer], carried_label[nearer]
     keep = np.isfinite(distance) & (distance >= sensor.min_range_m) & (distance <= limit)
     rng = np.random.default_rng(seed)
     if dropout > 0:
@@ -191,33 +200,55 @@ def simulate_scan(
         range_offset_m,
         elevation_offsets_deg,
     )
-    return Scan(xyz, {"ring": ring[keep], "time": time[keep]}, sensor, pose, source)
+    scan = Scan(
+        xyz,
+        {"ring": ring[keep], "time": time[keep], "object": label[keep]},
+        sensor,
+        pose,
+        source,
+        stamp_s=float(time_s),
+    )
+    scan.sweep_motion = motion_record(pose, linear_velocity_mps, angular_velocity_rps, rolling_shutter)
+    return scan
 
 
 def _scene_hits(
     scene: Scene, time_s: float, origins: np.ndarray, directions: np.ndarray, ray_time: np.ndarray
-) -> np.ndarray:
-    """Distance to the first hit over all objects. A moving object is cast once at its place
-    at ``time_s``, with each ray's origin shifted by -velocity x (the ray's own time offset):
-    the same as moving the object, per ray."""
+) -> tuple[np.ndarray, np.ndarray]:
+    """Distance to the first hit over the world's objects, and the ``object`` label of what each
+    ray hit (0: the static scene or a miss). The static objects are cast together, once; a
+    moving object is cast alone at its place at ``time_s``, with each ray's origin shifted by
+    -velocity x (the ray's own time offset): the same as moving the object, per ray."""
     static = [o.mesh for o in scene.objects if not o.moving and not o.carried]
     distance = np.full(len(origins), np.inf)
     if static:
         distance = first_hits(trimesh.util.concatenate(static), origins, directions)[0]
-    for obj in (o for o in scene.objects if o.moving and not o.carried):
+    label = np.zeros(len(origins), dtype=np.int32)
+    for number, obj in scene.labelled_objects():
+        if obj.carried:
+            continue
         shifted = origins - ray_time[:, None] * obj.velocity_mps
-        distance = np.minimum(distance, first_hits(obj.mesh_at(time_s), shifted, directions)[0])
-    return distance
+        _keep_nearer(distance, label, first_hits(obj.mesh_at(time_s), shifted, directions)[0], number)
+    return distance, label
 
 
-def _carried_hits(scene: Scene, local_directions: np.ndarray) -> np.ndarray:
-    """Distance to the first hit on the objects the sensor carries, cast in the sensor frame of
-    each firing (where they do not move, rolling shutter or not)."""
-    carried = [o.mesh for o in scene.objects if o.carried]
-    if not carried:
-        return np.full(len(local_directions), np.inf)
+def _carried_hits(scene: Scene, local_directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Distance to the first hit on the objects the sensor carries, and their labels, cast in
+    the sensor frame of each firing (where they do not move, rolling shutter or not)."""
+    distance = np.full(len(local_directions), np.inf)
+    label = np.zeros(len(local_directions), dtype=np.int32)
     origins = np.zeros_like(local_directions)
-    return first_hits(trimesh.util.concatenate(carried), origins, local_directions)[0]
+    for number, obj in scene.labelled_objects():
+        if obj.carried:
+            _keep_nearer(distance, label, first_hits(obj.mesh, origins, local_directions)[0], number)
+    return distance, label
+
+
+def _keep_nearer(distance: np.ndarray, label: np.ndarray, hits: np.ndarray, number: int) -> None:
+    """Where ``hits`` is nearer than ``distance``: take it, and label the ray ``number`` (in place)."""
+    nearer = hits < distance
+    distance[nearer] = hits[nearer]
+    label[nearer] = number
 
 
 def _checked_max_range(sensor: SensorModel, max_range_m: float | None) -> float:

@@ -76,6 +76,17 @@ class Scene:
     objects: tuple[SceneObject, ...]
     source: str  # "builtin:NAME" or the YAML path
 
+    def labelled_objects(self) -> list[tuple[int, SceneObject]]:
+        """The objects a simulated point is labelled with (its ``object`` attribute), each with
+        its label: its 1-based place in ``objects`` for one that moves in the world, minus that
+        for one the sensor carries (its own vehicle: neither a moving object nor the static
+        scene). Every other object is the static scene, label 0."""
+        return [
+            (-number if o.carried else number, o)
+            for number, o in enumerate(self.objects, start=1)
+            if o.moving or o.carried
+        ]
+
     def mesh_at(self, time_s: float = 0.0) -> trimesh.Trimesh:
         """The world's objects (not those the sensor carries) as one mesh, each where it is at ``time_s``."""
         return trimesh.util.concatenate([o.mesh_at(time_s) for o in self.objects if not o.carried])

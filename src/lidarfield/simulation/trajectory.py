@@ -10,6 +10,7 @@ from typing import NamedTuple
 import numpy as np
 
 from ..poses import pose_from_xyzrpy
+from ..scan import still_sweep
 
 
 def moved_pose(pose: np.ndarray, dt_s, linear_velocity_mps, angular_velocity_rps) -> np.ndarray:
@@ -25,6 +26,19 @@ def moved_pose(pose: np.ndarray, dt_s, linear_velocity_mps, angular_velocity_rps
     out[:, :3, :3] = pose[:3, :3] @ rotation
     out[:, :3, 3] = pose[:3, 3] + dt[:, None] * np.asarray(linear_velocity_mps, dtype=float)
     return out if np.ndim(dt_s) else out[0]
+
+
+def motion_record(pose: np.ndarray, linear_velocity_mps, angular_velocity_rps, rolling_shutter: bool) -> dict:
+    """A simulated scan's ``sweep_motion``: the motion its points carry, in its sensor frame at
+    the sweep start (the linear velocity turned from the world frame by ``pose``); zero without
+    rolling shutter, whose points are all taken at the sweep start."""
+    if not rolling_shutter:
+        return still_sweep()
+    velocity = np.asarray(pose, dtype=float)[:3, :3].T @ np.asarray(linear_velocity_mps, dtype=float)
+    return {
+        "velocity_mps": [float(v) for v in velocity],
+        "angular_velocity_rps": [float(w) for w in angular_velocity_rps],
+    }
 
 
 class TrajectoryFrame(NamedTuple):

@@ -63,6 +63,8 @@ def recorded_scan(spec: dict) -> Scan:
         scan.pose = np.asarray(spec["pose"], dtype=float)
     if spec.get("stamp_s") is not None:
         scan.stamp_s = spec["stamp_s"]
+    if spec.get("sweep_motion") is not None:
+        scan.sweep_motion = spec["sweep_motion"]
     return scan
 
 

@@ -15,7 +15,8 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import ConfigError, LidarfieldError
-from ..poses import pose_from_xyzrpy, poses_of_attached_frame
+from ..poses import pose_from_xyzrpy, poses_of_attached_frame, velocities_from_neighbours
+from ..scan import still_sweep
 
 
 @dataclass(frozen=True)
@@ -134,12 +135,14 @@ def recorded_scan_spec(
     poses: dict | None = None,
     options: dict | None = None,
     stamp_s: float | None = None,
+    sweep_motion: dict | None = None,
 ) -> dict:
     """The spec of a recorded scan, as the ingest job reads it and stage ids hash it: the one
     place it is built, for a study's pairs and for ``lidarfield run`` (equal inputs, equal ids).
     ``poses`` ({topic, frame}) takes the scan's pose from a topic of its bag when it is read;
     ``options`` are the format reader's (a dataset's sweep: its frame and lidars); ``stamp_s``
-    the scan's time where its dataset gives it. Keys that are not given stay out of the spec."""
+    the scan's time where its dataset gives it, ``sweep_motion`` the motion its points carry
+    where the dataset says (none: de-skewed). Keys that are not given stay out of the spec."""
     spec = {"path": path, "format": format, "sensor": sensor, "pose": pose}
     if isinstance(poses, dict):
         spec["poses"] = poses
@@ -147,6 +150,8 @@ def recorded_scan_spec(
         spec["options"] = options
     if stamp_s is not None:
         spec["stamp_s"] = float(stamp_s)
+    if sweep_motion is not None:
+        spec["sweep_motion"] = sweep_motion
     return spec
 
 
@@ -275,6 +280,7 @@ def _dataset_sequence(name: str, entry: dict, base_dir: Path) -> list[ScanSpec]:
     _sensor(sensor, key, base_dir)
     first, last = _first_last(name, entry, len(dataset.scans))
     scans = dataset.scans[first : last + 1]
+    motions = _sweep_motions(dataset)[first : last + 1]
     if _needs_poses(entry["register"]) and any(scan.pose is None for scan in scans):
         raise ConfigError(
             f"{key}: register {entry['register']!r} needs the scans' poses, and {dataset.what} has none; "
@@ -284,9 +290,39 @@ def _dataset_sequence(name: str, entry: dict, base_dir: Path) -> list[ScanSpec]:
         ScanSpec(
             f"{name}-s{k:03d}",
             "recorded",
-            recorded_scan_spec(scan.path, scan.format, sensor, scan.pose, None, scan.options, scan.stamp_s),
+            recorded_scan_spec(
+                scan.path,
+                scan.format,
+                sensor,
+                scan.pose,
+                None,
+                scan.options,
+                scan.stamp_s,
+                motion,
+            ),
         )
-        for k, scan in enumerate(scans, start=first)
+        for (k, scan), motion in zip(enumerate(scans, start=first), motions)
+    ]
+
+
+def _sweep_motions(dataset) -> list[dict | None]:
+    """Each scan's ``sweep_motion`` as the dataset tells it: still for de-skewed sweeps, else the
+    constant velocity between its neighbours' poses where the sequence has poses and stamps."""
+    if dataset.deskewed:
+        return [still_sweep() for _ in dataset.scans]
+    if any(scan.pose is None or scan.stamp_s is None for scan in dataset.scans):
+        return [None] * len(dataset.scans)
+    poses = [np.asarray(scan.pose, dtype=np.float64) for scan in dataset.scans]
+    velocities = velocities_from_neighbours([scan.stamp_s for scan in dataset.scans], poses)
+    return [
+        None
+        if velocity is None
+        else {
+            "velocity_mps": velocity[0].tolist(),
+            "angular_velocity_rps": velocity[1].tolist(),
+            "source": "neighbours",
+        }
+        for velocity in velocities
     ]
 
 

@@ -12,7 +12,8 @@ from ..analysis.suggest import suggestions, write_suggestions
 from ..errors import ConfigError, InputError
 from ..io import read_scan, write_scan
 from ..io.atomic import write_text
-from ..pair import write_pair
+from ..pair import RegisteredPair, write_pair
+from ..scan import Scan
 from ..sensors.fit import log_fit
 from .jobs import field_stage, write_stage
 from .pairs import recorded_scan_spec
@@ -37,18 +38,41 @@ def registration_settings(register: str | None = None, transform: str | Path | N
     return {"method": register}
 
 
-def check_out_dir(out_dir: str | Path) -> Path:
-    """``out_dir`` if it is new, empty, or written by an earlier ``lidarfield run``."""
+def check_out_dir(out_dir: str | Path, marker: str = RUN_MARKER, command: str = "lidarfield run") -> Path:
+    """``out_dir`` if it is new, empty, or written by an earlier ``command`` (it holds ``marker``)."""
     out_dir = Path(out_dir)
     if out_dir.exists() and not out_dir.is_dir():
         raise InputError("the output folder is a file", out_dir)
-    if out_dir.is_dir() and any(out_dir.iterdir()) and not (out_dir / RUN_MARKER).is_file():
+    if out_dir.is_dir() and any(out_dir.iterdir()) and not (out_dir / marker).is_file():
         raise InputError(
-            f"the output folder is not empty and was not written by lidarfield run (no {RUN_MARKER}); "
+            f"the output folder is not empty and was not written by {command} (no {marker}); "
             "choose a new or empty folder",
             out_dir,
         )
     return out_dir
+
+
+def read_and_register(
+    scan1: str | Path, scan2: str | Path, settings: str | dict, sensor: str | None = None, poses: dict | None = None
+) -> tuple[list[Scan], RegisteredPair]:
+    """Both scans read (``sensor``: their sensor model; ``poses``: from a topic of their ROS bag)
+    and registered by ``settings`` (``registration_settings``): what ``lidarfield run`` and
+    ``lidarfield explain`` start from."""
+    scans = [read_scan(path, sensor=sensor, poses=poses) for path in (scan1, scan2)]
+    for path, scan in zip((scan1, scan2), scans):
+        log.info("read %s: %d points (%d invalid rows dropped)", path, len(scan), scan.dropped_invalid)
+        log_fit(scan.xyz, scan.sensor, str(path))
+    from ..registration import register_pair  # imports Open3D: only where a pair is registered
+
+    pair = register_pair(scans[0], scans[1], settings)
+    reg = pair.registration
+    log.info(
+        "registered by %s: fitness %.3f, converged %s",
+        reg.get("method"),
+        reg.get("fitness", float("nan")),
+        reg.get("converged"),
+    )
+    return scans, pair
 
 
 def run_pair(
@@ -74,20 +98,7 @@ def run_pair(
     out_dir = check_out_dir(out_dir)
     study = load_config(config_path, require_pairs=False)
     settings = registration_settings(register, transform)
-    scans = [read_scan(path, sensor=sensor, poses=poses) for path in (scan1, scan2)]
-    for path, scan in zip((scan1, scan2), scans):
-        log.info("read %s: %d points (%d invalid rows dropped)", path, len(scan), scan.dropped_invalid)
-        log_fit(scan.xyz, scan.sensor, str(path))
-    from ..registration import register_pair  # imports Open3D: only where a pair is registered
-
-    pair = register_pair(scans[0], scans[1], settings)
-    reg = pair.registration
-    log.info(
-        "registered by %s: fitness %.3f, converged %s",
-        reg.get("method"),
-        reg.get("fitness", float("nan")),
-        reg.get("converged"),
-    )
+    scans, pair = read_and_register(scan1, scan2, settings, sensor, poses)
     candidates = [study.candidates(level) for level in range(len(study.hypotheses) + 1)]
     stages, tables = [], []
     for stage in apply_stack(pair, study.hypotheses, study.base_dir, study.grid_section):

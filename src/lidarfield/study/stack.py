@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from ..hypotheses import apply_step, validate_stack, validate_step
-from ..hypotheses.outcome import displacement
+from ..hypotheses.outcome import displacement, reasons_of_removed
 from ..hypotheses.outliers import carry_neighbours
 from ..hypotheses.steps import canonical_json, step_name
 from ..pair import RegisteredPair
@@ -45,6 +45,7 @@ class Stage:
     # (median, max) distance the survivors of each cloud moved, metres
     displacement1: tuple[float, float] = (0.0, 0.0)
     displacement2: tuple[float, float] = (0.0, 0.0)
+    reasons: np.ndarray | None = None  # why each removed point went (cloud 1's, then 2's); None: not said
 
     @property
     def removed1(self) -> int:
@@ -55,12 +56,15 @@ class Stage:
         return len(self.removed.xyz2)
 
     def removed_columns(self) -> dict[str, np.ndarray]:
-        """The removed-points table: points-table columns plus ``hypothesis`` and ``row`` (the
-        point's row among its cloud's points in the previous stage)."""
+        """The removed-points table: points-table columns plus ``hypothesis``, ``row`` (the
+        point's row among its cloud's points in the previous stage) and, when the hypothesis
+        says why it removed each point, ``reason``."""
         columns = self.removed.to_columns()
         columns.pop(ROW, None)  # here: the row in the previous stage, below
         columns["hypothesis"] = np.full(len(columns["cloud"]), self.name, dtype=object).astype(str)
         columns["row"] = np.concatenate([np.flatnonzero(~self.keep1), np.flatnonzero(~self.keep2)]).astype(np.int64)
+        if self.reasons is not None:
+            columns["reason"] = self.reasons
         return columns
 
     def metadata(self, stage_id: str) -> dict:
@@ -99,6 +103,7 @@ def with_rows(pair: RegisteredPair) -> RegisteredPair:
         {**pair.attributes2, ROW: np.arange(len(pair.xyz2), dtype=np.int64)},
         pair.registration,
         pair.sensor_fit,
+        pair.sweeps,
         neighbours=pair.neighbours,
     )
 
@@ -119,6 +124,7 @@ def next_stage(
     keep1, keep2 = outcome
     survivors = pair.subset(keep1, keep2)
     stage = Stage(level, step_name(spec), spec, survivors, pair.subset(~keep1, ~keep2), keep1, keep2)
+    stage.reasons = reasons_of_removed(outcome)
     if not outcome.corrects:
         return stage
     stage.correction = outcome.fitted

@@ -69,7 +69,42 @@ def summary_row(pair_name: str, pair: RegisteredPair, meta: dict, removed_cloud:
         row[f"sensor_outside{k}"] = (fits.get(k) or {}).get("outside")  # None: no sensor model
     row["sensor_warning"] = "; ".join(filter(None, (fit_warning(fits.get(k), f"scan {k}") for k in ("1", "2"))))
     row.update(correction_columns(meta))
+    row.update(label_counts(pair))
     return row
+
+
+# Where a pair's points carry the simulator's ``object`` labels (0: the static scene).
+LABEL = "object"
+LABEL_SCORES = ("moving_removed_share", "static_kept_share")  # against the pair's stage 0
+
+
+def label_counts(pair: RegisteredPair) -> dict:
+    """``moving_points`` and ``static_points``: a stage's survivors (both clouds) on a moving
+    object (label > 0) and on the static scene (label 0; the sensor's own vehicle, < 0, is neither);
+    {} when the points have no labels."""
+    if LABEL not in pair.attributes1 and LABEL not in pair.attributes2:
+        return {}
+    labels = [
+        np.asarray(a.get(LABEL, np.full(len(x), np.nan)))
+        for a, x in ((pair.attributes1, pair.xyz1), (pair.attributes2, pair.xyz2))
+    ]
+    label = np.concatenate(labels)
+    return {"moving_points": int(np.count_nonzero(label > 0)), "static_points": int(np.count_nonzero(label == 0))}
+
+
+def with_label_scores(rows: list[dict]) -> list[dict]:
+    """The rows of labelled pairs with, against their pair's stage 0 (the registered pair):
+    ``moving_removed_share``, the share of the moving objects' points removed up to the stage,
+    and ``static_kept_share``, the share of the static points kept (NaN where there are none)."""
+    first = {row["pair"]: row for row in rows if row.get("level") == 0 and "moving_points" in row}
+    for row in rows:
+        start = first.get(row["pair"])
+        if start is None or "moving_points" not in row:
+            continue
+        moving, static = start["moving_points"], start["static_points"]
+        removed = 1 - row["moving_points"] / moving if moving else float("nan")
+        row.update(zip(LABEL_SCORES, (removed, row["static_points"] / static if static else float("nan"))))
+    return rows
 
 
 # A correcting stage's columns: in every row (a removing stage: '' and 0).
@@ -124,7 +159,7 @@ def read_stats(stats_paths: list[str | Path], rematch_paths: list[str | Path] = 
         # a stats.json written before the correction columns existed: a removing stage's values
         row.update({k: v for k, v in correction_columns({}).items() if k not in row})
         rows.append({**row, **rematched.get(Path(path).parent, {})})
-    return rows
+    return with_label_scores(rows)
 
 
 def write_summary(

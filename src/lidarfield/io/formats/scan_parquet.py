@@ -1,5 +1,5 @@
 """The scan Parquet contract: columns x, y, z (float64) plus attributes; metadata key
-``lidarfield`` = {"sensor", "pose", "source", "dropped_invalid", "stamp_s"}."""
+``lidarfield`` = {"sensor", "pose", "source", "dropped_invalid", "stamp_s", "sweep_motion"}."""
 
 from __future__ import annotations
 
@@ -27,6 +27,7 @@ def scan_metadata(scan: Scan) -> dict:
         "source": scan.source,
         "dropped_invalid": int(scan.dropped_invalid),
         "stamp_s": scan.stamp_s,
+        "sweep_motion": scan.sweep_motion,
     }
 
 
@@ -49,4 +50,5 @@ def read_parquet(path: Path, index: int = 0, sensor: SensorModel | None = None) 
     if meta.get("source"):
         scan.source = meta["source"]
     scan.stamp_s = meta.get("stamp_s")
+    scan.sweep_motion = meta.get("sweep_motion")
     return scan

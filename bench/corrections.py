@@ -1,13 +1,16 @@
-"""Benchmark: ``range_calibration`` and ``realign`` on a pair of 120,000-point clouds (target < 1 s
-each), against the time of computing the field of the same pair in the same run.
+"""Benchmark: the correcting hypotheses (``realign``, ``range_calibration``, ``deskew``) on a pair
+of 120,000-point clouds (target < 1 s each), against the time of computing the field of the same
+pair in the same run; with baselines in the same run: ``realign`` on 0.2 m voxels (its default
+before 2026-11-25) and the field without the scan patterns' covariance (before 2026-11-25).
 
 The pair: the simulated paper intersection seen twice by the paper's 80-channel sensor at a
 0.14 deg azimuth step (2 cm range noise, different seeds, scan 2 yawed 0.21 deg and measured with
 ``range_scale=1.003, range_offset_m=0.03``), registered by the truth, 120,000 points of each
 cloud kept (evenly spaced rows). "The field" is ``analyse_field`` with the default settings
-(binning, aggregation, tags and statistics: the field job's work).
+(binning, aggregation, tags and statistics: the field job's work). ``deskew`` is asked for a
+10 m/s motion of both clouds (``motion_source: settings``: the simulated scans are still).
 
-Run: ``python bench/range_calibration.py [--repeat N]``.
+Run: ``python bench/corrections.py [--repeat N]``.
 """
 
 from __future__ import annotations
@@ -18,8 +21,9 @@ import os
 
 import numpy as np
 
-from lidarfield.analysis.field_stats import analyse_field
+from lidarfield.analysis.field_stats import analyse_field, scan_patterns
 from lidarfield.field.grid import field_settings_from_config
+from lidarfield.field.kernel import field_from_voxel_ids
 from lidarfield.hypotheses import apply_step
 from lidarfield.pair import RegisteredPair
 from lidarfield.poses import pose_from_xyzrpy
@@ -66,14 +70,33 @@ def main() -> None:
     settings = field_settings_from_config({})
     field, _ = best_time(lambda: analyse_field(pair, settings), args.repeat)
     print(f"field (analyse_field, default settings): {field:.3f} s")
-    for step in ({"range_calibration": {}}, {"range_calibration": {"per_ring": True}}, {"realign": {}}):
+    ids = settings.grid.assign(pair.xyz1), settings.grid.assign(pair.xyz2)
+    kernel = {}
+    for name, patterns in (("with", scan_patterns(pair)), ("without", (None, None))):
+        kernel[name], _ = best_time(
+            lambda: field_from_voxel_ids(ids[0], pair.xyz1, ids[1], pair.xyz2, settings, patterns=patterns), args.repeat
+        )
+    print(
+        f"field kernel with the scan patterns' covariance {kernel['with']:.3f} s, without {kernel['without']:.3f} s "
+        f"= {kernel['with'] / kernel['without']:.2f} x"
+    )
+    moving = {"motion_source": "settings", "velocity_mps": [10.0, 0.0, 0.0]}
+    for step in (
+        {"range_calibration": {}},
+        {"range_calibration": {"per_ring": True}},
+        {"realign": {}},
+        {"realign": {"voxel_m": 0.05}},
+        {"realign": {"voxel_m": 0.2}},
+        {"deskew": moving},
+    ):
         seconds, outcome = best_time(lambda: apply_step(pair, step), args.repeat)
         c = outcome.fitted
-        fit = (
-            f"scale {c['scale']:.5f}, offset {c['offset_m'] * 1e3:.1f} mm, {c['points']} points"
-            if "scale" in c
-            else f"translation {np.round(c['translation_m'], 4).tolist()} m, angle {c['angle_deg']:.4f} deg"
-        )
+        if "scale" in c:
+            fit = f"scale {c['scale']:.5f}, offset {c['offset_m'] * 1e3:.1f} mm, {c['points']} points"
+        elif "translation_m" in c:
+            fit = f"translation {np.round(c['translation_m'], 4).tolist()} m, angle {c['angle_deg']:.4f} deg"
+        else:
+            fit = f"largest displacement {max(c[k]['max_displacement_m'] for k in ('cloud1', 'cloud2')):.3f} m"
         print(
             f"{list(step)[0]:18s} {str(list(step.values())[0]):18s} {seconds:.3f} s "
             f"= {seconds / field:.2f} x the field | {fit}"

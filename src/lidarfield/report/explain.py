@@ -1,0 +1,266 @@
+"""What ``lidarfield explain`` (and a study pair's explain target) writes, and the study
+report's section on it.
+
+An explanation's folder holds ``stack.yaml`` (the stack found, a ready config), ``steps.csv``
+(one row per step, ``study.explain.STEP_COLUMNS``), ``explain.json`` (the stack, the steps and
+why the loop stopped: what the study report reads), ``figures/`` (per stage its field, or
+before / after the step and what it removed) and ``explain.html`` (the page showing them step
+by step). The study report's section lists per pair the stack found, and per hypothesis how
+often the loop chose it.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import logging
+import shutil
+from collections import Counter
+from pathlib import Path
+
+import numpy as np
+
+from .. import __version__
+from ..analysis.explain import explain_settings
+from ..analysis.field_stats import summary_json_safe
+from ..errors import InputError
+from ..field.file import field_meta
+from ..field.grid import FieldSettings, field_settings_from_config
+from ..io.atomic import write_text
+from ..pair import read_pair
+from ..plots.pair_stats import pair_figure_png
+from ..plots.settings import figure_settings
+from ..plots.stage import draw_stage
+from ..plots.stage_data import StageData, vector_field
+from ..study.config import load_config, validate_config
+from ..study.explain import (
+    STEP_COLUMNS,
+    TABLE_COLUMNS,
+    ExplainedStage,
+    Explanation,
+    explain_pair,
+    format_step,
+    stack_config,
+)
+from ..study.run import check_out_dir, read_and_register, registration_settings
+from .page import esc, image, image_file, link, page, relative_href, table
+from .pair_page import DPI, PAIR_FIGURES
+
+log = logging.getLogger(__name__)
+
+STACK_FILE, STEPS_FILE, RECORD_FILE, PAGE_FILE, FIGURES_DIR = (
+    "stack.yaml",
+    "steps.csv",
+    "explain.json",
+    "explain.html",
+    "figures",
+)
+STAGE_CAPTIONS = {
+    "field_top": "the field from above",
+    "before_after": "before / after the step (same axes, same colour scale)",
+    "removed_top": "what the step removed, from above",
+}
+
+
+def write_explanation(
+    explanation: Explanation, settings: FieldSettings, grid_section: dict, out_dir: str | Path, plots: dict | None
+) -> list[Path]:
+    """Write an explanation's folder (see the module docstring); returns the files written."""
+    out_dir = Path(out_dir)
+    shutil.rmtree(out_dir / FIGURES_DIR, ignore_errors=True)  # an earlier explanation's steps
+    figures = draw_explanation(explanation, settings, out_dir / FIGURES_DIR, plots)
+    written = [out_dir / name for name in (STACK_FILE, STEPS_FILE, RECORD_FILE, PAGE_FILE)]
+    stack = stack_config(explanation, grid_section)
+    write_text(written[0], stack)
+    write_text(written[1], steps_csv(explanation.steps))
+    write_text(written[2], json.dumps(summary_json_safe(explanation.record()), indent=1, allow_nan=False) + "\n")
+    write_text(written[3], explain_page(explanation, stack, figures, out_dir))
+    return written + [path for paths in figures for path in paths]
+
+
+def steps_csv(steps: list[dict]) -> str:
+    out = io.StringIO()
+    writer = csv.DictWriter(out, fieldnames=STEP_COLUMNS, lineterminator="\n")
+    writer.writeheader()
+    writer.writerows(steps)
+    return out.getvalue()
+
+
+def stage_data(pair_name: str, explained: ExplainedStage, settings: FieldSettings) -> StageData:
+    """An explained stage as the figures take a stage folder's contents."""
+    stage = explained.stage
+    field = vector_field(explained.columns, field_meta(settings, {}))
+    meta = stage.metadata(explained.label)
+    return StageData(Path(pair_name) / "explain" / explained.label, stage.pair, meta, stage.removed_columns(), field)
+
+
+def draw_explanation(
+    explanation: Explanation, settings: FieldSettings, figures_dir: Path, plots: dict | None
+) -> list[list[Path]]:
+    """Per stage its figures (``plots.stage.draw_stage``): stage 0's field from above; each step
+    before / after it on the same axes and, when it removed points, what it removed."""
+    data = [stage_data(explanation.pair_name, explained, settings) for explained in explanation.stages]
+    drawn = []
+    for k, stage in enumerate(data):
+        names = ["field_top"] if k == 0 else ["before_after"] + (["removed_top"] if len(stage.removed["cloud"]) else [])
+        chosen = {**figure_settings(plots), "figures": names, "interactive": False}
+        drawn.append(draw_stage(stage, data[k - 1] if k else None, figures_dir / explanation.stages[k].label, chosen))
+    return drawn
+
+
+def explain_page(explanation: Explanation, stack: str, figures: list[list[Path]], out_dir: Path) -> str:
+    """The page: the steps' table, the stack found, the pair figures stage by stage, and each
+    step's figures."""
+    name = explanation.pair_name
+    rows = explanation.summary_rows()
+    body = [
+        f"<h1>explain · {esc(name)}</h1>",
+        f'<p class="note">lidarfield {esc(__version__)}. From the registered pair, the loop applied the best '
+        "candidate of “what to try next” worth it (the config's <code>explain</code> settings), recomputed the "
+        f"field and repeated. {len(explanation.steps)} step(s); stopped: {esc(explanation.stop)}; the field's verdict "
+        f"at the end: <b>{esc(explanation.verdict)}</b>. Energy = Σ min(n1, n2)·|v|² over the valid voxels "
+        "(m² × points); its reduction is over the voxels valid before and after the step.</p>",
+        "<h2>Steps</h2>",
+        table(list(TABLE_COLUMNS), [[row[c] for c in TABLE_COLUMNS] for row in explanation.steps], text_columns=2)
+        if explanation.steps
+        else '<p class="note">No step: the field was not patterned, or no candidate was worth it.</p>',
+        "<h2>The stack found</h2>",
+        f'<p class="note">{esc(STACK_FILE)}, a ready config (<code>lidarfield run --config {esc(STACK_FILE)}</code>, '
+        "or its <code>hypotheses:</code> in a study):</p>",
+        f"<pre>{esc(stack)}</pre>",
+        "<h2>Stage by stage</h2>",
+        '<div class="figures">',
+        *(image(pair_figure_png(stem, rows, DPI), f"{name}: {caption}") for stem, caption in PAIR_FIGURES),
+        "</div>",
+        "<h2>Each step</h2>",
+    ]
+    for k, (explained, paths) in enumerate(zip(explanation.stages, figures)):
+        title = "the registered pair" if k == 0 else f"step {k}: {explained.stage.name}"
+        body.append(f"<h3>{esc(title)}</h3>")
+        if k:
+            body.append(f"<p>{esc(format_step(explanation.steps[k - 1]))}</p>")
+        body.append('<div class="figures">')
+        body += [image_file(p, f"{explained.label}: {STAGE_CAPTIONS[p.stem]}") for p in paths if p.suffix == ".png"]
+        body.append("</div>")
+    return page(f"lidarfield explain: {name}", body)
+
+
+def read_explanations(paths: list[str | Path]) -> list[dict]:
+    """The ``explain.json`` records of a study's pairs, each with its ``path``."""
+    records = []
+    for path in paths:
+        try:
+            record = json.loads(Path(path).read_text())
+        except (OSError, ValueError) as e:
+            raise InputError(f"not a readable explain record ({e})", path) from None
+        records.append({**record, "path": str(path)})
+    return records
+
+
+def stack_names(record: dict) -> list[str]:
+    return [next(iter(step)) for step in record["stack"]]
+
+
+def study_explain_parts(records: list[dict], out_dir: Path) -> list[str]:
+    """The study report's section: per pair the stack found (linking its page), and per
+    hypothesis how often the loop chose it. Nothing without records."""
+    if not records:
+        return []
+    records = sorted(records, key=lambda r: r["pair"])
+    pairs = [
+        [
+            link(relative_href(Path(r["path"]).parent / PAGE_FILE, out_dir), r["pair"]),
+            " → ".join(stack_names(r)) or "(none)",
+            len(r["stack"]),
+            r["stop"],
+            r["verdict"],
+        ]
+        for r in records
+    ]
+    chosen = Counter(name for r in records for name in set(stack_names(r)))
+    positions = {name: [] for name in chosen}
+    reductions = {name: [] for name in chosen}
+    for r in records:
+        for step in r["steps"]:
+            positions[step["hypothesis"]].append(step["step"])
+            reductions[step["hypothesis"]].append(step["energy_reduction"])
+    counts = [
+        [
+            name,
+            n,
+            f"{100 * n / len(records):.0f}%",
+            float(np.median(positions[name])),
+            float(np.median(reductions[name])),
+        ]
+        for name, n in sorted(chosen.items(), key=lambda item: (-item[1], item[0]))
+    ]
+    ended = Counter(r["verdict"] for r in records)
+    return [
+        "<h2>What explain found</h2>",
+        f'<p class="note">The stack the loop found on its own for each of {len(records)} pair(s) '
+        "(<code>snakemake explain</code>; the config's <code>explain</code> settings); at the end the field was "
+        + ", ".join(f"{esc(v)} for {n}" for v, n in sorted(ended.items()))
+        + ".</p>",
+        table(["pair", "stack found", "steps", "stopped", "verdict at the end"], pairs, text_columns=2),
+        table(
+            ["hypothesis", "pairs that chose it", "share of the pairs", "median step", "median energy reduction"],
+            counts,
+            text_columns=1,
+        ),
+    ]
+
+
+EXPLAIN_MARKER = ".lidarfield-explain.json"  # marks a folder written by ``lidarfield explain``
+
+
+def explain_scans(
+    scan1: str | Path,
+    scan2: str | Path,
+    config_path: str | Path | None,
+    out_dir: str | Path,
+    register: str | None = None,
+    transform: str | Path | None = None,
+    sensor: str | None = None,
+    poses: dict | None = None,
+) -> Explanation:
+    """``lidarfield explain``: two scans read and registered as ``lidarfield run`` does, the loop
+    on the grid, ``suggest`` and ``explain`` settings of the config (the schema's defaults
+    without one; its ``hypotheses`` are not used), and the explanation's folder written."""
+
+    out_dir = check_out_dir(out_dir, EXPLAIN_MARKER, "lidarfield explain")
+    study = validate_config({}, require_pairs=False) if config_path is None else load_config(config_path, None, False)
+    settings = registration_settings(register, transform)
+    _, pair = read_and_register(scan1, scan2, settings, sensor, poses)
+    explanation = explain_pair(
+        pair,
+        study.grid,
+        study.grid_section,
+        explain_settings(study.config["explain"]),
+        study.suggest,
+        study.base_dir,
+        out_dir.resolve().name,
+    )
+    out_dir.mkdir(parents=True, exist_ok=True)
+    run = {"scan1": str(scan1), "scan2": str(scan2), "config": config_path and str(config_path), "register": settings}
+    write_text(out_dir / EXPLAIN_MARKER, json.dumps({**run, "sensor": sensor, "poses": poses}, indent=1) + "\n")
+    write_explanation(explanation, study.grid, study.grid_section, out_dir, study.config["plots"])
+    return explanation
+
+
+def explain_job(
+    points: str | Path,
+    pair_name: str,
+    grid_section: dict,
+    suggest: list[dict] | None,
+    explain: dict,
+    plots: dict | None,
+    out_dir: str | Path,
+) -> Explanation:
+    """A study pair's explain target: the loop on its registered pair, its folder written."""
+
+    pair, _ = read_pair(points)
+    settings = field_settings_from_config(grid_section)
+    explanation = explain_pair(pair, settings, grid_section, explain_settings(explain), suggest, ".", pair_name)
+    write_explanation(explanation, settings, grid_section, out_dir, plots)
+    return explanation

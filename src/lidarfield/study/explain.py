@@ -1,0 +1,247 @@
+"""The loop closed (``lidarfield explain``): from a registered pair, apply the best suggestion
+worth it, recompute the field, and repeat until the verdict is not ``patterned`` or nothing helps.
+
+Everything stays in memory: each step is a :class:`~.stack.Stage` (the same ``next_stage`` as a
+study's mitigate job) with its field and statistics (``analyse_field``, as the field job), and
+the candidates of each step are the suggestions of that stage (``analysis.suggest``: the
+config's ``suggest`` list, or every built-in the stack has not applied). The stopping rule is
+:mod:`lidarfield.analysis.explain`. What it found is a stack (normalised entries, as a config's
+``hypotheses:``), one row per step with the numbers behind the choice, and every stage's field.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+from ..analysis.explain import (
+    STOP_MAX_STEPS,
+    STOP_NO_CANDIDATES,
+    STOP_NOTHING_HELPS,
+    STOP_VERDICT,
+    ExplainSettings,
+    best_worth_it,
+    repeats,
+    worth_it,
+)
+from ..analysis.field_stats import analyse_field
+from ..analysis.suggest import candidate_steps, suggestions
+from ..field.grid import FieldSettings
+from ..hypotheses.steps import canonical_json
+from ..pair import RegisteredPair
+from .stack import Stage, initial_stage, next_stage
+from .summary import summary_row
+
+log = logging.getLogger(__name__)
+
+# One row per step: the choice and what it did to the field. The first ``PRINTED`` columns are
+# what ``lidarfield explain`` prints; the page shows all but the last two (the JSON ones).
+STEP_COLUMNS = (
+    "step",
+    "hypothesis",
+    "energy_reduction",
+    "removed1",
+    "removed2",
+    "removed_share",
+    "displacement_max_m",
+    "verdict_before",
+    "verdict_after",
+    "field_energy_before",
+    "field_energy_after",
+    "runner_up",
+    "max_magnitude_before",
+    "max_magnitude_after",
+    "worth_it",
+    "candidates",
+    "params",
+    "fitted",
+)
+PRINTED_COLUMNS = STEP_COLUMNS[:12]
+TABLE_COLUMNS = STEP_COLUMNS[:-2]
+
+
+@dataclass
+class ExplainedStage:
+    """One stage of the loop: the stage, its field's columns and its statistics."""
+
+    stage: Stage
+    columns: dict[str, np.ndarray]
+    statistics: dict
+
+    @property
+    def label(self) -> str:
+        return f"{self.stage.level:02d}-{self.stage.name}"
+
+
+@dataclass
+class Explanation:
+    """What the loop found: the stages (0 = the registered pair), one row per applied step, the
+    stack that applies them, and why it stopped."""
+
+    pair_name: str
+    stages: list[ExplainedStage]
+    steps: list[dict] = field(default_factory=list)
+    stop: str = ""
+
+    @property
+    def stack(self) -> list[dict]:
+        return [explained.stage.spec for explained in self.stages[1:]]
+
+    @property
+    def verdict(self) -> str:
+        return self.stages[-1].statistics["verdict"]
+
+    def summary_rows(self) -> list[dict]:
+        """One summary row per stage (``study.summary``'s contract), for the pair figures."""
+        return [stage_summary_row(self.pair_name, explained) for explained in self.stages]
+
+    def record(self) -> dict:
+        """The explanation as JSON-able data (``explain.json``)."""
+        return {
+            "pair": self.pair_name,
+            "stack": self.stack,
+            "stop": self.stop,
+            "verdict": self.verdict,
+            "steps": self.steps,
+        }
+
+
+def stage_summary_row(pair_name: str, explained: ExplainedStage) -> dict:
+    stage = explained.stage
+    meta = {**stage.metadata(explained.label), **stage.pair.metadata()}
+    cloud = np.repeat(np.array([1, 2], dtype=np.uint8), [stage.removed1, stage.removed2])
+    return summary_row(pair_name, stage.pair, meta, cloud, explained.statistics)
+
+
+def explained_stage(stage: Stage, settings: FieldSettings) -> ExplainedStage:
+    columns, statistics = analyse_field(stage.pair, settings)
+    return ExplainedStage(stage, columns, statistics)
+
+
+def explain_pair(
+    pair: RegisteredPair,
+    settings: FieldSettings,
+    grid_section: dict,
+    explain: ExplainSettings,
+    suggest: list[dict] | None = None,
+    base_dir: str | Path = ".",
+    pair_name: str = "pair",
+) -> Explanation:
+    """Apply the best suggestion worth it, recompute, repeat (see the module docstring).
+
+    ``suggest``: the config's normalised candidates (None: the default ones, which skip what
+    cannot apply to the pair); a candidate whose hypothesis the stack already has is never
+    tried again.
+    """
+    current = explained_stage(initial_stage(pair), settings)
+    result = Explanation(pair_name, [current])
+    while True:
+        verdict = current.statistics["verdict"]
+        if verdict != "patterned":
+            result.stop = STOP_VERDICT.format(verdict=verdict)
+            break
+        if len(result.steps) >= explain.max_steps:
+            result.stop = STOP_MAX_STEPS
+            break
+        applied = result.stack
+        candidates = [
+            step for step in candidate_steps(suggest, applied, base_dir, grid_section) if not repeats(step, applied)
+        ]
+        if not candidates:
+            result.stop = STOP_NO_CANDIDATES
+            break
+        start = time.perf_counter()
+        table = suggestions(current.stage.pair, settings, candidates, base_dir, grid_section, suggest is None)
+        chosen = best_worth_it(table, explain)
+        if chosen is None:
+            result.stop = STOP_NOTHING_HELPS
+            break
+        spec = {str(table["hypothesis"][chosen]): json.loads(table["params"][chosen])}
+        level = len(result.steps) + 1
+        following = explained_stage(next_stage(current.stage.pair, spec, level, base_dir, grid_section), settings)
+        result.steps.append(step_row(level, table, chosen, current, following, explain))
+        result.stages.append(following)
+        log.info("step %d: %s (%.2f s)", level, format_step(result.steps[-1]), time.perf_counter() - start)
+        current = following
+    log.info("explain %s: %d step(s), stopped: %s", pair_name, len(result.steps), result.stop)
+    return result
+
+
+def step_row(
+    level: int,
+    table: dict[str, np.ndarray],
+    chosen: int,
+    before: ExplainedStage,
+    after: ExplainedStage,
+    explain: ExplainSettings,
+) -> dict:
+    """The numbers behind step ``level``'s choice (``STEP_COLUMNS``)."""
+    rows = [{name: column[i] for name, column in table.items()} for i in range(len(table["rank"]))]
+    others = [r for i, r in enumerate(rows) if i != chosen]
+    runner_up = f"{others[0]['hypothesis']} {float(others[0]['energy_reduction']):.3f}" if others else ""
+    row = rows[chosen]
+    values = {
+        "step": level,
+        "hypothesis": str(row["hypothesis"]),
+        "energy_reduction": float(row["energy_reduction"]),
+        "removed1": int(row["removed1"]),
+        "removed2": int(row["removed2"]),
+        "removed_share": float(row["removed_share"]),
+        "displacement_max_m": float(row["displacement_max_m"]),
+        "verdict_before": before.statistics["verdict"],
+        "verdict_after": after.statistics["verdict"],
+        "field_energy_before": float(before.statistics["field_energy"]),
+        "field_energy_after": float(after.statistics["field_energy"]),
+        "max_magnitude_before": float(before.statistics["max_magnitude"]),
+        "max_magnitude_after": float(after.statistics["max_magnitude"]),
+        "candidates": len(rows),
+        "worth_it": sum(worth_it(r, explain) for r in rows),
+        "runner_up": runner_up,
+        "params": str(row["params"]),
+        "fitted": str(row["fitted"]),
+    }
+    return {name: values[name] for name in STEP_COLUMNS}
+
+
+def format_step(row: dict) -> str:
+    """One step as a line: the choice and the numbers behind it."""
+    cost = (
+        f"moved up to {row['displacement_max_m']:.3f} m"
+        if row["fitted"] not in ("", "{}")
+        else f"removed {row['removed1']} + {row['removed2']} points ({100 * row['removed_share']:.1f}%)"
+    )
+    return (
+        f"{row['hypothesis']}: energy reduction {100 * row['energy_reduction']:.1f}%, {cost}, "
+        f"verdict {row['verdict_before']} -> {row['verdict_after']}, "
+        f"field energy {row['field_energy_before']:.4g} -> {row['field_energy_after']:.4g}"
+        + (f" (runner-up {row['runner_up']})" if row["runner_up"] else "")
+    )
+
+
+def stack_config(explanation: Explanation, grid_section: dict) -> str:
+    """The stack found as a ready study config (YAML): the grid it was found on and
+    ``hypotheses:`` with every parameter as used, each step's numbers and what it fitted as a
+    comment. ``lidarfield run --config`` and a study's config take it as it is."""
+    lines = [
+        f"# found by lidarfield explain for {explanation.pair_name}: {len(explanation.steps)} step(s), "
+        f"stopped: {explanation.stop}",
+        "grid: " + _flow(grid_section),
+        "hypotheses:" + ("" if explanation.steps else " []"),
+    ]
+    for spec, row in zip(explanation.stack, explanation.steps):
+        fitted = json.loads(row["fitted"] or "{}")
+        note = f"energy reduction {row['energy_reduction']:.3f}, removed {row['removed1']} + {row['removed2']}"
+        note += f", fitted {canonical_json(fitted)}" if fitted else ""
+        lines.append(f"  - {_flow(spec)}  # step {row['step']}: {note}")
+    return "\n".join(lines) + "\n"
+
+
+def _flow(value) -> str:
+    """One line of YAML flow style."""
+    return yaml.safe_dump(value, default_flow_style=True, sort_keys=True, width=float("inf")).strip()

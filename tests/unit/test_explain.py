@@ -1,0 +1,283 @@
+"""``lidarfield explain`` (issue 25): the loop finds the stacks the method's authors built by hand,
+and stops where it should."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from lidarfield.analysis.explain import (
+    STOP_MAX_STEPS,
+    STOP_NO_CANDIDATES,
+    STOP_NOTHING_HELPS,
+    ExplainSettings,
+    explain_settings,
+    repeats,
+    worth_it,
+)
+from lidarfield.analysis.field_stats import analyse_field
+from lidarfield.analysis.suggest import suggestions
+from lidarfield.cli import main
+from lidarfield.errors import ConfigError
+from lidarfield.field.grid import field_settings_from_config
+from lidarfield.hypotheses import validate_step
+from lidarfield.pair import RegisteredPair
+from lidarfield.poses import pose_from_xyzrpy
+from lidarfield.registration import register_pair
+from lidarfield.report.explain import read_explanations, study_explain_parts
+from lidarfield.sensors.models import PRESETS
+from lidarfield.simulation.raycast import simulate_scan
+from lidarfield.simulation.scene import load_scene
+from lidarfield.study.config import load_config, validate_config
+from lidarfield.study.explain import STEP_COLUMNS, explain_pair
+from lidarfield.study.jobs import simulated_scan
+from lidarfield.study.stack import apply_stack
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+@pytest.fixture(scope="module")
+def paper_sim():
+    """The default study's paper-sim pair (the method's simulated intersection, paper-sim-80,
+    sensor 2 moved 1.4 m and turned 0.05 rad, registered by the truth) and the study."""
+    study = load_config(ROOT / "config" / "config.yaml", ROOT)
+    spec = study.pairs["paper-sim"]
+    pair = register_pair(simulated_scan(spec.scan1.spec), simulated_scan(spec.scan2.spec), "truth")
+    return pair, study
+
+
+def _explain(pair, study, explain: ExplainSettings = ExplainSettings(), suggest=None):
+    return explain_pair(pair, study.grid, study.grid_section, explain, suggest, study.base_dir, "paper-sim")
+
+
+def test_on_the_methods_simulated_pair_the_first_step_is_field_of_view(paper_sim):
+    """The authors' stack for their simulated pair is field_of_view then shadow: the loop finds
+    it without being told, and each step shrinks the field."""
+    explanation = _explain(*paper_sim)
+    names = [row["hypothesis"] for row in explanation.steps]
+    assert names[0] in ("field_of_view", "shadow"), names
+    assert names[:2] == ["field_of_view", "shadow"]
+    for row in explanation.steps:
+        assert row["energy_reduction"] >= ExplainSettings().min_energy_reduction
+        assert row["field_energy_after"] < row["field_energy_before"]
+    first = explanation.steps[0]
+    assert first["energy_reduction"] > 0.5 and first["removed_share"] < 0.15
+    assert list(explanation.steps[0]) == list(STEP_COLUMNS)
+
+
+def test_the_loop_stops_when_no_candidate_is_worth_it(paper_sim):
+    """A reduction threshold no candidate reaches: no step, the verdict unchanged; the default
+    settings end the simulated pair the same way once field_of_view and shadow are applied (what
+    is left, the parallax of a sensor moved 1.4 m, is no adversity of the candidates)."""
+    pair, study = paper_sim
+    strict = _explain(pair, study, ExplainSettings(min_energy_reduction=0.99))
+    assert strict.steps == [] and strict.stop == STOP_NOTHING_HELPS and strict.stack == []
+    assert strict.verdict == "patterned"
+    default = _explain(pair, study)
+    assert default.stop == STOP_NOTHING_HELPS and default.verdict == "patterned"
+
+
+def test_the_loop_stops_after_max_steps(paper_sim):
+    pair, study = paper_sim
+    explanation = _explain(pair, study, ExplainSettings(max_steps=1))
+    assert len(explanation.steps) == 1 and explanation.stop == STOP_MAX_STEPS
+
+
+def test_the_loop_never_applies_a_hypothesis_twice_nor_a_useless_one(paper_sim):
+    """Configured candidates are offered again at every step, but one already in the stack is
+    not tried again: realign on 0.2 m voxels, run a second time on what it realigned, still lowers
+    the energy by a hair, and with no reduction required the loop would apply it forever. A candidate that
+    changes nothing (crop with its defaults removes no point) is never applied."""
+    pair, study = paper_sim
+    anything = ExplainSettings(min_energy_reduction=0.0, min_reduction_per_removed=0.0)
+    realign = [validate_step({"realign": {"voxel_m": 0.2}})]
+    shift = pose_from_xyzrpy([0.3, 0, 0, 0, 0, 0])  # scan 2 registered 0.3 m off
+    off = dataclasses.replace(pair, xyz2=pair.xyz2 + shift[:3, 3], T_1_2=shift @ pair.T_1_2)
+    explanation = _explain(off, study, anything, realign)
+    assert [row["hypothesis"] for row in explanation.steps] == ["realign"]
+    assert explanation.stop == STOP_NO_CANDIDATES
+    again = suggestions(explanation.stages[-1].stage.pair, study.grid, realign, ".", study.grid_section)
+    assert again["energy_reduction"][0] > 0  # what the loop did not take
+    useless = [validate_step({"field_of_view": {}}), validate_step({"crop": {}})]
+    explanation = _explain(pair, study, anything, useless)
+    assert [row["hypothesis"] for row in explanation.steps] == ["field_of_view"]
+    assert explanation.stop == STOP_NOTHING_HELPS
+
+
+def test_the_loop_stops_on_a_random_field_without_trying_a_candidate():
+    """Two noisy samplings of the same points: every voxel's vector is noise, the verdict is
+    random, and the loop takes no step although outliers would shrink the field."""
+    rng = np.random.default_rng(7)
+    n = 20000
+    azimuth, elevation = rng.uniform(-np.pi, np.pi, n), np.radians(rng.uniform(-18, 18, n))
+    r = rng.uniform(10, 30, n)
+    points = np.column_stack(
+        [np.cos(elevation) * np.cos(azimuth), np.cos(elevation) * np.sin(azimuth), np.sin(elevation)]
+    )
+    points *= r[:, None]
+    pair = RegisteredPair(points + rng.normal(0, 0.05, (n, 3)), points + rng.normal(0, 0.05, (n, 3)))
+    study = validate_config({}, require_pairs=False)
+    explanation = _explain(pair, study)
+    assert explanation.stages[0].statistics["verdict"] == "random"
+    assert explanation.steps == [] and explanation.stop == "verdict random"
+
+
+def test_worth_it_weighs_the_reduction_against_the_points_removed():
+    settings = ExplainSettings(min_energy_reduction=0.05, max_removed_share=0.5, min_reduction_per_removed=1.0)
+    assert worth_it({"energy_reduction": 0.57, "removed_share": 0.22}, settings)
+    assert not worth_it({"energy_reduction": 0.04, "removed_share": 0.0}, settings)  # too little explained
+    assert not worth_it({"energy_reduction": 0.3, "removed_share": 0.35}, settings)  # more points than energy
+    assert not worth_it({"energy_reduction": 0.9, "removed_share": 0.6}, settings)  # over max_removed_share
+    assert not worth_it({"energy_reduction": 0.0, "removed_share": 0.0}, ExplainSettings(min_energy_reduction=0))
+    assert not worth_it({"energy_reduction": math.nan, "removed_share": 0.0}, settings)
+    assert worth_it({"energy_reduction": 0.06, "removed_share": 0.0}, settings)  # a correction removes nothing
+
+
+def test_repeats_compares_builtins_by_name_and_plugins_by_file_and_function():
+    plugin = {"plugin": {"file": "a.py", "function": "f", "params": {}}}
+    assert repeats({"shadow": {"jump_m": 2.0}}, [{"shadow": {"jump_m": 1.0}}])
+    assert not repeats({"shadow": {}}, [{"ego_vehicle": {}}])
+    assert repeats({"plugin": {"file": "a.py", "function": "f", "params": {"x": 1}}}, [plugin])
+    assert not repeats({"plugin": {"file": "a.py", "function": "g", "params": {}}}, [plugin])
+
+
+def test_explain_settings_refuse_an_unknown_key():
+    with pytest.raises(ConfigError, match="min_reduction"):
+        explain_settings({"min_reduction": 0.1})
+    assert explain_settings(None) == ExplainSettings()
+
+
+def test_explain_finds_ego_vehicle_first_on_the_real_vlp16_pair(expd, tmp_path, capsys):
+    """The authors removed their van first on the experimental pair: so does the loop, from the
+    command line with lidarfield run's inputs. The stack it writes is a ready config: loaded as
+    a study config it is the same stack, and applied it leaves the same field."""
+    out = tmp_path / "expd"
+    args = [str(expd / "Cloud1_ExpD.txt"), str(expd / "Cloud10_ExpD.txt"), "--sensor", "vlp16"]
+    args += ["--transform", str(ROOT / "config" / "expd-T_1_10.txt")]
+    assert main(["explain", *args, "--config", str(ROOT / "config" / "expd-paper.yaml"), "--out", str(out)]) == 0
+    printed = capsys.readouterr().out
+    record = json.loads((out / "explain.json").read_text())
+    names = [step["hypothesis"] for step in record["steps"]]
+    assert names[0] == "ego_vehicle", names
+    assert record["steps"][0]["energy_reduction"] > 0.5
+    assert record["steps"][0]["verdict_before"] == "patterned"
+    # Every step it took was worth it, and it went on while the field was patterned. The scans
+    # were taken 3 m apart: voxels that mix surfaces change their mix with the viewpoint, and
+    # so the field can stay patterned (docs/field.md).
+    assert all(step["energy_reduction"] >= 0.05 for step in record["steps"])
+    assert all(step["verdict_after"] == "patterned" for step in record["steps"][:-1])
+    assert record["stop"] in ("verdict random", "no candidate is worth it")
+    assert printed.splitlines()[1].split()[:2] == ["1", "ego_vehicle"]
+    assert f"stopped: {record['stop']}" in printed
+    lines = (out / "steps.csv").read_text().splitlines()
+    assert lines[0].split(",") == list(STEP_COLUMNS) and len(lines) == 1 + len(names)
+    html = (out / "explain.html").read_text()
+    removals = sum(step["removed1"] + step["removed2"] > 0 for step in record["steps"])
+    # stage 0's field, the 3 pair figures, each step's before / after and what a removal removed
+    assert html.count("<img") == 1 + 3 + len(names) + removals
+    assert "ego_vehicle" in html and record["stop"] in html
+
+    study = load_config(out / "stack.yaml", require_pairs=False)
+    assert study.hypotheses == record["stack"]
+    pair = register_pair(*_expd_scans(expd), {"transform": str(ROOT / "config" / "expd-T_1_10.txt")})
+    last = list(apply_stack(pair, study.hypotheses, study.base_dir, study.grid_section))[-1]
+    _, statistics = analyse_field(last.pair, field_settings_from_config(study.grid_section))
+    assert statistics["verdict"] == record["verdict"]
+    assert statistics["field_energy"] == pytest.approx(record["steps"][-1]["field_energy_after"], rel=1e-9)
+
+    # the same folder again is fine; a folder of something else is not
+    assert main(["explain", *args, "--out", str(out)]) == 0
+    assert main(["explain", *args, "--out", str(tmp_path)]) == 2
+    assert "not written by lidarfield explain" in capsys.readouterr().err
+
+
+def _expd_scans(expd: Path):
+    from lidarfield.io import read_scan
+
+    return [read_scan(expd / name, sensor="vlp16") for name in ("Cloud1_ExpD.txt", "Cloud10_ExpD.txt")]
+
+
+OFF_BEAM_GRID = {"kind": "spherical", "azimuth_bins": 36, "elevation_deg": [-22.0, 16.0], "elevation_bins": 5}
+
+
+@pytest.fixture(scope="module")
+def ego_car_explanation():
+    """Issue 25: a simulated pair registered 0.3 m off, with a carried vehicle body and a moving
+    car (the built-in scene paper-intersection-ego-car; sensor 2 1 m further, 0.5 s later)."""
+    scene, sensor = load_scene("paper-intersection-ego-car"), PRESETS["vlp16"]
+    scans = [
+        simulate_scan(scene, sensor, pose_from_xyzrpy(pose), time_s=t, seed=seed, range_noise_m=0.02)
+        for seed, pose, t in ((1, [0, 0, 2, 0, 0, 0], 0.0), (2, [1, 0, 2, 0, 0, 0.0037], 0.5))
+    ]
+    pair = register_pair(scans[0], scans[1], "truth")
+    shift = pose_from_xyzrpy([0.3, 0, 0, 0, 0, 0])  # scan 2 registered 0.3 m off
+    off = dataclasses.replace(pair, xyz2=pair.xyz2 + shift[:3, 3], T_1_2=shift @ pair.T_1_2)
+    study = validate_config({"grid": OFF_BEAM_GRID}, require_pairs=False)
+    return _explain(off, study)
+
+
+def test_explain_finds_realign_ego_vehicle_and_moving_objects(ego_car_explanation):
+    """The body is the largest discrepancy (its points sit at one place in each sensor's frame,
+    so at two places in frame 1) and it pulls a rigid fit towards no motion: ego_vehicle comes
+    before realign. moving_objects comes after realign: its evidence is free space seen through
+    by the other sensor, and 0.3 m off every wall looks moved (before realign it would remove
+    about a third of the points and raise the energy)."""
+    names = [row["hypothesis"] for row in ego_car_explanation.steps]
+    assert {"realign", "ego_vehicle", "moving_objects"} <= set(names), names
+    assert names.index("ego_vehicle") < names.index("realign") < names.index("moving_objects"), names
+    moving = ego_car_explanation.steps[names.index("moving_objects")]
+    assert moving["energy_reduction"] > 0.2 and moving["removed_share"] < 0.02
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="known limitation (docs/field.md): the sensors are 1 m apart, and voxels that mix "
+    "surfaces change their mix with the viewpoint, which the field's covariance does not model",
+)
+def test_explain_on_the_ego_car_pair_ends_random(ego_car_explanation):
+    assert ego_car_explanation.verdict == "random" and ego_car_explanation.stop == "verdict random"
+
+
+def test_the_study_section_counts_how_often_each_hypothesis_was_chosen(tmp_path):
+    def record(pair, names, reductions, verdict):
+        steps = [
+            {"step": k, "hypothesis": name, "energy_reduction": reduction}
+            for k, (name, reduction) in enumerate(zip(names, reductions), start=1)
+        ]
+        path = tmp_path / pair / "explain" / "explain.json"
+        stop = f"verdict {verdict}" if verdict == "random" else STOP_NOTHING_HELPS
+        path.parent.mkdir(parents=True)
+        path.write_text(
+            json.dumps(
+                {"pair": pair, "stack": [{n: {}} for n in names], "stop": stop, "verdict": verdict, "steps": steps}
+            )
+        )
+        return path
+
+    paths = [
+        record("a", ["ego_vehicle", "shadow"], [0.6, 0.5], "random"),
+        record("b", ["ego_vehicle"], [0.4], "patterned"),
+        record("c", ["field_of_view", "ego_vehicle"], [0.8, 0.2], "random"),
+    ]
+    html = "".join(study_explain_parts(read_explanations(paths), tmp_path))
+    assert 'href="a/explain/explain.html"' in html and "ego_vehicle → shadow" in html
+    assert "random for 2" in html and "patterned for 1" in html
+    # ego_vehicle: 3 pairs (100%), median step 1, median reduction 0.4; shadow and field_of_view: 1 pair each
+    assert "<td>ego_vehicle</td><td>3</td><td>100%</td><td>1</td><td>0.4</td>" in html.replace(' class="text"', "")
+    assert "<td>shadow</td><td>1</td><td>33%</td><td>2</td><td>0.5</td>" in html.replace(' class="text"', "")
+    assert study_explain_parts([], tmp_path) == []
+
+
+def test_a_bad_explain_setting_is_one_error_naming_the_config_and_nothing_is_written(tmp_path, capsys):
+    config = tmp_path / "study.yaml"
+    config.write_text("explain: {min_energy_reduction: 2}\n")
+    out = tmp_path / "out"
+    assert main(["explain", "a.txt", "b.txt", "--config", str(config), "--out", str(out)]) == 2
+    error = capsys.readouterr().err
+    assert "study.yaml" in error and "min_energy_reduction" in error
+    assert not out.exists()

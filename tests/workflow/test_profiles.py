@@ -36,7 +36,9 @@ def test_the_slurm_profile_keeps_its_settings_beside_the_workstation_profile(tmp
     monkeypatch.chdir(tmp_path)
     _, args = parse_args(["--snakefile", str(ROOT / "Snakefile"), "--profile", str(PROFILES / "slurm")])
     assert "workflow specific profile" in capsys.readouterr().err  # profiles/default was read too
-    assert args.executor == "slurm"
+    assert args.executor == "slurm-allocation"
     assert args.latency_wait == 60
-    assert args.slurm_status_command == "squeue"
+    assert args.slurm_allocation_status_command == "squeue"
+    assert args.slurm_allocation_pass_command_as_script is True
     assert args.groups["mitigate"] == args.groups["field"] == "pair"
+    assert args.groups["simulate"] == "scans"

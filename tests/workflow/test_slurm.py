@@ -2,10 +2,10 @@
 from Debian's packages by scripts/slurm-cluster.sh (root and apt-get needed; skipped, with the
 reason, otherwise).
 
-config/smoke.yaml runs through ``snakemake --profile profiles/slurm`` (only the partition set
-on the command line, as a user would) and locally; the summaries must be identical. A study
-whose mitigation raises must be reported failed within a minute of the failure, and the run
-must exit non-zero.
+config/smoke.yaml runs through a copy of ``profiles/slurm`` with only its partition line edited,
+as a user would, and locally; the summaries must be identical. A study whose mitigation raises
+for one of its two pairs must fail with that job's log shown, leave no job worker or socket on
+the node, and complete when rerun once the mitigation is mended.
 """
 
 from __future__ import annotations
@@ -15,8 +15,6 @@ import os
 import re
 import subprocess
 import sys
-import threading
-import time
 from pathlib import Path
 
 import pytest
@@ -29,16 +27,28 @@ pytestmark = pytest.mark.slow
 CLUSTER_SCRIPT = ROOT / "scripts" / "slurm-cluster.sh"
 SMOKE = ROOT / "config" / "smoke.yaml"
 SNAKEMAKE = [sys.executable, "-m", "snakemake", "--snakefile", str(ROOT / "Snakefile")]
-SLURM = ["--profile", str(ROOT / "profiles" / "slurm"), "--default-resources", "slurm_partition=test"]
+PROFILE = ROOT / "profiles" / "slurm" / "config.yaml"
+# The profile's partition line, and what the test cluster's partition makes it.
+PARTITION_LINE = 'slurm_partition: "your_partition"'
+TEST_PARTITION_LINE = 'slurm_partition: "test"'
 # slurm-cluster.sh's exit status when it cannot install or start SLURM on this machine at all.
 CANNOT_RUN_HERE = 3
 
-FAILING_PLUGIN = '''"""Fails on purpose: the failing job of the SLURM test."""
+# Fails for the pair whose scans are more than 0.5 m apart (smoke's "shift", not "turn");
+# FAILS_FOR_NONE mends it.
+FAILING_PLUGIN = '''"""The failing job of the SLURM test."""
+
+import numpy as np
+
+FAILS_BEYOND_M = {limit}
 
 
 def remove(pair, params):
-    raise RuntimeError("this hypothesis fails on purpose")
+    if np.linalg.norm(pair.T_1_2[:3, 3]) > FAILS_BEYOND_M:
+        raise RuntimeError("this hypothesis fails on purpose")
+    return np.ones(len(pair.xyz1), dtype=bool), np.ones(len(pair.xyz2), dtype=bool)
 '''
+FAILS_FOR_SHIFT, FAILS_FOR_NONE = 0.5, 1e9
 
 
 def why_no_cluster() -> str | None:
@@ -70,6 +80,17 @@ def slurm_env(tmp_path_factory):
         subprocess.run([str(CLUSTER_SCRIPT), "stop", str(folder)], check=True, capture_output=True)
 
 
+@pytest.fixture
+def slurm_profile(tmp_path) -> list[str]:
+    """The options naming a copy of profiles/slurm whose partition line says the test cluster's."""
+    text = PROFILE.read_text()
+    assert text.count(PARTITION_LINE) == 1
+    folder = tmp_path / "profile"
+    folder.mkdir()
+    (folder / "config.yaml").write_text(text.replace(PARTITION_LINE, TEST_PARTITION_LINE))
+    return ["--profile", str(folder)]
+
+
 def run_study(workdir: Path, config: Path, *args: str, env=None) -> subprocess.CompletedProcess:
     return subprocess.run(
         [*SNAKEMAKE, "--directory", str(workdir), "--configfile", str(config), *args],
@@ -84,51 +105,68 @@ def submissions(log: str) -> int:
     return len(re.findall(r"has been submitted with SLURM jobid", log))
 
 
-def test_the_smoke_study_through_slurm_matches_the_local_run(slurm_env, tmp_path):
+def test_the_smoke_study_through_slurm_matches_the_local_run(slurm_env, slurm_profile, tmp_path):
     local = run_study(tmp_path / "local", SMOKE, "--cores", "2")
     assert local.returncode == 0, local.stderr
-    cluster = run_study(tmp_path / "slurm", SMOKE, *SLURM, env=slurm_env)
+    cluster = run_study(tmp_path / "slurm", SMOKE, *slurm_profile, env=slurm_env)
     assert cluster.returncode == 0, cluster.stderr
     summary = Path("results/smoke/summary.csv")
     assert (tmp_path / "slurm" / summary).read_bytes() == (tmp_path / "local" / summary).read_bytes()
-    # 4 scans, then one submission per pair for its whole chain, then one for the study-wide
-    # jobs: 7 submissions for 32 jobs.
-    assert submissions(cluster.stderr) == 7, cluster.stderr
+    # One allocation for the 4 scans, one for both pairs' chains, one for the study-wide jobs.
+    assert submissions(cluster.stderr) == 3, cluster.stderr
+    # Each allocation's jobs ran on its job worker: one log line a job.
+    worker_logs = sorted((tmp_path / "slurm" / "results" / "smoke" / "logs" / "workers").glob("slurm-*.log"))
+    assert len(worker_logs) == 3
+    assert sum(log.read_text().count(": {'exit': 0}") for log in worker_logs) == 33
 
 
-def test_a_failing_job_is_reported_within_a_minute_and_the_run_fails(slurm_env, tmp_path):
+def workers_on(node_tmp: Path) -> list[str]:
+    """The command lines of the running job workers whose socket is in ``node_tmp``."""
+    found = []
+    for cmdline in Path("/proc").glob("[0-9]*/cmdline"):
+        try:
+            argv = cmdline.read_bytes().decode(errors="replace").split("\0")
+        except OSError:
+            continue
+        if "lidarfield.runner.server" in argv and any(a.startswith(str(node_tmp)) for a in argv):
+            found.append(" ".join(argv))
+    return found
+
+
+def test_a_failing_job_fails_with_its_log_and_the_rerun_completes(slurm_env, slurm_profile, tmp_path):
     study = yaml.safe_load(SMOKE.read_text())
-    study["pairs"] = {"shift": study["pairs"]["shift"]}
     study["hypotheses"] = [{"plugin": {"file": "fails.py", "function": "remove"}}]
-    (tmp_path / "fails.py").write_text(FAILING_PLUGIN)
+    (tmp_path / "fails.py").write_text(FAILING_PLUGIN.format(limit=FAILS_FOR_SHIFT))
     config = tmp_path / "failing.yaml"
     config.write_text(yaml.safe_dump(study))
+    # The allocations' node-local folder (sbatch passes the environment on).
+    node_tmp = tmp_path / "node-tmp"
+    node_tmp.mkdir()
+    env = {**slurm_env, "TMPDIR": str(node_tmp)}
 
-    reported_at: list[float] = []
-    proc = subprocess.Popen(
-        [*SNAKEMAKE, "--directory", str(tmp_path), "--configfile", str(config), *SLURM],
-        stderr=subprocess.PIPE,
-        stdout=subprocess.DEVNULL,
-        text=True,
-        env=slurm_env,
-    )
-    lines: list[str] = []
-
-    def read() -> None:
-        for line in proc.stderr:
-            lines.append(line)
-            if line.startswith("Error in rule") and not reported_at:
-                reported_at.append(time.time())
-
-    reader = threading.Thread(target=read)
-    reader.start()
-    code = proc.wait(timeout=600)
-    reader.join()
-    log = "".join(lines)
-    assert code != 0, log
-    assert reported_at, log
-    # The mitigation's log is written until the job fails.
-    failed_log = next((tmp_path / "results" / "smoke" / "logs" / "mitigate" / "shift").glob("01-plugin-*.log"))
+    failed = run_study(tmp_path, config, *slurm_profile, env=env)
+    assert failed.returncode != 0, failed.stderr
+    assert "Error in rule mitigate" in failed.stderr
+    results = tmp_path / "results" / "smoke"
+    failed_log = next((results / "logs" / "mitigate" / "shift").glob("01-plugin-*.log"))
     assert "fails on purpose" in failed_log.read_text()
-    assert reported_at[0] - failed_log.stat().st_mtime < 60, log
-    assert not list((tmp_path / "results" / "smoke").rglob("summary.csv"))
+    # The job's own log, printed into its allocation's SLURM log, which the run shows.
+    assert failed.stderr.count("this hypothesis fails on purpose") >= 1, failed.stderr
+    assert not (results / "summary.csv").exists()
+    # The batch's other pair ran to its end in the allocation, whatever the run then kept of it.
+    pair_worker_log = next(
+        log for log in (results / "logs" / "workers").glob("slurm-*.log") if "pair-report" in log.read_text()
+    )
+    assert pair_worker_log.read_text().count("pair-report: {'exit': 0}") == 1
+    # ... and Snakemake removed the failed batch's outputs: the rerun runs it again.
+    assert not (results / "turn" / "registered.parquet").exists()
+    assert not list(node_tmp.iterdir())
+    assert not workers_on(node_tmp)
+
+    (tmp_path / "fails.py").write_text(FAILING_PLUGIN.format(limit=FAILS_FOR_NONE))
+    rerun = run_study(tmp_path, config, *slurm_profile, env=env)
+    assert rerun.returncode == 0, rerun.stderr
+    summary = (results / "summary.csv").read_text()
+    assert "shift" in summary and "turn" in summary
+    assert not list(node_tmp.iterdir())
+    assert not workers_on(node_tmp)

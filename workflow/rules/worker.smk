@@ -1,7 +1,7 @@
 # A local run hands each job to a pre-imported worker (lidarfield.runner.server), started here and
 # stopped when the run ends (or at exit, when the run executes nothing): jobs then skip
-# Python's start and imports. On a cluster, or with
-# LIDARFIELD_WORKER=off, every job is its own process.
+# Python's start and imports. With LIDARFIELD_WORKER=off every job is its own process. On a
+# SLURM cluster (profiles/slurm) each allocation's Snakemake starts one of its own.
 # The end of a run also cancels the scheduler's pending re-evaluation timers (see
 # lidarfield.runner.scheduling), which would otherwise hold the exit for up to a minute.
 from lidarfield.runner import launch, scheduling
@@ -9,13 +9,19 @@ from lidarfield.runner import launch, scheduling
 # Not in the Snakemake processes that run one job each (on a cluster node), nor when each job
 # runs in its rule's own software environment (--sdm conda / apptainer): the worker runs the
 # jobs with its own imports, those of the environment Snakemake runs in.
-USE_WORKER = (
-    workflow.is_main_process and not workflow.deployment_settings.deployment_method
-)
+NO_DEPLOYMENT = not workflow.deployment_settings.deployment_method
+USE_WORKER = workflow.is_main_process and NO_DEPLOYMENT
 # Started importing now, while Snakemake plans: the run's first jobs need not wait for it. It
 # warms up for the figures when the study draws enough of them.
 if USE_WORKER:
     launch.spawn(RESULTS, figure_jobs=sum(len(STAGES[pair]) for pair in PLOT_PAIRS))
+# The one Snakemake of a SLURM allocation (profiles/slurm) runs a batch of jobs: its worker
+# starts now, as hooks do not run there. The batch's jobs are its command line's
+# --target-jobs (RULE:WILDCARDS), which Snakemake has not parsed yet.
+elif NO_DEPLOYMENT and launch.in_allocation(workflow.remote_exec):
+    launch.start_in_allocation(
+        RESULTS, figure_jobs=sum(arg.startswith("plot_stage:") for arg in sys.argv)
+    )
 
 
 onstart:

@@ -2,19 +2,27 @@
 
 The workflow spawns it while Snakemake reads the Snakefile (its imports overlap the planning),
 points the jobs at it when the run starts executing locally (``start``), and stops it when the
-run ends (``stop``).
+run ends (``stop``). Inside a SLURM allocation (the ``slurm-allocation`` executor, whose one
+Snakemake runs a job group's jobs) it is started while Snakemake reads the Snakefile, since
+hooks do not run there, with its socket and log on the node's own storage
+(``start_in_allocation``).
 """
 
 from __future__ import annotations
 
 import atexit
 import os
+import shutil
+import socket
 import subprocess
 import sys
+import tempfile
+import threading
 import time
 from pathlib import Path
 
 from ..cli.worker_client import ENV, worker_socket
+from . import scheduling
 from .server import IDLE_TIMEOUT_S
 
 # Numeric libraries start as many threads as these say; jobs run with threads: 1.
@@ -23,29 +31,39 @@ THREAD_VARS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NU
 # done for studies with at least this many stage-figure jobs (the default study has 27; a
 # one-pair test study's run took 20% longer with it).
 WARM_UP_MIN_FIGURE_JOBS = 10
-SOCKET_GLOB = ".worker-*.sock"
+# Set (to 1) in the command of a SLURM allocation by the slurm-allocation executor
+# (src/snakemake_executor_plugin_slurm_allocation).
+ALLOCATION_ENV = "LIDARFIELD_SLURM_ALLOCATION"
+# A socket's name carries the host and the PID of the workflow run that owns it: on a shared
+# file system only this host's sockets are ever checked for staleness.
+HOST = socket.gethostname()
+LOCAL_RUN_STEM = ".worker"
 
 
-def socket_path(results: str | Path, owner_pid: int) -> str:
-    """The socket of the worker of the workflow run ``owner_pid``, in its results folder; a
-    relative path where the absolute one is too long for a Unix socket (108 bytes)."""
-    path = Path(results).absolute() / f".worker-{owner_pid}.sock"
+def socket_path(folder: str | Path, stem: str, owner_pid: int) -> str:
+    """The socket, in ``folder``, of the worker of the workflow run ``owner_pid`` on this host;
+    a relative path where the absolute one is too long for a Unix socket (108 bytes)."""
+    path = Path(folder).absolute() / f"{stem}-{HOST}-{owner_pid}.sock"
     return str(path) if len(str(path)) < 100 else os.path.relpath(path)
 
 
-def remove_stale_sockets(results: Path) -> None:
-    """Sockets left by workers whose workflow run is gone (killed before its onerror)."""
-    for path in results.glob(SOCKET_GLOB):
+def remove_stale_sockets(folder: Path, stem: str) -> None:
+    """This host's sockets in ``folder`` whose workflow run is gone (killed before it could stop
+    its worker). Another host's sockets are never touched: their PIDs mean nothing here."""
+    prefix = f"{stem}-{HOST}-"
+    for path in folder.glob(f"{prefix}*.sock"):
         try:
-            os.kill(int(path.name.split("-")[1].split(".")[0]), 0)
+            os.kill(int(path.name[len(prefix) : -len(".sock")]), 0)
         except ProcessLookupError:
             path.unlink(missing_ok=True)
         except (ValueError, PermissionError):
             pass
 
 
-# The worker of this workflow run (the Snakemake process), from spawn() or start() to stop().
+# The worker of this workflow run (the Snakemake process) and its socket, from spawn() or
+# start() to stop().
 _running: subprocess.Popen | None = None
+_socket: str | None = None
 
 
 def spawn(results: str | Path, idle_timeout_s: float = IDLE_TIMEOUT_S, figure_jobs: int = 0) -> subprocess.Popen | None:
@@ -54,24 +72,30 @@ def spawn(results: str | Path, idle_timeout_s: float = IDLE_TIMEOUT_S, figure_jo
     then uses it; a run that executes nothing (a dry run, nothing to do) stops it at exit.
     ``figure_jobs``: the study's stage-figure jobs, which decide the figure warm-up (see
     ``WARM_UP_MIN_FIGURE_JOBS``). None when ``LIDARFIELD_WORKER=off``."""
-    global _running
+    results = Path(results)
+    return _spawn(results, LOCAL_RUN_STEM, results / "logs" / "worker.log", idle_timeout_s, figure_jobs)
+
+
+def _spawn(folder: Path, stem: str, log: Path, idle_timeout_s: float, figure_jobs: int) -> subprocess.Popen | None:
+    """The worker, listening on its socket in ``folder`` and logging to ``log``."""
+    global _running, _socket
     if ENV in os.environ and worker_socket() is None:
         return None
     if _running is None:
-        results = Path(results)
-        (results / "logs").mkdir(parents=True, exist_ok=True)
-        remove_stale_sockets(results)
-        path = socket_path(results, os.getpid())
-        Path(path).unlink(missing_ok=True)
+        folder.mkdir(parents=True, exist_ok=True)
+        log.parent.mkdir(parents=True, exist_ok=True)
+        remove_stale_sockets(folder, stem)
+        _socket = socket_path(folder, stem, os.getpid())
+        Path(_socket).unlink(missing_ok=True)
         env = {**os.environ, **{name: "1" for name in THREAD_VARS}}
         env.pop(ENV, None)
-        with open(results / "logs" / "worker.log", "a") as log_file:
+        with open(log, "a") as log_file:
             _running = subprocess.Popen(
                 [
                     sys.executable,
                     "-m",
                     "lidarfield.runner.server",
-                    path,
+                    _socket,
                     "--parent-pid",
                     str(os.getpid()),
                     "--idle-timeout",
@@ -92,18 +116,51 @@ def start(results: str | Path, idle_timeout_s: float = IDLE_TIMEOUT_S) -> subpro
     """Point this workflow run's jobs at its worker (``LIDARFIELD_WORKER``), spawned now if
     ``spawn`` was not called; None, and jobs run as plain processes, when
     ``LIDARFIELD_WORKER=off`` or the worker did not come up."""
-    worker = spawn(results, idle_timeout_s)
+    return _serve_jobs(spawn(results, idle_timeout_s))
+
+
+def _serve_jobs(worker: subprocess.Popen | None) -> subprocess.Popen | None:
+    """Wait (up to 10 s) for ``worker``'s socket, then point this process's jobs at it."""
     if worker is None:
         return None
-    path = socket_path(results, os.getpid())
     deadline = time.monotonic() + 10.0
-    while not os.path.exists(path) and worker.poll() is None and time.monotonic() < deadline:
+    while not os.path.exists(_socket) and worker.poll() is None and time.monotonic() < deadline:
         time.sleep(0.01)
-    if not os.path.exists(path):
+    if not os.path.exists(_socket):
         stop()
         return None  # jobs run as plain processes; the reason is in the worker's log
-    os.environ[ENV] = path
+    os.environ[ENV] = _socket
     return worker
+
+
+def in_allocation(remote_exec: bool) -> bool:
+    """Whether this Snakemake runs a job group's jobs inside a SLURM allocation of the
+    slurm-allocation executor (``remote_exec``: Snakemake's ``workflow.remote_exec``)."""
+    return remote_exec and os.environ.get(ALLOCATION_ENV) == "1"
+
+
+def start_in_allocation(results: str | Path, figure_jobs: int = 0) -> subprocess.Popen | None:
+    """Start the worker of this SLURM allocation's Snakemake and point its jobs at it: socket
+    and log in the node's own temporary folder (``TMPDIR``, which SLURM sites often make a
+    per-job one), named after the SLURM job. When the Snakemake exits (hooks do not run in an
+    allocation), the worker stops and its log moves to ``results/logs/workers/``.
+    ``figure_jobs``: the allocation's stage-figure jobs (see ``spawn``)."""
+    job = os.environ.get("SLURM_JOB_ID", f"pid{os.getpid()}")
+    node_local = Path(tempfile.gettempdir())
+    log = node_local / f"lidarfield-slurm-{job}-worker.log"
+    worker = _serve_jobs(_spawn(node_local, f"lidarfield-slurm-{job}", log, IDLE_TIMEOUT_S, figure_jobs))
+    # Run when the main thread ends, before Python waits for the other threads: the scheduler's
+    # pending re-evaluation timers (see runner.scheduling) would hold the exit for their timespan.
+    threading._register_atexit(_end_allocation, log, Path(results) / "logs" / "workers" / f"slurm-{job}.log")
+    return worker
+
+
+def _end_allocation(log: Path, kept_log: Path) -> None:
+    scheduling.cancel_pending_rounds()
+    stop()
+    if log.exists():
+        kept_log.parent.mkdir(parents=True, exist_ok=True)
+        shutil.move(log, kept_log)
 
 
 def stop() -> None:

@@ -1,0 +1,79 @@
+"""The slurm-allocation executor plugin's own decisions (when it polls, the cores an allocation's
+Snakemake runs with) and the job worker's socket names and stale-socket clean-up, without a
+cluster (tests/workflow/test_slurm.py runs them on one)."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from types import SimpleNamespace
+
+import pytest
+
+from lidarfield.runner import launch
+
+slurm_allocation = pytest.importorskip("snakemake_executor_plugin_slurm_allocation")
+pytest.importorskip("snakemake_executor_plugin_slurm")
+
+
+def test_snakemake_finds_the_plugin_with_the_slurm_plugins_settings():
+    from snakemake_interface_executor_plugins.registry import ExecutorPluginRegistry
+
+    plugin = ExecutorPluginRegistry().get_plugin("slurm-allocation")
+    assert plugin.executor is slurm_allocation.Executor
+    settings = plugin.settings_cls()
+    assert settings.pass_command_as_script is False  # the profile turns it on
+    assert settings.init_seconds_before_status_checks == 40
+
+
+def test_the_plugin_and_the_workflow_name_the_allocation_alike():
+    assert slurm_allocation.ALLOCATION_ENV == launch.ALLOCATION_ENV
+
+
+@pytest.mark.parametrize(
+    ("plugin_interval", "unchanged", "expected"),
+    [
+        (2.0, 0.0, 2.0),  # an allocation just ended or was submitted: the plugin's shortest interval
+        (45.0, 5.0, 2.0),  # never sooner than the shortest interval
+        (45.0, 300.0, 30.0),  # a tenth of the time nothing changed
+        (45.0, 1000.0, 45.0),  # never later than the plugin would poll
+    ],
+)
+def test_the_next_poll_comes_within_a_tenth_of_the_time_nothing_changed(plugin_interval, unchanged, expected):
+    assert slurm_allocation.next_poll_s(plugin_interval, unchanged, shortest_s=2) == pytest.approx(expected)
+
+
+@pytest.mark.parametrize(
+    ("resources", "threads", "expected"),
+    [({}, 2, 2), ({"cpus_per_task": 8}, 2, 8), ({}, 0, 1)],
+)
+def test_an_allocations_snakemake_runs_on_the_cpus_its_submission_asks_for(resources, threads, expected):
+    job = SimpleNamespace(resources=resources, threads=threads)
+    assert slurm_allocation.allocation_cpus(job) == expected
+
+
+def ended_pid() -> int:
+    proc = subprocess.Popen([sys.executable, "-c", "pass"])
+    proc.wait()
+    return proc.pid
+
+
+def test_stale_socket_clean_up_removes_only_this_hosts_sockets_of_ended_runs(tmp_path):
+    gone = ended_pid()
+    stale = tmp_path / f".worker-{launch.HOST}-{gone}.sock"
+    live = tmp_path / f".worker-{launch.HOST}-{os.getpid()}.sock"
+    other_host = tmp_path / f".worker-{launch.HOST}x-{gone}.sock"  # another node's, same PID
+    dashed_host = tmp_path / f".worker-{launch.HOST}-2-{gone}.sock"  # node "HOST-2"
+    other_stem = tmp_path / f"lidarfield-slurm-7-{launch.HOST}-{gone}.sock"
+    for path in (stale, live, other_host, dashed_host, other_stem):
+        path.touch()
+    launch.remove_stale_sockets(tmp_path, launch.LOCAL_RUN_STEM)
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(
+        p.name for p in (live, other_host, dashed_host, other_stem)
+    )
+
+
+def test_a_socket_is_named_after_its_host_and_run(tmp_path):
+    path = launch.socket_path(tmp_path, "lidarfield-slurm-42", 1234)
+    assert path == str(tmp_path / f"lidarfield-slurm-42-{launch.HOST}-1234.sock")

@@ -109,14 +109,16 @@ def this_stage_dir(wildcards):
 
 
 @planned
-def previous_stage_points(wildcards):
-    """Stage 0 starts from the registered pair; stage k from stage k-1's survivors."""
-    level = stage_level(wildcards)
-    if level == 0:
-        return f"{RESULTS}/{wildcards.pair}/registered.parquet"
-    return (
-        f"{stage_dir(wildcards.pair, STAGES[wildcards.pair][level - 1])}/points.parquet"
-    )
+def stage_changes(wildcards):
+    """Stage k's points are the registered pair with the changes of stages 0..k."""
+    stages = STAGES[wildcards.pair][: stage_level(wildcards) + 1]
+    return [f"{stage_dir(wildcards.pair, stage)}/changes.parquet" for stage in stages]
+
+
+@planned
+def previous_stage_changes(wildcards):
+    """What stage k starts from: the registered pair with the changes of stages 0..k-1."""
+    return stage_changes(wildcards)[:-1]
 
 
 @planned

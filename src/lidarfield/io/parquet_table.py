@@ -52,6 +52,18 @@ def read_table(
     return columns, meta
 
 
+def read_metadata(path: str | Path) -> dict:
+    """A Parquet file's lidarfield metadata ({} when absent), without reading its columns."""
+    path = Path(path)
+    if not path.is_file():
+        raise InputError("file not found", path)
+    try:
+        raw = (pq.read_schema(path).metadata or {}).get(METADATA_KEY)
+    except (pa.ArrowException, OSError) as e:
+        raise InputError(f"not a readable Parquet file ({e})", path) from None
+    return json.loads(raw) if raw else {}
+
+
 # pyarrow's own conversions (pa.array, to_numpy) import pandas to look at their input: half a
 # second of every job's start. Numeric, boolean and string columns without nulls, all of
 # lidarfield's, go through their buffers instead: the same values and dtypes as pyarrow's.

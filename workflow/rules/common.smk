@@ -121,10 +121,14 @@ def previous_stage_changes(wildcards):
     return stage_changes(wildcards)[:-1]
 
 
+# Each stage level's step as its job's params (canonical JSON), made once here rather than at
+# every mitigate job planned (1.5% of planning a 1,000-pair drive).
+STEPS = [canonical_json(step) for step in (None, *STUDY.hypotheses)]
+
+
 @planned
 def stage_step(wildcards):
-    level = stage_level(wildcards)
-    return canonical_json(STUDY.hypotheses[level - 1] if level else None)
+    return STEPS[stage_level(wildcards)]
 
 
 @planned

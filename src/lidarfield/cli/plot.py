@@ -32,8 +32,8 @@ def run(args) -> int:
     from ..study.config import load_config
 
     settings = load_config(args.config, require_pairs=False).plots if args.config else {}
-    changes = stage_files(args.stage_dir)[1]
-    previous = changes[-2].parent if args.before_after and len(changes) > 1 else None
+    changes = stage_files(args.stage_dir)[1] if args.before_after else []
+    previous = changes[-2].parent if len(changes) > 1 else None
     for path in plot_stage(args.stage_dir, previous, args.out, settings):
         print(path)
     return 0

@@ -60,9 +60,10 @@ def plot_stage(
     start = time.perf_counter()
     s = plot_settings(settings)
     out_dir = Path(out_dir)
-    registered, changes = points or stage_files(stage_dir)
-    stage = load_stage(stage_dir, (registered, changes))
-    prev = load_stage(prev_stage_dir, (registered, changes[:-1])) if prev_stage_dir is not None else None
+    stage, prev = load_stage(stage_dir, points), None
+    if prev_stage_dir is not None:
+        registered, changes = points or stage_files(stage_dir)
+        prev = load_stage(prev_stage_dir, (registered, changes[:-1]))
 
     reference = prev if prev is not None else stage
     scene = np.vstack(

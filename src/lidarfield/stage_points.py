@@ -88,37 +88,28 @@ def write_changes(path: str | Path, columns: dict[str, np.ndarray], meta: dict) 
     write_table(path, columns, meta)
 
 
-def positions(rows: np.ndarray, wanted: np.ndarray, what: str, path: Path) -> np.ndarray:
-    """Where each of ``wanted`` is in ``rows`` (ascending: points keep their registered order)."""
-    at = np.searchsorted(rows, wanted)
-    found = at < len(rows)
-    found[found] = rows[at[found]] == wanted[found]
-    if not found.all():
-        raise InputError(
-            f"{what} row {int(wanted[~found][0])}, which the stages before it do not have "
-            "(a change file of another pair or stack?)",
-            path,
-        )
-    return at
-
-
-def apply_changes(pair: RegisteredPair, columns: dict[str, np.ndarray], path: Path) -> RegisteredPair:
-    """``pair`` (with ``row``) after one stage's change rows; ``path`` names the file in errors."""
-    clouds = np.asarray(columns["cloud"])
+def apply_changes(kept: list[np.ndarray], xyz: list[np.ndarray], columns: dict[str, np.ndarray], path: Path) -> None:
+    """One stage's change rows applied in place to ``kept`` (per cloud, which of the registered
+    pair's points are left) and ``xyz`` (per cloud, their coordinates); ``path`` names the file
+    in errors."""
+    clouds, rows = np.asarray(columns["cloud"]), np.asarray(columns[ROW])
     removed = np.asarray(columns["removed"], dtype=bool)
-    keeps, moves = [], []
-    for cloud, rows in ((1, pair.attributes1[ROW]), (2, pair.attributes2[ROW])):
-        keep = np.ones(len(rows), dtype=bool)
-        keep[positions(rows, columns[ROW][(clouds == cloud) & removed], f"cloud {cloud}: removes", path)] = False
-        keeps.append(keep)
-        moving = (clouds == cloud) & ~removed
-        moves.append((moving, rows[keep]))
-    after = pair.subset(*keeps)
-    for (moving, kept_rows), xyz in zip(moves, (after.xyz1, after.xyz2)):
-        if moving.any():
-            at = positions(kept_rows, columns[ROW][moving], "moves", path)
-            xyz[at] = np.column_stack([columns[axis][moving] for axis in "xyz"])
-    return after
+    for index, cloud in enumerate((1, 2)):
+        for what, mine in (("removes", removed), ("moves", ~removed)):
+            wanted = rows[(clouds == cloud) & mine]
+            there = (wanted >= 0) & (wanted < len(kept[index]))
+            there[there] = kept[index][wanted[there]]
+            if not there.all():
+                raise InputError(
+                    f"cloud {cloud}: {what} row {int(wanted[~there][0])}, which the stages before it do not have "
+                    "(a change file of another pair or stack?)",
+                    path,
+                )
+            if what == "removes":
+                kept[index][wanted] = False
+            else:
+                moved = (clouds == cloud) & mine
+                xyz[index][wanted] = np.column_stack([columns[axis][moved] for axis in "xyz"])
 
 
 def read_stage_points(registered: str | Path, changes: Sequence[str | Path]) -> tuple[RegisteredPair, dict]:
@@ -128,15 +119,18 @@ def read_stage_points(registered: str | Path, changes: Sequence[str | Path]) -> 
     The metadata is the registered pair's with stage k's keys over it (``stage``, ``level``,
     ``hypothesis``, ``T_1_2``, ...), as a file of the survivors would hold. No changes: the
     registered pair (numbered by ``row``)."""
-    pair, meta = read_pair(registered)
-    pair, stage_meta = with_rows(pair), {}
+    pair, meta = read_pair(registered)  # arrays of its own: moved in place
+    pair = with_rows(pair)
+    kept = [np.ones(len(pair.xyz1), dtype=bool), np.ones(len(pair.xyz2), dtype=bool)]
+    xyz, stage_meta = [pair.xyz1, pair.xyz2], {}
     for path in map(Path, changes):
         columns, stage_meta = read_table(path, required=COLUMNS)
         if "T_1_2" not in stage_meta:
             raise InputError("not a stage's changes file (no T_1_2 in its lidarfield metadata)", path)
-        pair = apply_changes(pair, columns, path)
+        apply_changes(kept, xyz, columns, path)
+    if stage_meta:
         pair.T_1_2 = np.asarray(stage_meta["T_1_2"], dtype=np.float64)
-    return pair, {**meta, **stage_meta}
+    return pair.subset(*kept), {**meta, **stage_meta}
 
 
 def stage_files(stage_dir: str | Path) -> tuple[Path, list[Path]]:

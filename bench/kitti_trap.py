@@ -86,12 +86,12 @@ def run_study(entry: dict, base: Path, out: Path) -> list[dict]:
             spec = {**scan.spec, "path": str(base / scan.spec["path"])}
             scan_job(scan.kind, spec, folder / f"scan{k}.parquet")
         register_job(folder / "scan1.parquet", folder / "scan2.parquet", pair.register, folder / "pair.parquet")
-        mitigate_stage(
-            folder / "pair.parquet", None, "00-none", 0, folder / "points.parquet", folder / "removed.parquet"
-        )
+        changes = [folder / "changes.parquet"]
+        mitigate_stage(folder / "pair.parquet", [], None, "00-none", 0, changes[0], folder / "removed.parquet")
         rows.append(
             field_stage(
-                folder / "points.parquet",
+                folder / "pair.parquet",
+                changes,
                 folder / "removed.parquet",
                 study.config["grid"],
                 name,

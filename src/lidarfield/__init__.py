@@ -68,6 +68,8 @@ _EXPORTS = {
     "validate_stack": "hypotheses",
     "apply_stack": "study.stack",
     "Stage": "study.stack",
+    "read_stage_points": "stage_points",
+    "stage_files": "stage_points",
     "run_pair": "study.run",
     "explain_pair": "study.explain",
     "ExplainSettings": "analysis.explain",

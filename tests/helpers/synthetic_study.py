@@ -20,6 +20,7 @@ from lidarfield.field.grid import FieldSettings, SphericalGrid
 from lidarfield.io.atomic import write_text
 from lidarfield.io.parquet_table import write_table
 from lidarfield.pair import RegisteredPair, write_pair
+from lidarfield.stage_points import CHANGES, change_columns, with_rows, write_changes
 from lidarfield.study.summary import write_summary_table
 
 SETTINGS = FieldSettings(SphericalGrid(36, 0.0, (-20.0, 20.0), 5), min_points=10)
@@ -115,7 +116,7 @@ def write_synthetic_pair(
     pair_dir = Path(pair_dir)
     pair = synthetic_pair(seed, n)
     write_pair(pair_dir / "registered.parquet", pair)
-    stage_dirs, rows = [], []
+    pair, stage_dirs, rows = with_rows(pair), [], []
     for level in range(levels):
         hypothesis = HYPOTHESES[level % len(HYPOTHESES)]
         keep1, keep2 = _mitigate(pair, hypothesis)
@@ -125,8 +126,10 @@ def write_synthetic_pair(
         gone = pair.subset(~keep1, ~keep2)
         removed = gone.to_columns()
         removed["hypothesis"] = np.full(len(removed["cloud"]), hypothesis)
+        changes = change_columns(pair, keep1, keep2, pair.subset(keep1, keep2))
         pair = pair.subset(keep1, keep2)
-        write_pair(stage_dir / "points.parquet", pair, meta)
+        previous = stage_dirs[-1].name if stage_dirs else None
+        write_changes(stage_dir / CHANGES, changes, {**meta, "T_1_2": pair.T_1_2.tolist(), "previous": previous})
         write_table(stage_dir / "removed.parquet", removed, {**pair.metadata(), **meta})
         field, statistics = analyse_field(pair, SETTINGS)
         write_field(

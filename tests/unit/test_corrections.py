@@ -15,12 +15,13 @@ from lidarfield.hypotheses import apply_step
 from lidarfield.hypotheses.outcome import Outcome, checked_outcome
 from lidarfield.hypotheses.outliers import neighbour_distances
 from lidarfield.io.parquet_table import read_table
-from lidarfield.pair import RegisteredPair, read_pair, write_pair
+from lidarfield.pair import RegisteredPair, write_pair
 from lidarfield.poses import pose_from_xyzrpy
 from lidarfield.registration import register_pair
 from lidarfield.sensors.models import PRESETS
 from lidarfield.simulation.raycast import simulate_scan
 from lidarfield.simulation.scene import load_scene
+from lidarfield.stage_points import CHANGES, read_stage_points
 from lidarfield.study.jobs import field_stage, mitigate_stage
 from lidarfield.study.stack import apply_stack
 from lidarfield.study.summary import CORRECTION_COLUMNS, write_summary
@@ -208,33 +209,30 @@ def test_a_correcting_stages_files_and_summary_row(tmp_path):
     write_pair(tmp_path / "registered.parquet", pair)
     steps = [None, {"ego_vehicle": {"radius_m": 8.0}}, SHIFT]
     dirs = [tmp_path / f"0{level}" for level in range(3)]
-    previous = tmp_path / "registered.parquet"
+    registered, changes = tmp_path / "registered.parquet", []
     for level, (step, folder) in enumerate(zip(steps, dirs)):
-        mitigate_stage(
-            previous,
-            step,
-            f"0{level}-x-0000000{level}",
-            level,
-            folder / "points.parquet",
-            folder / "removed.parquet",
-            ROOT,
-        )
+        stage_id = f"0{level}-x-0000000{level}"
+        mitigate_stage(registered, changes, step, stage_id, level, folder / CHANGES, folder / "removed.parquet", ROOT)
+        changes.append(folder / CHANGES)
         field_stage(
-            folder / "points.parquet",
+            registered,
+            changes,
             folder / "removed.parquet",
             GRID,
             "demo",
             folder / "field.parquet",
             folder / "stats.json",
         )
-        previous = folder / "points.parquet"
-    columns, meta = read_table(dirs[2] / "points.parquet")
-    stage2, _ = read_pair(dirs[2] / "points.parquet")
-    row2 = columns["row"][columns["cloud"] == 2]
+    stage2, meta = read_stage_points(registered, changes)
+    row2 = stage2.attributes2["row"]
     assert np.allclose(stage2.xyz2, pair.xyz2[row2] + [-0.3, 0, 0], atol=1e-12)
-    assert np.array_equal(stage2.xyz1, pair.xyz1[columns["row"][columns["cloud"] == 1]])
+    assert np.array_equal(stage2.xyz1, pair.xyz1[stage2.attributes1["row"]])
     assert meta["moved"] == [2] and meta["correction"] == {"shift_m": [-0.3, 0.0, 0.0]}
     assert np.allclose(stage2.T_1_2[:3, 3], [-0.3, 0, 0])
+    # its changes: every survivor of cloud 2 moved, nothing removed; not cloud 1's survivors
+    moved, _ = read_table(changes[2])
+    assert set(moved["cloud"]) == {2} and not moved["removed"].any()
+    assert np.array_equal(moved["row"], row2)
     removed, _ = read_table(dirs[2] / "removed.parquet")
     assert len(removed["cloud"]) == 0 and list(removed)[-2:] == ["hypothesis", "row"]
 
@@ -264,20 +262,15 @@ def test_the_suggest_jobs_search_a_moved_cloud_anew(tmp_path):
     neighbours_job(tmp_path / "registered.parquet", [20], tmp_path / "neighbours.parquet")
     steps = [None, {"crop": {"max_range_m": 12}}, SHIFT, {"crop": {"max_range_m": 9}}]
     dirs = [tmp_path / f"0{level}" for level in range(len(steps))]
-    previous = tmp_path / "registered.parquet"
+    registered, stage_changes = tmp_path / "registered.parquet", []
     for level, (step, folder) in enumerate(zip(steps, dirs)):
+        stage_id = f"0{level}-x-0000000{level}"
         mitigate_stage(
-            previous,
-            step,
-            f"0{level}-x-0000000{level}",
-            level,
-            folder / "points.parquet",
-            folder / "removed.parquet",
-            ROOT,
+            registered, stage_changes, step, stage_id, level, folder / CHANGES, folder / "removed.parquet", ROOT
         )
-        previous = folder / "points.parquet"
+        stage_changes.append(folder / CHANGES)
         suggest_stage(
-            folder / "points.parquet",
+            read_stage_points(registered, stage_changes),
             [{"outliers": {}}],
             GRID,
             folder / "suggestions.parquet",
@@ -288,18 +281,18 @@ def test_the_suggest_jobs_search_a_moved_cloud_anew(tmp_path):
             changes_out=folder / "neighbour_changes.parquet",
         )
         searched = tmp_path / f"searched{level}.parquet"
-        suggest_stage(folder / "points.parquet", [{"outliers": {}}], GRID, searched, ROOT)
+        suggest_stage(read_stage_points(registered, stage_changes), [{"outliers": {}}], GRID, searched, ROOT)
         carried, anew = read_table(folder / "suggestions.parquet")[0], read_table(searched)[0]
         for name in anew:
             np.testing.assert_array_equal(carried[name], anew[name])
     # the shift stage's change: cloud 2 whole (searched anew), cloud 1 carried (no change: nothing removed)
     changes = read_changes(dirs[2] / "neighbour_changes.parquet")
-    assert len(changes[(2, 20)]) == len(read_pair(dirs[2] / "points.parquet")[0].xyz2)
+    assert len(changes[(2, 20)]) == len(read_stage_points(registered, stage_changes[:3])[0].xyz2)
     assert len(changes.get((1, 20), ([],))[0]) == 0
     # and the distances the last stage carried: a new search's, to the bit
     from lidarfield.analysis.neighbour_file import carry_to_stage
 
-    last, meta = read_pair(dirs[3] / "points.parquet")
+    last, meta = read_stage_points(registered, stage_changes)
     carry_to_stage(
         last,
         tmp_path / "neighbours.parquet",

@@ -15,7 +15,8 @@ from lidarfield.hypotheses import outliers as outliers_module
 from lidarfield.hypotheses.outliers import after_removal, neighbour_distances
 from lidarfield.io import read_scan
 from lidarfield.io.parquet_table import read_table
-from lidarfield.pair import RegisteredPair, read_pair
+from lidarfield.pair import RegisteredPair
+from lidarfield.stage_points import CHANGES, read_stage_points
 from lidarfield.study.jobs import write_stage
 from lidarfield.study.stack import initial_stage, next_stage
 
@@ -95,11 +96,11 @@ def test_the_suggest_jobs_carry_the_pairs_distances_to_every_stage(tmp_path, exp
         stages.append(next_stage(stages[-1].pair, step, level, study_grid=GRID))
         assert 0 < stages[-1].removed1 < len(stages[-2].pair.xyz1) / 2
     dirs = [tmp_path / f"s{stage.level}" for stage in stages]
+    ids = [f"0{stage.level}-x-0000000{stage.level}" for stage in stages]
     for stage, folder in zip(stages, dirs):
         folder.mkdir()
-        write_stage(
-            stage, f"0{stage.level}-x-0000000{stage.level}", folder / "points.parquet", folder / "removed.parquet"
-        )
+        previous = ids[stage.level - 1] if stage.level else None
+        write_stage(stage, ids[stage.level], previous, folder / CHANGES, folder / "removed.parquet")
     argv = [
         "job",
         "neighbours",
@@ -119,8 +120,10 @@ def test_the_suggest_jobs_carry_the_pairs_distances_to_every_stage(tmp_path, exp
         argv = [
             "job",
             "suggest",
-            "--points",
-            str(dirs[level] / "points.parquet"),
+            "--registered",
+            str(tmp_path / "registered.parquet"),
+            "--stage-changes",
+            *[str(folder / CHANGES) for folder in dirs[: level + 1]],
             "--candidates",
             json.dumps(candidates),
             "--grid",
@@ -159,7 +162,7 @@ def test_the_suggest_jobs_carry_the_pairs_distances_to_every_stage(tmp_path, exp
     # The carried distances themselves, at the last stage: a new search's.
     from lidarfield.analysis.neighbour_file import carry_to_stage
 
-    last, _ = read_pair(dirs[2] / "points.parquet")
+    last, _ = read_stage_points(tmp_path / "registered.parquet", [folder / CHANGES for folder in dirs])
     carry_to_stage(
         last, tmp_path / "neighbours.parquet", [dirs[1] / "removed.parquet", dirs[2] / "removed.parquet"], [changes[1]]
     )

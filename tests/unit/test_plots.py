@@ -125,7 +125,7 @@ def test_no_temporary_files_left(plotted, stages):
 def test_missing_field_file_is_one_clear_error(tmp_path, stages):
     bad = tmp_path / "stage"
     bad.mkdir()
-    (bad / "points.parquet").write_bytes((stages[0] / "points.parquet").read_bytes())
+    (bad / "changes.parquet").write_bytes((stages[0] / "changes.parquet").read_bytes())
     out = tmp_path / "figures"
     with pytest.raises(InputError, match=r"field\.parquet: file not found"):
         plot_stage(bad, None, out, FAST)

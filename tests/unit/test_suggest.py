@@ -141,13 +141,13 @@ def test_the_suggest_job_skips_default_candidates_that_cannot_apply(tmp_path, ca
     from lidarfield.pair import write_pair
 
     vehicle, _ = with_vehicle()
-    write_pair(tmp_path / "points.parquet", RegisteredPair(targets(60, 1), np.vstack([targets(60, 2), vehicle])))
+    write_pair(tmp_path / "registered.parquet", RegisteredPair(targets(60, 1), np.vstack([targets(60, 2), vehicle])))
     candidates = candidate_steps(None, [], ".", GRID)
     argv = [
         "job",
         "suggest",
-        "--points",
-        str(tmp_path / "points.parquet"),
+        "--registered",
+        str(tmp_path / "registered.parquet"),
         "--candidates",
         json.dumps(candidates),
         "--grid",

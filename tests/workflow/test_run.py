@@ -21,6 +21,7 @@ from lidarfield.poses import pose_from_xyzrpy
 from lidarfield.sensors.models import PRESETS
 from lidarfield.simulation.raycast import simulate_scan
 from lidarfield.simulation.scene import load_scene
+from lidarfield.stage_points import CHANGES, read_stage_points, stage_files
 from lidarfield.study.config import load_config
 from lidarfield.study.jobs import field_stage, mitigate_stage
 from lidarfield.study.run import run_pair
@@ -100,19 +101,16 @@ def test_stage_functions_write_the_layout(tmp_path):
     )
     write_pair(tmp_path / "registered.parquet", pair)
     s0, s1 = tmp_path / "00", tmp_path / "01"
-    mitigate_stage(
-        tmp_path / "registered.parquet", None, "00-none-aaaaaaaa", 0, s0 / "points.parquet", s0 / "removed.parquet"
-    )
+    registered, c0, c1 = tmp_path / "registered.parquet", s0 / CHANGES, s1 / CHANGES
+    mitigate_stage(registered, [], None, "00-none-aaaaaaaa", 0, c0, s0 / "removed.parquet")
     step = {"ego_vehicle": {"radius_m": 8.0}}
-    mitigate_stage(
-        s0 / "points.parquet", step, "01-ego_vehicle-bbbbbbbb", 1, s1 / "points.parquet", s1 / "removed.parquet"
-    )
+    mitigate_stage(registered, [c0], step, "01-ego_vehicle-bbbbbbbb", 1, c1, s1 / "removed.parquet")
 
-    stage0, meta0 = read_pair(s0 / "points.parquet")
+    stage0, meta0 = read_stage_points(registered, [c0])
     assert np.array_equal(stage0.xyz1, pair.xyz1) and meta0["stage"] == "00-none-aaaaaaaa" and meta0["level"] == 0
     removed0, _ = read_table(s0 / "removed.parquet")
     assert len(removed0["cloud"]) == 0 and "hypothesis" in removed0
-    stage1, meta1 = read_pair(s1 / "points.parquet")
+    stage1, meta1 = read_stage_points(registered, [c0, c1])
     removed1, rmeta1 = read_table(s1 / "removed.parquet")
     near1 = np.linalg.norm(pair.xyz1, axis=1) < 8.0
     assert len(stage1.xyz1) == np.count_nonzero(~near1) and np.count_nonzero(removed1["cloud"] == 1) == near1.sum()
@@ -122,10 +120,11 @@ def test_stage_functions_write_the_layout(tmp_path):
     assert meta1["hypothesis"] == "ego_vehicle" and meta1["registration"]["method"] == "icp"
 
     rows = []
-    for folder in (s0, s1):
+    for level, folder in enumerate((s0, s1)):
         rows.append(
             field_stage(
-                folder / "points.parquet",
+                registered,
+                [c0, c1][: level + 1],
                 folder / "removed.parquet",
                 GRID,
                 "demo",
@@ -168,7 +167,7 @@ def test_run_writes_every_stage_and_prints_the_table(tmp_path, paper_scans, caps
     assert list(summary["hypothesis"]) == ["none", "field_of_view", "shadow"]
     ids = list(summary["stage"])
     for stage_id in ids:
-        files = {"points.parquet", "removed.parquet", "field.parquet", "stats.json", "suggestions.parquet"}
+        files = {"changes.parquet", "removed.parquet", "field.parquet", "stats.json", "suggestions.parquet"}
         assert {p.name for p in (out / "stages" / stage_id).iterdir()} == files
         assert stage_id in printed
     # The registered pair's neighbour distances (stage 0's outliers candidate searched them), for
@@ -276,11 +275,10 @@ def test_run_with_correcting_stages(tmp_path, paper_scans, monkeypatch):
     registered, _ = read_pair(out / "registered.parquet")
     ids = list(summary["stage"])
     for stage_id, offset in zip(ids, ([0, 0, 0], [0, 0, 0], [0.2, 0, 0])):
-        stage, _ = read_pair(out / "stages" / stage_id / "points.parquet")
+        stage, _ = read_stage_points(*stage_files(out / "stages" / stage_id))
         assert np.array_equal(registered.xyz1[stage.attributes1["row"]], stage.xyz1)
         assert np.allclose(registered.xyz2[stage.attributes2["row"]] + offset, stage.xyz2)
-        assert "row" in read_table(out / "stages" / stage_id / "points.parquet")[0]
-    last, meta = read_pair(out / "stages" / ids[3] / "points.parquet")
+    last, meta = read_stage_points(*stage_files(out / "stages" / ids[3]))
     assert meta["moved"] == [2] and np.abs(last.T_1_2[:3, 3] - registered.T_1_2[:3, 3]).max() < 0.01
     suggested = pd.read_parquet(out / "stages" / ids[2] / "suggestions.parquet")
     assert set(suggested["hypothesis"]) == {"realign", "outliers"}

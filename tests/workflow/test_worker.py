@@ -71,21 +71,27 @@ def pair_jobs(hypothesis: dict, base_dir: Path) -> list[list[list[str]]]:
         "registered.parquet",
     ]
 
+    def changes(up_to: int) -> list[str]:
+        return [
+            "--registered",
+            "registered.parquet",
+            "--stage-changes",
+            *[f"{d}/changes.parquet" for d in stages[:up_to]],
+        ]
+
     def mitigate(level: int) -> list[str]:
-        points_in = "registered.parquet" if level == 0 else f"{stages[level - 1]}/points.parquet"
         step = canonical_json(s.hypotheses[level - 1] if level else None)
         return [
             "mitigate",
-            "--points-in",
-            points_in,
+            *changes(level),
             "--step",
             step,
             "--stage",
             stages[level],
             "--level",
             str(level),
-            "--points-out",
-            f"{stages[level]}/points.parquet",
+            "--changes-out",
+            f"{stages[level]}/changes.parquet",
             "--removed-out",
             f"{stages[level]}/removed.parquet",
         ]
@@ -94,8 +100,7 @@ def pair_jobs(hypothesis: dict, base_dir: Path) -> list[list[list[str]]]:
         d = stages[level]
         return [
             "field",
-            "--points",
-            f"{d}/points.parquet",
+            *changes(level + 1),
             "--removed",
             f"{d}/removed.parquet",
             "--grid",
@@ -253,7 +258,7 @@ def test_a_failing_job_reports_the_same_exit_code_and_message_on_both_paths(tmp_
     _, sock = worker
     argv = [
         "field",
-        "--points",
+        "--registered",
         "missing.parquet",
         "--removed",
         "missing.parquet",
@@ -407,6 +412,10 @@ def test_figures_drawn_after_the_warm_up_are_those_of_a_plain_process(tmp_path, 
         out = tmp_path / ("plain" if mode == "off" else "forked")
         argv = [
             "plot-stage",
+            "--registered",
+            str(tmp_path / "pair" / "registered.parquet"),
+            "--stage-changes",
+            *[str(stage / "changes.parquet") for stage in stages],
             "--stage-dir",
             str(stages[1]),
             f"--previous={stages[0]}",

@@ -4,7 +4,8 @@
 
 rule field:
     input:
-        points=f"{RESULTS}/{{pair}}/stages/{{stage}}/points.parquet",
+        registered=f"{RESULTS}/{{pair}}/registered.parquet",
+        stage_changes=stage_changes,
         removed=f"{RESULTS}/{{pair}}/stages/{{stage}}/removed.parquet",
     output:
         field=f"{RESULTS}/{{pair}}/stages/{{stage}}/field.parquet",
@@ -21,6 +22,7 @@ rule field:
     params:
         grid=GRID,
     shell:
-        "lidarfield job field --points {input.points:q} --removed {input.removed:q}"
+        "lidarfield job field --registered {input.registered:q} --stage-changes {input.stage_changes:q}"
+        " --removed {input.removed:q}"
         " --grid {params.grid:q} --pair {wildcards.pair} --field-out {output.field:q}"
         " --stats-out {output.stats:q} > {log:q} 2>&1"

@@ -1,4 +1,7 @@
-# Stage k applies hypothesis k of the stack to stage k-1's survivors (stage 0: no mitigation).
+# Stage k applies hypothesis k of the stack to stage k-1's survivors (stage 0: no mitigation),
+# the registered pair with the changes of stages 0..k-1, and writes what it changed: the rows
+# it removed and the corrected coordinates of what it moved (changes.parquet), and its removed
+# points as they were (removed.parquet). Never a copy of the survivors.
 # Stage ids are content addresses, so an edited or appended hypothesis gets new folders and
 # earlier stages are reused. A step that uses the study's grid (shadow without a grid of its
 # own) carries it in its validated spec, so a grid edit changes that stage's id.
@@ -6,10 +9,11 @@
 
 rule mitigate:
     input:
-        points=previous_stage_points,
+        registered=f"{RESULTS}/{{pair}}/registered.parquet",
+        stage_changes=previous_stage_changes,
         plugin=plugin_source,
     output:
-        points=f"{RESULTS}/{{pair}}/stages/{{stage}}/points.parquet",
+        changes=f"{RESULTS}/{{pair}}/stages/{{stage}}/changes.parquet",
         removed=f"{RESULTS}/{{pair}}/stages/{{stage}}/removed.parquet",
     log:
         f"{RESULTS}/logs/mitigate/{{pair}}/{{stage}}.log",
@@ -24,6 +28,6 @@ rule mitigate:
         step=stage_step,
         level=stage_level,
     shell:
-        "lidarfield job mitigate --points-in {input.points:q} --step {params.step:q}"
-        " --stage {wildcards.stage} --level {params.level}"
-        " --points-out {output.points:q} --removed-out {output.removed:q} > {log:q} 2>&1"
+        "lidarfield job mitigate --registered {input.registered:q} --stage-changes {input.stage_changes:q}"
+        " --step {params.step:q} --stage {wildcards.stage} --level {params.level}"
+        " --changes-out {output.changes:q} --removed-out {output.removed:q} > {log:q} 2>&1"

@@ -5,7 +5,8 @@
 rule plot_stage:
     input:
         field=f"{RESULTS}/{{pair}}/stages/{{stage}}/field.parquet",
-        points=f"{RESULTS}/{{pair}}/stages/{{stage}}/points.parquet",
+        registered=f"{RESULTS}/{{pair}}/registered.parquet",
+        stage_changes=stage_changes,
         removed=f"{RESULTS}/{{pair}}/stages/{{stage}}/removed.parquet",
         previous=previous_stage_file("field.parquet"),
         plotly=f"{RESULTS}/assets/plotly.min.js",
@@ -31,7 +32,8 @@ rule plot_stage:
         previous=previous_stage_dir,
         plots=PLOTS,
     shell:
-        "lidarfield job plot-stage --stage-dir {params.stage:q}"
+        "lidarfield job plot-stage --registered {input.registered:q} --stage-changes {input.stage_changes:q}"
+        " --stage-dir {params.stage:q}"
         " --previous={params.previous:q} --plots {params.plots:q} --plotly-js {input.plotly:q}"
         " --out {output:q} > {log:q} 2>&1"
 

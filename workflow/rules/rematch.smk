@@ -6,7 +6,8 @@
 
 rule rematch:
     input:
-        points=f"{RESULTS}/{{pair}}/stages/{{stage}}/points.parquet",
+        registered=f"{RESULTS}/{{pair}}/registered.parquet",
+        stage_changes=stage_changes,
     output:
         f"{RESULTS}/{{pair}}/stages/{{stage}}/rematch.parquet",
     log:
@@ -21,5 +22,5 @@ rule rematch:
     params:
         settings=REMATCH,
     shell:
-        "lidarfield job rematch --points {input.points:q} --settings {params.settings:q}"
+        "lidarfield job rematch --registered {input.registered:q} --stage-changes {input.stage_changes:q} --settings {params.settings:q}"
         " --out {output:q} > {log:q} 2>&1"

@@ -30,7 +30,8 @@ rule neighbours:
 
 rule suggest:
     input:
-        points=f"{RESULTS}/{{pair}}/stages/{{stage}}/points.parquet",
+        registered=f"{RESULTS}/{{pair}}/registered.parquet",
+        stage_changes=stage_changes,
         neighbours=pair_neighbours,
         removed=removed_up_to_stage,
         changes=changes_before_stage,
@@ -52,6 +53,7 @@ rule suggest:
         defaults=CANDIDATES_FLAG,
         grid=GRID,
     shell:
-        "lidarfield job suggest --points {input.points:q} --candidates {params.candidates:q} {params.defaults}"
+        "lidarfield job suggest --registered {input.registered:q} --stage-changes {input.stage_changes:q}"
+        " --candidates {params.candidates:q} {params.defaults}"
         " --grid {params.grid:q} --neighbours={input.neighbours:q} --removed {input.removed:q}"
         " --changes {input.changes:q} --out {output.suggestions:q} --changes-out {output.changes:q} > {log:q} 2>&1"

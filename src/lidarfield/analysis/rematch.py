@@ -18,7 +18,7 @@ import numpy as np
 from ..checks import is_number
 from ..errors import RegistrationError
 from ..io.parquet_table import read_table, write_table
-from ..pair import read_pair
+from ..pair import RegisteredPair
 from ..poses import apply_pose, invert_pose, pose_error
 
 log = logging.getLogger(__name__)
@@ -195,9 +195,10 @@ def reference_pose(meta: dict) -> tuple[np.ndarray, str]:
     return np.asarray(meta["T_1_2"], dtype=np.float64), "registration"
 
 
-def rematch_stage(points_path: str | Path, settings: dict, out: str | Path) -> dict[str, np.ndarray]:
-    """Rematch a stage's survivors (its ``points.parquet``) and write ``rematch.parquet``."""
-    pair, meta = read_pair(points_path)
+def rematch_stage(points: tuple[RegisteredPair, dict], settings: dict, out: str | Path) -> dict[str, np.ndarray]:
+    """Rematch a stage's survivors (its points and their metadata, as
+    :func:`~lidarfield.stage_points.read_stage_points` reads them) and write ``rematch.parquet``."""
+    pair, meta = points
     reference, kind = reference_pose(meta)
     # The survivors of scan 2 are in frame 1 by the study's T_1_2: back to sensor 2's frame.
     xyz2_sensor = apply_pose(invert_pose(pair.T_1_2), pair.xyz2)

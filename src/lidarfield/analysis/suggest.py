@@ -46,7 +46,7 @@ from ..hypotheses import BUILTINS, CORRECTING, apply_step, validate_step
 from ..hypotheses.outcome import displacement
 from ..hypotheses.steps import canonical_json, step_name
 from ..io.parquet_table import write_table
-from ..pair import RegisteredPair, read_pair
+from ..pair import RegisteredPair
 from .neighbour_file import carry_to_stage, write_changes
 from .tags import vector_tags, voxel_energy
 
@@ -231,7 +231,7 @@ def _rank_key(row: dict) -> tuple:
 
 
 def suggest_stage(
-    points_path: str | Path,
+    points: tuple[RegisteredPair, dict],
     candidates: list[dict],
     grid_section: dict,
     out: str | Path,
@@ -242,14 +242,15 @@ def suggest_stage(
     change_paths: list[str | Path] = (),
     changes_out: str | Path | None = None,
 ) -> dict[str, np.ndarray]:
-    """``suggestions.parquet`` of a stage from its ``points.parquet``; returns the table.
+    """``suggestions.parquet`` of a stage from its points and their metadata (as
+    :func:`~lidarfield.stage_points.read_stage_points` reads them); returns the table.
 
     ``neighbours``: the pair's ``neighbours.parquet``, carried to this stage past what stages
     1..k removed (``removed_paths``: their ``removed.parquet``) with the changes stages
     1..k-1 made (``change_paths``) instead of a new search; ``changes_out``: where this stage's
     changes go (see :mod:`.neighbour_file`; no rows without ``neighbours``).
     """
-    pair, meta = read_pair(points_path)
+    pair, meta = points
     carried = (
         carry_to_stage(pair, neighbours, list(removed_paths), list(change_paths), meta.get("moved") or ())
         if neighbours

@@ -21,6 +21,14 @@ def _json_or_stdin(text: str):
     return json.loads(sys.stdin.read() if text == "-" else text)
 
 
+def add_stage_points(parser: argparse.ArgumentParser, stages: str = "0..k") -> None:
+    """The options naming a stage's points: the registered pair and the stages' changes."""
+    parser.add_argument("--registered", required=True, help="the pair's registered.parquet")
+    parser.add_argument(
+        "--stage-changes", nargs="*", default=[], help=f"the changes.parquet of stages {stages}, in order"
+    )
+
+
 def add_parser(subparsers) -> None:
     parser = subparsers.add_parser("job", help="one workflow job (called by the Snakemake rules)")
     jobs = parser.add_subparsers(dest="job", required=True, metavar="JOB")
@@ -39,16 +47,16 @@ def add_parser(subparsers) -> None:
     p.set_defaults(func=_register)
 
     p = jobs.add_parser("mitigate")
-    p.add_argument("--points-in", required=True)
+    add_stage_points(p, "0..k-1")
     p.add_argument("--step", type=_json, required=True)
     p.add_argument("--stage", required=True)
     p.add_argument("--level", type=int, required=True)
-    p.add_argument("--points-out", required=True)
+    p.add_argument("--changes-out", required=True)
     p.add_argument("--removed-out", required=True)
     p.set_defaults(func=_mitigate)
 
     p = jobs.add_parser("field")
-    p.add_argument("--points", required=True)
+    add_stage_points(p)
     p.add_argument("--removed", required=True)
     p.add_argument("--grid", type=_json, required=True)
     p.add_argument("--pair", required=True)
@@ -57,7 +65,7 @@ def add_parser(subparsers) -> None:
     p.set_defaults(func=_field)
 
     p = jobs.add_parser("suggest")
-    p.add_argument("--points", required=True)
+    add_stage_points(p)
     p.add_argument("--candidates", type=_json, required=True, help="normalised hypothesis entries")
     p.add_argument(
         "--default-candidates", action="store_true", help="skip the candidates that cannot apply to the pair"
@@ -78,12 +86,13 @@ def add_parser(subparsers) -> None:
     p.add_argument("--out", required=True)
     p.set_defaults(func=_neighbours)
     p = jobs.add_parser("rematch")
-    p.add_argument("--points", required=True)
+    add_stage_points(p)
     p.add_argument("--settings", type=_json, required=True, help="the validated rematch section")
     p.add_argument("--out", required=True)
     p.set_defaults(func=_rematch)
 
     p = jobs.add_parser("plot-stage")
+    add_stage_points(p)
     p.add_argument("--stage-dir", required=True)
     p.add_argument("--previous", default="", help="the previous stage's folder ('' for stage 0)")
     p.add_argument("--plots", type=_json, required=True)
@@ -179,20 +188,23 @@ def _register(args: argparse.Namespace) -> None:
 def _mitigate(args: argparse.Namespace) -> None:
     from ..study.jobs import mitigate_stage
 
-    mitigate_stage(args.points_in, args.step, args.stage, args.level, args.points_out, args.removed_out)
+    mitigate_stage(
+        args.registered, args.stage_changes, args.step, args.stage, args.level, args.changes_out, args.removed_out
+    )
 
 
 def _field(args: argparse.Namespace) -> None:
     from ..study.jobs import field_stage
 
-    field_stage(args.points, args.removed, args.grid, args.pair, args.field_out, args.stats_out)
+    field_stage(args.registered, args.stage_changes, args.removed, args.grid, args.pair, args.field_out, args.stats_out)
 
 
 def _suggest(args: argparse.Namespace) -> None:
     from ..analysis.suggest import suggest_stage
+    from ..stage_points import read_stage_points
 
     suggest_stage(
-        args.points,
+        read_stage_points(args.registered, args.stage_changes),
         args.candidates,
         args.grid,
         args.out,
@@ -212,14 +224,16 @@ def _neighbours(args: argparse.Namespace) -> None:
 
 def _rematch(args: argparse.Namespace) -> None:
     from ..analysis.rematch import rematch_stage
+    from ..stage_points import read_stage_points
 
-    rematch_stage(args.points, args.settings, args.out)
+    rematch_stage(read_stage_points(args.registered, args.stage_changes), args.settings, args.out)
 
 
 def _plot_stage(args: argparse.Namespace) -> None:
     from ..plots import plot_stage
 
-    plot_stage(args.stage_dir, args.previous or None, args.out, args.plots, args.plotly_js)
+    points = (args.registered, args.stage_changes)
+    plot_stage(args.stage_dir, args.previous or None, args.out, args.plots, args.plotly_js, points)
 
 
 def _plotly_js(args: argparse.Namespace) -> None:

@@ -10,11 +10,13 @@ from __future__ import annotations
 
 import logging
 import time
+from collections.abc import Sequence
 from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
+from ..stage_points import stage_files
 from .before_after import plot_before_after
 from .field_views import magnified_tips, plot_field_perspective, plot_field_top
 from .interactive import plot_interactive
@@ -42,17 +44,23 @@ def plot_stage(
     out_dir: str | Path,
     settings: dict | None = None,
     plotly_js: str | Path | None = None,
+    points: tuple[str | Path, Sequence[str | Path]] | None = None,
 ) -> list[Path]:
     """Write every figure of one stage; returns the paths written.
 
+    ``points``: the files of the stage's points, the pair's ``registered.parquet`` and the
+    ``changes.parquet`` of stages 0..k (the previous stage's: all but the last); found from
+    the results' layout when None (:func:`~lidarfield.stage_points.stage_files`).
     ``settings`` is the config's ``plots`` section. Axis limits come from the previous stage
     when given (its points are a superset of this stage's), so that both halves of
     ``before_after`` and the figures of consecutive stages share their axes. ``plotly_js``:
     a shared plotly.js file for the 3-D view (embedded when None). Magnification "auto" fits
     the stage's figures to its own largest vector and ``before_after`` to the larger of both.
     """
-    stage = load_stage(stage_dir)
-    prev = load_stage(prev_stage_dir) if prev_stage_dir is not None else None
+    stage, prev = load_stage(stage_dir, points), None
+    if prev_stage_dir is not None:
+        registered, changes = points or stage_files(stage_dir)
+        prev = load_stage(prev_stage_dir, (registered, changes[:-1]))
     return draw_stage(stage, prev, out_dir, settings, plotly_js)
 
 

@@ -1,12 +1,14 @@
 """A stage folder, loaded for its figures: its survivors, what it removed and its field.
 
-A stage folder holds ``points.parquet`` (survivors), ``removed.parquet`` (points this stage
-removed, with a ``hypothesis`` column) and ``field.parquet`` (one row per voxel); see the
-shared layout.
+A stage folder holds ``changes.parquet`` (what the stage removed and moved: with the registered
+pair and the changes of the stages before it, its survivors; see
+:mod:`lidarfield.stage_points`), ``removed.parquet`` (points this stage removed, with a
+``hypothesis`` column) and ``field.parquet`` (one row per voxel); see the shared layout.
 """
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -16,7 +18,8 @@ from ..defaults import default
 from ..errors import InputError
 from ..io.parquet_table import read_table
 from ..layout import level_of
-from ..pair import RegisteredPair, read_pair
+from ..pair import RegisteredPair
+from ..stage_points import read_stage_points, stage_files
 
 FIELD_COLUMNS = ("voxel", "n1", "n2", "x1", "y1", "z1", "x2", "y2", "z2", "u", "v", "w", "magnitude", "valid")
 
@@ -98,13 +101,15 @@ def vector_field(columns: dict[str, np.ndarray], meta: dict) -> VectorField:
     return VectorField(tails, vectors, columns["magnitude"].astype(np.float64), columns, meta)
 
 
-def load_stage(stage_dir: str | Path) -> StageData:
-    """Read a stage folder; a missing or malformed file raises InputError naming it."""
+def load_stage(stage_dir: str | Path, points: tuple[str | Path, Sequence[str | Path]] | None = None) -> StageData:
+    """Read a stage folder; a missing or malformed file raises InputError naming it. ``points``:
+    the pair's ``registered.parquet`` and the ``changes.parquet`` of stages 0..k (found from the
+    results' layout when None)."""
     stage_dir = Path(stage_dir)
     if not stage_dir.is_dir():
         raise InputError("stage folder not found", stage_dir)
     field = read_vector_field(stage_dir / "field.parquet")
-    pair, points_meta = read_pair(stage_dir / "points.parquet")
+    pair, points_meta = read_stage_points(*(points or stage_files(stage_dir)))
     removed_path = stage_dir / "removed.parquet"
     if removed_path.exists():
         removed, _ = read_table(removed_path, required=("cloud", "x", "y", "z"))

@@ -218,12 +218,14 @@ class Worker:
             else:
                 result = {"exit": os.waitstatus_to_exitcode(status)}
             log.info(
-                "job %d %s: %s, %.2f s wall, %.2f s CPU, %.0f MB peak",
+                "job %d %s: %s, %.2f s wall, %.2f s CPU (%.2f s system), %d page faults, %.0f MB peak",
                 pid,
                 argv[1] if len(argv) > 1 else "?",
                 result,
                 time.monotonic() - started,
                 usage.ru_utime + usage.ru_stime,
+                usage.ru_stime,
+                usage.ru_minflt + usage.ru_majflt,
                 usage.ru_maxrss / 1024,
             )
             try:

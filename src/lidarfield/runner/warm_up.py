@@ -21,6 +21,7 @@ from ..registration import register_pair
 from ..sensors.models import sensor_model
 from ..simulation.raycast import simulate_scan
 from ..simulation.scene import load_scene
+from ..stage_points import CHANGES
 from ..study.jobs import field_stage, mitigate_stage
 
 WARM_UP_FIGURES = ("field_top", "field_perspective")
@@ -35,21 +36,17 @@ def write_warm_up_stages(folder: Path) -> list[Path]:
     into ``folder``; returns the stage folders."""
     scene, sensor = load_scene(SCENE), sensor_model(SENSOR)
     scans = [simulate_scan(scene, sensor, pose_from_xyzrpy(pose)) for pose in POSES]
-    write_pair(folder / "registered.parquet", register_pair(*scans, "truth"))
-    stages, points = [], folder / "registered.parquet"
+    registered = folder / "registered.parquet"
+    write_pair(registered, register_pair(*scans, "truth"))
+    stages, changes = [], []
     for level, step in enumerate(STACK):
         stage = folder / "stages" / f"{level:02d}-warm-up"
-        mitigate_stage(points, step, stage.name, level, stage / "points.parquet", stage / "removed.parquet")
+        mitigate_stage(registered, changes, step, stage.name, level, stage / CHANGES, stage / "removed.parquet")
+        changes.append(stage / CHANGES)
         field_stage(
-            stage / "points.parquet",
-            stage / "removed.parquet",
-            {},
-            "warm-up",
-            stage / "field.parquet",
-            stage / "stats.json",
+            registered, changes, stage / "removed.parquet", {}, "warm-up", stage / "field.parquet", stage / "stats.json"
         )
         stages.append(stage)
-        points = stage / "points.parquet"
     return stages
 
 

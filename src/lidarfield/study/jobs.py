@@ -1,5 +1,5 @@
 """The workflow's jobs, file in, file out: a scan (simulated or recorded), the registered
-pair, a stage's points (mitigate) and its field with its summary row.
+pair, a stage's changes (mitigate) and its field with its summary row.
 
 Each job reads what the config resolved for it (a scan spec, the pair's ``register``
 setting, one stack entry, the grid) and writes its outputs whole and atomically, so a failed
@@ -20,10 +20,11 @@ from ..field.grid import field_settings_from_config
 from ..io import read_scan, write_scan
 from ..io.atomic import write_text
 from ..io.parquet_table import read_table, write_table
-from ..pair import read_pair, write_pair
+from ..pair import write_pair
 from ..scan import Scan
 from ..sensors.fit import log_fit
 from ..sensors.models import sensor_model
+from ..stage_points import read_stage_points, write_changes
 from .stack import Stage, initial_stage, next_stage
 from .summary import summary_row
 
@@ -86,43 +87,50 @@ def register_job(scan1: str | Path, scan2: str | Path, settings, out: str | Path
     write_pair(out, pair)
 
 
-def write_stage(stage: Stage, stage_id: str, points_out: str | Path, removed_out: str | Path) -> None:
-    """The stage's survivors and removed points, each file with the stage's metadata."""
+def write_stage(
+    stage: Stage, stage_id: str, previous: str | None, changes_out: str | Path, removed_out: str | Path
+) -> None:
+    """The stage's changes (what it removed and moved, sensor 2's pose after it and the
+    ``previous`` stage's id) and its removed points, each file with the stage's metadata."""
     meta = stage.metadata(stage_id)
-    write_pair(points_out, stage.pair, meta)
+    write_changes(changes_out, stage.changes, {"T_1_2": stage.pair.T_1_2.tolist(), "previous": previous, **meta})
     write_table(removed_out, stage.removed_columns(), {**stage.removed.metadata(), **meta})
 
 
 def mitigate_stage(
-    points_in: str | Path,
+    registered: str | Path,
+    changes_in: list[str | Path],
     step: dict | None,
     stage_id: str,
     level: int,
-    points_out: str | Path,
+    changes_out: str | Path,
     removed_out: str | Path,
     base_dir: str | Path = ".",
     study_grid: dict | None = None,
 ) -> None:
-    """Stage ``level``: apply ``step`` to the points of ``points_in`` (the previous stage's, or
-    the registered pair for stage 0, where ``step`` is None and nothing is removed)."""
-    pair, _ = read_pair(points_in)
+    """Stage ``level``: apply ``step`` to the points of the previous stage (the registered pair
+    with ``changes_in``, the changes of stages 0..level-1; stage 0, where ``step`` is None and
+    nothing changes, has none)."""
+    pair, meta = read_stage_points(registered, changes_in)
     stage = initial_stage(pair) if step is None else next_stage(pair, step, level, base_dir, study_grid)
     log.info("stage %s: removed %d + %d points", stage_id, stage.removed1, stage.removed2)
     if stage.correction is not None:
         log.info("stage %s: corrected, %s", stage_id, stage.correction_json())
-    write_stage(stage, stage_id, points_out, removed_out)
+    write_stage(stage, stage_id, meta.get("stage") if changes_in else None, changes_out, removed_out)
 
 
 def field_stage(
-    points_path: str | Path,
+    registered: str | Path,
+    changes: list[str | Path],
     removed_path: str | Path,
     grid_section: dict,
     pair_name: str,
     field_out: str | Path,
     stats_out: str | Path,
 ) -> dict:
-    """The field of a stage's survivors and its summary row (``stats.json``); returns the row."""
-    pair, meta = read_pair(points_path)
+    """The field of a stage's points (the registered pair with ``changes``, those of stages
+    0..k) and its summary row (``stats.json``); returns the row."""
+    pair, meta = read_stage_points(registered, changes)
     removed, _ = read_table(removed_path, columns=("cloud",))
     settings = field_settings_from_config(grid_section)
     columns, statistics = analyse_field(pair, settings)

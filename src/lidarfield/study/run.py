@@ -15,6 +15,7 @@ from ..io.atomic import write_text
 from ..pair import RegisteredPair, write_pair
 from ..scan import Scan
 from ..sensors.fit import log_fit
+from ..stage_points import CHANGES, read_stage_points
 from .jobs import field_stage, write_stage
 from .pairs import recorded_scan_spec
 from .stack import apply_stack
@@ -136,21 +137,25 @@ def run_pair(
     write_neighbours(out_dir / "neighbours.parquet", pair)  # what stage 0's suggestions searched
     pair_name = out_dir.resolve().name
     folders = [out_dir / "stages" / stage_id for stage_id in ids]
+    changes = [folder / CHANGES for folder in folders]
     for stage, stage_id, folder, table in zip(stages, ids, folders, tables):
-        write_stage(stage, stage_id, folder / "points.parquet", folder / "removed.parquet")
+        level = stage.level
+        write_stage(stage, stage_id, ids[level - 1] if level else None, changes[level], folder / "removed.parquet")
         field_stage(
-            folder / "points.parquet",
+            out_dir / "registered.parquet",
+            changes[: level + 1],
             folder / "removed.parquet",
             study.grid_section,
             pair_name,
             folder / "field.parquet",
             folder / "stats.json",
         )
-        write_suggestions(folder / "suggestions.parquet", table, stage_id, candidates[stage.level], study.grid_section)
+        write_suggestions(folder / "suggestions.parquet", table, stage_id, candidates[level], study.grid_section)
         if study.rematch:
             from ..analysis.rematch import rematch_stage
 
-            rematch_stage(folder / "points.parquet", study.rematch, folder / "rematch.parquet")
+            points = read_stage_points(out_dir / "registered.parquet", changes[: level + 1])
+            rematch_stage(points, study.rematch, folder / "rematch.parquet")
     stats = [folder / "stats.json" for folder in folders]
     rematched = [folder / "rematch.parquet" for folder in folders] if study.rematch else []
     write_summary(stats, out_dir / "summary.parquet", out_dir / "summary.csv", rematched)

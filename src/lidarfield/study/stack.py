@@ -7,15 +7,16 @@ can be compared with the one before.
 A correcting stage (a hypothesis returning corrected coordinates, see
 :mod:`lidarfield.hypotheses.outcome`) keeps its survivors *as corrected*, and sensor 2's
 corrected pose; its removed points are as they were. Every stage's survivors carry ``row``
-(an attribute of both clouds, so a column of the points file): the point's row among its
-cloud's points in the registered pair. Stage 0 numbers them 0..N-1; every later stage keeps
-the rows of its survivors, whatever it moved.
+(an attribute of both clouds): the point's row among its cloud's points in the registered
+pair. Stage 0 numbers them 0..N-1; every later stage keeps the rows of its survivors, whatever
+it moved. A stage is stored as what it changed (its ``changes``, by these rows): see
+:mod:`lidarfield.stage_points`.
 """
 
 from __future__ import annotations
 
 from collections.abc import Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -25,9 +26,9 @@ from ..hypotheses.outcome import displacement, reasons_of_removed
 from ..hypotheses.outliers import carry_neighbours
 from ..hypotheses.steps import canonical_json, step_name
 from ..pair import RegisteredPair
+from ..stage_points import ROW, change_columns, with_rows
 
 NO_MITIGATION = "none"  # the hypothesis name of stage 0
-ROW = "row"  # the survivors' attribute: each point's row among its cloud's points in the registered pair
 
 
 @dataclass
@@ -46,6 +47,8 @@ class Stage:
     displacement1: tuple[float, float] = (0.0, 0.0)
     displacement2: tuple[float, float] = (0.0, 0.0)
     reasons: np.ndarray | None = None  # why each removed point went (cloud 1's, then 2's); None: not said
+    # the stage's changes.parquet rows: what it removed and moved (see lidarfield.stage_points)
+    changes: dict[str, np.ndarray] = field(default_factory=dict)
 
     @property
     def removed1(self) -> int:
@@ -88,31 +91,13 @@ class Stage:
         return "" if self.correction is None else canonical_json(self.correction)
 
 
-def with_rows(pair: RegisteredPair) -> RegisteredPair:
-    """``pair`` with the ``row`` attribute (0..N-1 per cloud) if it has none; its neighbour
-    distances are shared (same points, same order)."""
-    if ROW in pair.attributes1 and ROW in pair.attributes2:
-        return pair
-    return RegisteredPair(
-        pair.xyz1,
-        pair.xyz2,
-        pair.T_1_2,
-        pair.sensor1,
-        pair.sensor2,
-        {**pair.attributes1, ROW: np.arange(len(pair.xyz1), dtype=np.int64)},
-        {**pair.attributes2, ROW: np.arange(len(pair.xyz2), dtype=np.int64)},
-        pair.registration,
-        pair.sensor_fit,
-        pair.sweeps,
-        neighbours=pair.neighbours,
-    )
-
-
 def initial_stage(pair: RegisteredPair) -> Stage:
     """Stage 0: the registered pair itself (numbered by ``row``), nothing removed."""
     pair = with_rows(pair)
     keep1, keep2 = np.ones(len(pair.xyz1), dtype=bool), np.ones(len(pair.xyz2), dtype=bool)
-    return Stage(0, NO_MITIGATION, None, pair, pair.subset(~keep1, ~keep2), keep1, keep2)
+    stage = Stage(0, NO_MITIGATION, None, pair, pair.subset(~keep1, ~keep2), keep1, keep2)
+    stage.changes = change_columns(pair, keep1, keep2, pair)
+    return stage
 
 
 def next_stage(
@@ -125,8 +110,15 @@ def next_stage(
     survivors = pair.subset(keep1, keep2)
     stage = Stage(level, step_name(spec), spec, survivors, pair.subset(~keep1, ~keep2), keep1, keep2)
     stage.reasons = reasons_of_removed(outcome)
-    if not outcome.corrects:
-        return stage
+    if outcome.corrects:
+        correct(stage, pair, outcome)
+    stage.changes = change_columns(pair, keep1, keep2, stage.pair)
+    return stage
+
+
+def correct(stage: Stage, pair: RegisteredPair, outcome) -> None:
+    """Move ``stage``'s survivors (of ``pair``) and sensor 2 as ``outcome`` corrected them."""
+    keep1, keep2, survivors = stage.keep1, stage.keep2, stage.pair
     stage.correction = outcome.fitted
     if outcome.xyz1 is not None:
         survivors.xyz1 = np.ascontiguousarray(outcome.xyz1[keep1])
@@ -136,7 +128,6 @@ def next_stage(
         stage.moved2, stage.displacement2 = True, displacement(pair.xyz2[keep2], survivors.xyz2)
     if outcome.T_1_2 is not None:
         survivors.T_1_2 = outcome.T_1_2
-    return stage
 
 
 def apply_stack(

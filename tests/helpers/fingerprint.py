@@ -3,7 +3,7 @@
 Two runs of the same study give the same fingerprint only if every value of the summary and
 every value of every field is the same, bit for bit. ``tests/data/default_study.json`` is the
 default study's, written by the code before stages were stored as their changes (main at
-295a3ef) with
+e16a60a, the survivor copies, with the day's other work merged) with
 
     snakemake --cores 2 results/summary.parquet   # in a checkout of that commit
     python tests/helpers/fingerprint.py results tests/data/default_study.json

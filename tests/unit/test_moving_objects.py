@@ -225,19 +225,21 @@ def test_the_summary_scores_each_stage_against_the_labels(tmp_path, traffic_pair
     the static points kept; ego_vehicle (3 m) removes no car point, moving_objects the cars."""
     write_pair(tmp_path / "registered.parquet", traffic_pair)
     grid = {"kind": "spherical", "azimuth_bins": 36, "elevation_deg": [-22.5, 15], "elevation_bins": 5}
-    previous, folders = tmp_path / "registered.parquet", []
+    registered, changes, folders = tmp_path / "registered.parquet", [], []
     for level, step in enumerate([None, {"ego_vehicle": {}}, {"moving_objects": {}}]):
         folder = tmp_path / f"0{level}"
-        mitigate_stage(previous, step, f"0{level}-x", level, folder / "points.parquet", folder / "removed.parquet")
+        changes_out = folder / "changes.parquet"
+        mitigate_stage(registered, changes, step, f"0{level}-x", level, changes_out, folder / "removed.parquet")
+        changes.append(changes_out)
         field_stage(
-            folder / "points.parquet",
+            registered,
+            list(changes),
             folder / "removed.parquet",
             grid,
             "traffic",
             folder / "f.parquet",
             folder / "stats.json",
         )
-        previous = folder / "points.parquet"
         folders.append(folder)
     write_summary([f / "stats.json" for f in folders], tmp_path / "summary.parquet", tmp_path / "summary.csv")
     table = pd.read_parquet(tmp_path / "summary.parquet")

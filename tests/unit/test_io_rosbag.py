@@ -236,3 +236,86 @@ def test_truncated_bag_is_one_error_naming_it(tmp_path, organised_expd_scans, st
     with pytest.raises(InputError, match=str(path.name)) as error:
         read_scan(f"{path}#1")
     assert "\n" not in str(error.value)
+
+
+# A drive whose sensor frame is rolled and yawed against the world: 8 m/s along world x and y,
+# turning 0.3 rad/s about its own z. Odometry's twist is in that (child) frame.
+START = pose_from_xyzrpy([5.0, -3.0, 2.0, 0.4, 0.0, 1.2])
+WORLD_VELOCITY = np.array([6.0, 5.0, 0.3])
+ANGULAR_VELOCITY = np.array([0.0, 0.05, 0.3])
+
+
+def turning(t):
+    from lidarfield.simulation.trajectory import moved_pose
+
+    return moved_pose(START, t, WORLD_VELOCITY, ANGULAR_VELOCITY)
+
+
+def twist_at(t):
+    """The drive's (linear, angular) velocity at t in its sensor frame, as Odometry publishes it."""
+    return turning(t)[:3, :3].T @ WORLD_VELOCITY, ANGULAR_VELOCITY
+
+
+def turning_bag(path, scans, pose_type="nav_msgs/msg/Odometry", zero_twist=False):
+    """Scans at 100.07 and 100.17 s (timed by azimuth over a 0.1 s sweep), odometry at 20 Hz."""
+    clouds = []
+    for scan, stamp in zip(scans, (100.07, 100.17)):
+        valid = np.isfinite(scan.xyz).all(axis=1)
+        azimuth = np.mod(np.arctan2(scan.xyz[valid, 1], scan.xyz[valid, 0]), 2 * np.pi)
+        clouds.append(CloudMessage(Scan(scan.xyz[valid], {"time": azimuth / (2 * np.pi) * 0.1}), stamp))
+    stamps = 100.0 + 0.05 * np.arange(6)
+    twists = [((0, 0, 0), (0, 0, 0)) if zero_twist else twist_at(t - 100.0) for t in stamps]
+    topic = "/tf" if pose_type.startswith("tf2") else "/odom"
+    poses = [(t, turning(t - 100.0)) for t in stamps]
+    path = write_bag(path, clouds, poses=poses, twists=twists, pose_topic=topic, pose_type=pose_type)
+    return path, {"topic": topic, **({"frame": "lidar"} if topic == "/tf" else {})}
+
+
+def test_a_scan_posed_by_odometry_records_the_twist_nearest_its_stamp(tmp_path, organised_expd_scans):
+    path, source = turning_bag(tmp_path / "turn.bag", organised_expd_scans)
+    for k, nearest in enumerate((100.05, 100.15)):
+        scan = read_scan(f"{path}#{k}", poses=source)
+        linear, angular = twist_at(nearest - 100.0)
+        np.testing.assert_allclose(scan.sweep_motion["velocity_mps"], linear, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(scan.sweep_motion["angular_velocity_rps"], angular, rtol=0, atol=1e-12)
+        assert scan.sweep_motion["source"] == "odometry"
+        # in the sensor's frame, not the world's: turned by the scan's pose it is the drive's velocity
+        rotation = turning(nearest - 100.0)[:3, :3]
+        assert np.abs(linear - WORLD_VELOCITY).max() > 1.0
+        np.testing.assert_allclose(rotation @ scan.sweep_motion["velocity_mps"], WORLD_VELOCITY, atol=1e-9)
+
+
+@pytest.mark.parametrize("pose_type", ["geometry_msgs/msg/PoseStamped", "tf2_msgs/msg/TFMessage", "zero twist"])
+def test_no_twist_no_record(tmp_path, organised_expd_scans, pose_type):
+    zero = pose_type == "zero twist"
+    kind = "nav_msgs/msg/Odometry" if zero else pose_type
+    path, source = turning_bag(tmp_path / "still.bag", organised_expd_scans, kind, zero_twist=zero)
+    scan = read_scan(f"{path}#0", poses=source)
+    assert scan.pose is not None and scan.sweep_motion is None
+
+
+def test_deskew_takes_the_odometry_twist_as_the_same_motion_given_in_settings(tmp_path, organised_expd_scans):
+    from lidarfield.hypotheses import apply_step
+    from lidarfield.registration import register_pair
+
+    path, source = turning_bag(tmp_path / "turn.bag", organised_expd_scans)
+    pair = register_pair(*(read_scan(f"{path}#{k}", poses=source) for k in range(2)), "truth")
+    for cloud, nearest in ((1, 100.05), (2, 100.15)):
+        linear, angular = twist_at(nearest - 100.0)
+        recorded = apply_step(pair, {"deskew": {"cloud": cloud}})
+        given = apply_step(
+            pair,
+            {
+                "deskew": {
+                    "cloud": cloud,
+                    "motion_source": "settings",
+                    "velocity_mps": linear.tolist(),
+                    "angular_velocity_rps": angular.tolist(),
+                }
+            },
+        )
+        assert recorded.fitted[f"cloud{cloud}"]["motion_source"] == "odometry"
+        moved, expected = getattr(recorded, f"xyz{cloud}"), getattr(given, f"xyz{cloud}")
+        assert np.abs(moved - expected).max() < 1e-9
+        original = pair.xyz1 if cloud == 1 else pair.xyz2
+        assert np.linalg.norm(moved - original, axis=1).max() > 0.5  # 0.1 s at 8 m/s, turning

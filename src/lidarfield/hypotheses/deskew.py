@@ -25,9 +25,10 @@ one of them only):
 
 1. ``record``: the scan's own record of its motion during its sweep (``Scan.sweep_motion``,
    carried by the pair: the simulator writes it; zero for a scan taken still or without rolling
-   shutter, whose points then stay where they are); else ``neighbours``: the constant velocity
-   between the poses of the scan's neighbours in its sequence, which a study puts in that
-   record's place for a dataset sequence with poses and stamps (``source: neighbours``);
+   shutter, whose points then stay where they are; a bag's scan posed by Odometry records its
+   twist, ``source: odometry``, see :mod:`lidarfield.io.rosbag.poses`); else ``neighbours``: the
+   constant velocity between the poses of the scan's neighbours in its sequence, which a study
+   puts in that record's place for a dataset sequence with poses and stamps (``source: neighbours``);
 2. ``settings``: ``velocity_mps`` and ``angular_velocity_rps`` as given (the same for every
    chosen cloud without a record);
 3. ``pair``: the constant velocity between the pair's two scans, ``T_1_2`` over the difference
@@ -36,7 +37,6 @@ one of them only):
    Right for consecutive scans of one drive; wrong when one of them was taken still (a record
    or the settings say so).
 
-Not used (yet): a bag's odometry twist.
 Data already de-skewed (KITTI odometry, Argoverse 2 as datasets) records a still sweep on its
 scans, so ``deskew`` moves nothing there unless asked (``motion_source: settings``). A stage
 after ``deskew`` still carries the scans' records: do not de-skew the same cloud twice.

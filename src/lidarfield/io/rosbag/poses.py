@@ -7,6 +7,13 @@ composed up to the root of its tree, with the static ones of ``/tf_static`` when
 Between two messages the translation is linear and the rotation a slerp; a stamp outside the
 messages' time span is an error. Only the messages recorded within ``WINDOW_NS`` of the scan
 are read (all of them if those do not bracket its stamp).
+
+An Odometry topic also gives the scan's ``sweep_motion``: the twist of the message nearest its
+stamp. ROS publishes it in the message's ``child_frame_id`` frame, the frame whose pose the
+message gives; that frame is taken as the sensor's, as for the pose (no extrinsic is known here),
+so the twist as published is the sensor's velocities in its own frame. A twist of exact zeros or
+with a NaN is taken as not filled in (many odometry publishers leave it so) and gives no record;
+pose messages and TF carry no twist.
 """
 
 from __future__ import annotations
@@ -24,13 +31,18 @@ POSE_OF = {
     "geometry_msgs/msg/PoseStamped": lambda m: m.pose,
     "geometry_msgs/msg/PoseWithCovarianceStamped": lambda m: m.pose.pose,
 }
+TWIST_OF = {"nav_msgs/msg/Odometry": lambda m: m.twist.twist}
+TWIST = "twist"  # the key of a pose topic's twists among its tracks (TF's child frames have none)
 TF = "tf2_msgs/msg/TFMessage"
 STATIC_TF = "/tf_static"
 WINDOW_NS = 5 * 10**9
 
 
-def pose_from_bag(reader, path, source: dict, stamp_s: float, near_ns: int) -> np.ndarray:
-    """World-from-sensor pose at ``stamp_s`` from ``source`` (``topic``, and ``frame`` for TF)."""
+def pose_and_motion_from_bag(
+    reader, path, source: dict, stamp_s: float, near_ns: int
+) -> tuple[np.ndarray, dict | None]:
+    """World-from-sensor pose at ``stamp_s`` from ``source`` (``topic``, and ``frame`` for TF), and
+    the sensor's motion then as a ``sweep_motion`` when the source records it (an Odometry twist)."""
     topic, frame = source["topic"], source.get("frame")
     types = {t.name: t.msgtype for t in bag_topics(reader)}
     kinds = ", ".join(sorted(k.replace("/msg/", "/") for k in (*POSE_OF, TF)))
@@ -47,7 +59,7 @@ def pose_from_bag(reader, path, source: dict, stamp_s: float, near_ns: int) -> n
         else:
             pose = interpolate_pose(*tracks[None][1:], stamp_s) if None in tracks else None
         if pose is not None:
-            return pose
+            return pose, _sweep_motion(tracks.get(TWIST), stamp_s)
     if types[topic] == TF and frame not in tracks:
         children = sorted(k for k in tracks if k is not None)
         raise InputError(
@@ -61,7 +73,8 @@ def pose_from_bag(reader, path, source: dict, stamp_s: float, near_ns: int) -> n
 
 
 def _tracks(reader, topic: str, types: dict, start, stop) -> dict:
-    """{child frame (None for a pose topic): (parent, stamps (s), poses (M, 4, 4))}, by stamp."""
+    """{child frame (None for a pose topic): (parent, stamps (s), poses (M, 4, 4))}, by stamp; an
+    Odometry topic's twists under ``TWIST``: (None, stamps, (M, 2, 3) linear and angular)."""
     samples: dict = defaultdict(list)
     parents: dict = {}
     sources = [(topic, start, stop)] + ([(STATIC_TF, None, None)] if types[topic] == TF and STATIC_TF in types else [])
@@ -70,6 +83,9 @@ def _tracks(reader, topic: str, types: dict, start, stop) -> dict:
             if name == topic and types[topic] in POSE_OF:
                 pose = POSE_OF[types[topic]](msg)
                 samples[None].append((stamp_seconds(msg.header), _matrix(pose.position, pose.orientation)))
+                if types[topic] in TWIST_OF:
+                    twist = TWIST_OF[types[topic]](msg)
+                    samples[TWIST].append((stamp_seconds(msg.header), _vectors(twist.linear, twist.angular)))
                 continue
             for t in msg.transforms:
                 parents[t.child_frame_id] = t.header.frame_id
@@ -98,6 +114,22 @@ def _compose(tracks: dict, frame: str, stamp_s: float) -> np.ndarray | None:
         pose = step @ pose
         frame = parent
     return pose
+
+
+def _sweep_motion(twists, stamp_s: float) -> dict | None:
+    """The twist nearest ``stamp_s`` as a ``sweep_motion``; None without one, or one not filled in."""
+    if twists is None:
+        return None
+    _, stamps, values = twists
+    nearest = values[int(np.argmin(np.abs(stamps - stamp_s)))]
+    if not (np.isfinite(nearest).all() and np.any(nearest)):
+        return None
+    linear, angular = nearest
+    return {"velocity_mps": linear.tolist(), "angular_velocity_rps": angular.tolist(), "source": "odometry"}
+
+
+def _vectors(*vectors) -> np.ndarray:
+    return np.array([[v.x, v.y, v.z] for v in vectors], dtype=np.float64)
 
 
 def _matrix(translation, quaternion) -> np.ndarray:

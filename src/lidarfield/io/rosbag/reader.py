@@ -63,8 +63,9 @@ def read_rosbag(
     path: Path, index: int = 0, sensor: SensorModel | None = None, topic: str | None = None, poses: dict | None = None
 ) -> Scan:
     """Scan ``index`` of the bag's PointCloud2 ``topic``; with ``poses`` ({topic, frame}) its
-    pose interpolated at its header stamp (see :mod:`lidarfield.io.rosbag.poses`)."""
-    from .poses import pose_from_bag  # SciPy: only for scans posed from the bag
+    pose interpolated at its header stamp, and from an Odometry topic its ``sweep_motion`` (see
+    :mod:`lidarfield.io.rosbag.poses`)."""
+    from .poses import pose_and_motion_from_bag  # SciPy: only for scans posed from the bag
 
     reader = open_bag(path)
     topic = cloud_topic(reader, path, topic)
@@ -76,7 +77,9 @@ def read_rosbag(
         msg = reader.deserialize(raw, connection.msgtype)
         xyz, attributes = cloud_of(msg, path, where)
         stamp_s = stamp_seconds(msg.header)
-        pose = None if poses is None else pose_from_bag(reader, path, poses, stamp_s, int(times[index]))
+        pose, motion = (
+            (None, None) if poses is None else pose_and_motion_from_bag(reader, path, poses, stamp_s, int(times[index]))
+        )
     except InputError as e:
         if e.path is None:
             raise InputError(f"{where}: {e}", path) from None
@@ -86,4 +89,5 @@ def read_rosbag(
     scan = scan_from_rows(xyz, attributes, path, sensor=sensor, pose=pose)
     scan.source = f"{path}#{topic}#{index}"
     scan.stamp_s = stamp_s
+    scan.sweep_motion = motion
     return scan

@@ -64,6 +64,7 @@ def write_bag(
     layout: str = "velodyne",
     big_endian: bool = False,
     poses: list[tuple[float, np.ndarray]] = (),
+    twists: list[tuple[list[float], list[float]]] = (),
     pose_topic: str = "/odom",
     pose_type: str = "nav_msgs/msg/Odometry",
     frame_id: str = "lidar",
@@ -71,6 +72,8 @@ def write_bag(
     """Write the clouds on ``topic`` and the poses (stamp s, 4x4 world-from-sensor) on
     ``pose_topic`` as Odometry, PoseStamped or PoseWithCovarianceStamped, or as TF
     (``tf2_msgs/msg/TFMessage``, ``world`` -> ``frame_id``). Recording time = header stamp.
+    ``twists``: one (linear m/s, angular rad/s) per pose, in ``frame_id`` as Odometry's twist is
+    (default zero; pose types without a twist ignore them).
     Returns the bag's path (a folder for ROS 2 storages)."""
     from rosbags.typesys import Stores, get_typestore
 
@@ -92,9 +95,16 @@ def write_bag(
         )
         for c in clouds
     ]
+    twists = list(twists) or [((0.0, 0.0, 0.0), (0.0, 0.0, 0.0))] * len(poses)
+    if len(twists) != len(poses):
+        raise ValueError(f"write_bag: {len(twists)} twists for {len(poses)} poses")
     messages += [
-        (stamp, pose_topic, lambda stamp=stamp, pose=pose: _pose_message(store, pose_type, stamp, pose, frame_id))
-        for stamp, pose in poses
+        (
+            stamp,
+            pose_topic,
+            lambda stamp=stamp, pose=pose, twist=twist: _pose_message(store, pose_type, stamp, pose, twist, frame_id),
+        )
+        for (stamp, pose), twist in zip(poses, twists)
     ]
     types = {name: pose_type if name == pose_topic else "sensor_msgs/msg/PointCloud2" for _, name, _ in messages}
     with _writer(path, storage) as writer:
@@ -159,7 +169,7 @@ def _attribute(scan: Scan, name: str) -> np.ndarray:
     return scan.attributes.get(name, np.zeros(len(scan)))
 
 
-def _pose_message(store, pose_type: str, stamp_s: float, pose: np.ndarray, frame_id: str):
+def _pose_message(store, pose_type: str, stamp_s: float, pose: np.ndarray, twist, frame_id: str):
     from scipy.spatial.transform import Rotation
 
     T = store.types
@@ -171,14 +181,11 @@ def _pose_message(store, pose_type: str, stamp_s: float, pose: np.ndarray, frame
     covariance = np.zeros(36)
     with_covariance = T["geometry_msgs/msg/PoseWithCovariance"](pose=plain, covariance=covariance)
     if pose_type == "nav_msgs/msg/Odometry":
-        twist = T["geometry_msgs/msg/TwistWithCovariance"](
-            twist=T["geometry_msgs/msg/Twist"](
-                linear=T["geometry_msgs/msg/Vector3"](x=0, y=0, z=0),
-                angular=T["geometry_msgs/msg/Vector3"](x=0, y=0, z=0),
-            ),
-            covariance=covariance,
+        linear, angular = (T["geometry_msgs/msg/Vector3"](**dict(zip("xyz", map(float, v)))) for v in twist)
+        moving = T["geometry_msgs/msg/TwistWithCovariance"](
+            twist=T["geometry_msgs/msg/Twist"](linear=linear, angular=angular), covariance=covariance
         )
-        return T[pose_type](header=header, child_frame_id=frame_id, pose=with_covariance, twist=twist)
+        return T[pose_type](header=header, child_frame_id=frame_id, pose=with_covariance, twist=moving)
     if pose_type == "geometry_msgs/msg/PoseStamped":
         return T[pose_type](header=header, pose=plain)
     if pose_type == "geometry_msgs/msg/PoseWithCovarianceStamped":

@@ -184,6 +184,39 @@ def test_a_candidate_that_removes_nothing_gets_the_row_of_a_recomputed_field():
         assert table[name][0] == value or (math.isnan(table[name][0]) and math.isnan(value)), name
 
 
+def test_a_correction_that_moves_points_into_new_voxels_is_compared_over_the_common_ones():
+    """A correction (unlike a removal) can move points into voxels that held none before (deskew
+    did, on the default study's drive): the reduction is over the voxels valid before and after,
+    as a plain dictionary by voxel id computes it, and the new voxels count in energy_after."""
+    from lidarfield.analysis.suggest import compare_fields
+    from lidarfield.analysis.tags import voxel_energy
+    from lidarfield.field.kernel import field_from_voxel_ids
+    from lidarfield.poses import pose_from_xyzrpy
+
+    def field(xyz1, xyz2):
+        return field_from_voxel_ids(SETTINGS.grid.assign(xyz1), xyz1, SETTINGS.grid.assign(xyz2), xyz2, SETTINGS)
+
+    xyz1, xyz2 = targets(60, 1), targets(60, 2)
+    xyz1, xyz2 = xyz1[np.arctan2(xyz1[:, 1], xyz1[:, 0]) > 0], xyz2[np.arctan2(xyz2[:, 1], xyz2[:, 0]) > 0]
+    turn = pose_from_xyzrpy([0, 0, 0, 0, 0, math.pi])[:3, :3]
+    # cloud 2's points shifted a little, and a copy of both clouds half a turn away (where the
+    # clouds had no point)
+    after_xyz1, after_xyz2 = np.vstack([xyz1, xyz1 @ turn.T]), np.vstack([xyz2 + 0.05, xyz2 @ turn.T])
+    before, after = field(xyz1, xyz2), field(after_xyz1, after_xyz2)
+    assert set(after["voxel"][after["valid"]]) - set(before["voxel"])  # valid voxels that are new
+
+    def energies(columns):
+        return {v: e for v, e, ok in zip(columns["voxel"], voxel_energy(columns), columns["valid"]) if ok}
+
+    by_voxel_before, by_voxel_after = energies(before), energies(after)
+    common = set(by_voxel_before) & set(by_voxel_after)
+    expected = 1 - sum(by_voxel_after[v] for v in common) / sum(by_voxel_before[v] for v in common)
+    compared = compare_fields(before, after)
+    assert compared["energy_reduction"] == pytest.approx(expected, rel=1e-12)
+    assert compared["energy_after"] == pytest.approx(sum(by_voxel_after.values()), rel=1e-12)
+    assert compared["voxels_invalidated"] == len(set(by_voxel_before) - set(by_voxel_after))
+
+
 def test_a_default_correction_that_cannot_apply_is_skipped():
     """realign on a cloud 2 of 5 points: a HypothesisError of a correcting candidate is 'cannot
     apply' among the default candidates (skipped), an error naming the entry when configured."""

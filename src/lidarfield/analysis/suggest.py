@@ -188,14 +188,19 @@ def suggestions(
 
 
 def compare_fields(before: dict[str, np.ndarray], after: dict[str, np.ndarray]) -> dict:
-    """The field ``after`` removing points, against ``before`` (its voxels are a subset)."""
+    """The field ``after`` a candidate, against ``before``. A removal's voxels are a subset of
+    ``before``'s; a correction can move points into voxels that held none before: those count
+    in ``energy_after`` but not in the reduction, which is over the voxels valid before and after."""
     valid_before = np.asarray(before["valid"], dtype=bool)
     rows = np.searchsorted(before["voxel"], after["voxel"])
+    found = rows < len(valid_before)
+    found[found] = before["voxel"][rows[found]] == after["voxel"][found]
     valid_after = np.zeros(len(valid_before), dtype=bool)
-    valid_after[rows] = after["valid"]
+    valid_after[rows[found]] = np.asarray(after["valid"], dtype=bool)[found]
     energy_before = voxel_energy(before)
+    energy_after_voxels = voxel_energy(after)
     energy_after = np.zeros(len(valid_before))
-    energy_after[rows] = voxel_energy(after)
+    energy_after[rows[found]] = energy_after_voxels[found]
     common = valid_before & valid_after
     common_before = float(energy_before[common].sum())
     invalidated = valid_before & ~valid_after
@@ -206,7 +211,7 @@ def compare_fields(before: dict[str, np.ndarray], after: dict[str, np.ndarray]) 
         "energy_invalidated": float(energy_before[invalidated].sum()) / total_before if total_before > 0 else math.nan,
         "max_after": float(magnitude.max()) if magnitude.size else math.nan,
         "p95_after": float(np.percentile(magnitude, 95)) if magnitude.size else math.nan,
-        "energy_after": float(energy_after.sum()),
+        "energy_after": float(energy_after_voxels.sum()),
         "energy_reduction": 1.0 - float(energy_after[common].sum()) / common_before if common_before > 0 else math.nan,
     }
 

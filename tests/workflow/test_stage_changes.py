@@ -73,3 +73,14 @@ def test_a_deleted_change_file_reruns_its_stage_and_every_later_one(default_stud
     assert all(after[s.name] > before[s.name] for s in stages[1:])
     expected = json.loads((ROOT / "tests" / "data" / "default_study.json").read_text())
     assert fingerprint(default_study / "results") == expected
+
+
+def test_the_whole_default_study_runs_to_its_report(default_study):
+    """`make run`'s target on the embedded default study, every job: each stage's suggestions
+    (the corrections among them move points into voxels the field before had none in) and the
+    report."""
+    snakemake(default_study, "--cores", "2")
+    results = default_study / "results"
+    stages = sorted(results.glob("*/stages/*/"))
+    assert stages and all((stage / "suggestions.parquet").is_file() for stage in stages)
+    assert "<h2>What to try next</h2>" in (results / "report.html").read_text()

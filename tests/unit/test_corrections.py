@@ -250,61 +250,22 @@ def test_a_correcting_stages_files_and_summary_row(tmp_path):
     )
 
 
-def test_the_suggest_jobs_search_a_moved_cloud_anew(tmp_path):
-    """Neighbour distances through the files: a stage that moved cloud 2 stores its distances
-    whole, and a removing stage after it carries them on; every stage's equal a new search."""
-    from lidarfield.analysis.neighbour_file import neighbours_job, read_changes
-    from lidarfield.analysis.suggest import suggest_stage
+def test_a_stack_searches_a_moved_cloud_anew():
+    """Neighbour distances from stage to stage in memory: a stage that moved cloud 2 has it
+    searched anew (a rigid motion keeps distances only up to rounding), a removing stage after
+    it carries them on; every stage's equal a new search, to the bit."""
+    from lidarfield.hypotheses.outliers import cloud_neighbour_distances
 
     rng = np.random.default_rng(2)
     pair = RegisteredPair(rng.normal(scale=6, size=(3000, 3)), rng.normal(scale=6, size=(2500, 3)))
-    write_pair(tmp_path / "registered.parquet", pair)
-    neighbours_job(tmp_path / "registered.parquet", [20], tmp_path / "neighbours.parquet")
-    steps = [None, {"crop": {"max_range_m": 12}}, SHIFT, {"crop": {"max_range_m": 9}}]
-    dirs = [tmp_path / f"0{level}" for level in range(len(steps))]
-    registered, stage_changes = tmp_path / "registered.parquet", []
-    for level, (step, folder) in enumerate(zip(steps, dirs)):
-        stage_id = f"0{level}-x-0000000{level}"
-        mitigate_stage(
-            registered, stage_changes, step, stage_id, level, folder / CHANGES, folder / "removed.parquet", ROOT
-        )
-        stage_changes.append(folder / CHANGES)
-        suggest_stage(
-            read_stage_points(registered, stage_changes),
-            [{"outliers": {}}],
-            GRID,
-            folder / "suggestions.parquet",
-            ROOT,
-            neighbours=tmp_path / "neighbours.parquet",
-            removed_paths=[d / "removed.parquet" for d in dirs[1 : level + 1]],
-            change_paths=[d / "neighbour_changes.parquet" for d in dirs[1:level]],
-            changes_out=folder / "neighbour_changes.parquet",
-        )
-        searched = tmp_path / f"searched{level}.parquet"
-        suggest_stage(read_stage_points(registered, stage_changes), [{"outliers": {}}], GRID, searched, ROOT)
-        carried, anew = read_table(folder / "suggestions.parquet")[0], read_table(searched)[0]
-        for name in anew:
-            np.testing.assert_array_equal(carried[name], anew[name])
-    # the shift stage's change: cloud 2 whole (searched anew), cloud 1 carried (no change: nothing removed)
-    changes = read_changes(dirs[2] / "neighbour_changes.parquet")
-    assert len(changes[(2, 20)]) == len(read_stage_points(registered, stage_changes[:3])[0].xyz2)
-    assert len(changes.get((1, 20), ([],))[0]) == 0
-    # and the distances the last stage carried: a new search's, to the bit
-    from lidarfield.analysis.neighbour_file import carry_to_stage
-
-    last, meta = read_stage_points(registered, stage_changes)
-    carry_to_stage(
-        last,
-        tmp_path / "neighbours.parquet",
-        [d / "removed.parquet" for d in dirs[1:]],
-        [d / "neighbour_changes.parquet" for d in dirs[1:3]],
-        meta.get("moved", ()),
-    )
-    for (cloud, k), known in last.neighbours.items():
-        expected = neighbour_distances(last.xyz1 if cloud == 1 else last.xyz2, k)
-        np.testing.assert_array_equal(known.mean, expected.mean)
-        np.testing.assert_array_equal(known.reach, expected.reach)
-    assert "moved" not in meta and "correction" not in meta  # the last stage (a crop) only removed
+    stack = [{"crop": {"max_range_m": 12}}, SHIFT, {"crop": {"max_range_m": 9}}]
+    for stage in apply_stack(pair, stack, ROOT, GRID):
+        for cloud in (1, 2):
+            cloud_neighbour_distances(stage.pair, cloud, 20)  # as the outliers candidate asks
+        for (cloud, k), known in stage.pair.neighbours.items():
+            expected = neighbour_distances(stage.pair.xyz1 if cloud == 1 else stage.pair.xyz2, k)
+            np.testing.assert_array_equal(known.mean, expected.mean)
+            np.testing.assert_array_equal(known.reach, expected.reach)
 
 
 def test_the_pair_pages_stage_table_shows_a_correction_only_when_a_stage_corrects():

@@ -171,14 +171,9 @@ def test_editing_the_grid_replans_only_fields_plots_and_report(study_dir):
     }
 
 
-def test_the_outliers_candidates_neighbour_count_replans_the_pairs_one_search(study_dir):
-    """The pair's neighbour search (the neighbours rule) depends on the outliers candidates'
-    k only: a new k searches each pair again; no outliers candidate, no search."""
+def test_changing_the_candidates_replans_only_the_suggestions(study_dir):
     planned = planned_after(study_dir, lambda s: s.update(suggest=[{"outliers": {"nb_neighbors": 8}}]))
-    assert planned["neighbours"] == 2 and planned["suggest"] == 6
-    assert not {"mitigate", "field", "plot_stage"} & set(planned)
-    planned = planned_after(study_dir, lambda s: s.update(suggest=[{"crop": {"max_range_m": 30.0}}]))
-    assert "neighbours" not in planned and planned["suggest"] == 6
+    assert planned == {"suggest": 6, "pair_report": 2, "report": 1}
 
 
 def test_choosing_the_plotted_pairs_replans_only_their_pages(study_dir):

@@ -42,18 +42,8 @@ STAGES = {pair: STUDY.stage_ids(pair) for pair in PAIRS}
 CANDIDATES = [STUDY.candidates(level) for level in range(len(STUDY.hypotheses) + 1)]
 # Default candidates (no suggest: section) that cannot apply to a pair are skipped, not errors.
 CANDIDATES_FLAG = "--default-candidates" if STUDY.suggest is None else ""
-# The neighbour counts of the outliers candidates of any stage: the pair's neighbours job
-# searches each once.
-NEIGHBOUR_COUNTS = sorted(
-    {
-        step["outliers"]["nb_neighbors"]
-        for level in CANDIDATES
-        for step in level
-        if "outliers" in step
-    }
-)
-# The pairs whose stage figures the study draws (plots.pairs); any other pair's are drawn on
-# demand, by asking for its page with them: results/{pair}/stages.html.
+# The pairs whose stage figures and every stage's suggestions the study makes (plots.pairs); any
+# other pair's are made on demand, by asking for its page with them: results/{pair}/stages.html.
 PLOT_PAIRS = STUDY.plot_pairs
 
 
@@ -146,33 +136,6 @@ def stage_candidates(wildcards):
 
 
 @planned
-def pair_neighbours(wildcards):
-    """The pair's neighbour distances, when a stage has an outliers candidate."""
-    return f"{RESULTS}/{wildcards.pair}/neighbours.parquet" if NEIGHBOUR_COUNTS else []
-
-
-@planned
-def removed_up_to_stage(wildcards):
-    """What stages 1..k removed, which carries the pair's neighbour distances to stage k."""
-    if not NEIGHBOUR_COUNTS:
-        return []
-    stages = STAGES[wildcards.pair][1 : stage_level(wildcards) + 1]
-    return [f"{stage_dir(wildcards.pair, stage)}/removed.parquet" for stage in stages]
-
-
-@planned
-def changes_before_stage(wildcards):
-    """What stages 1..k-1 changed in the pair's neighbour distances (their suggest jobs')."""
-    if not NEIGHBOUR_COUNTS:
-        return []
-    stages = STAGES[wildcards.pair][1 : stage_level(wildcards)]
-    return [
-        f"{stage_dir(wildcards.pair, stage)}/neighbour_changes.parquet"
-        for stage in stages
-    ]
-
-
-@planned
 def candidate_plugin_sources(wildcards):
     """A plugin candidate's file is an input of the suggestions: editing it reruns them."""
     return [
@@ -217,9 +180,14 @@ def all_stage_files(name):
 
 @planned
 def pair_suggestions(wildcards):
+    """What a pair's page shows to try next: every stage's where it shows the stage figures
+    (plots.pairs, or its stages.html), else its last stage's: in a drive of thousands of pairs
+    the earlier stages' would be most of the study's work, and the next step is the last one's.
+    """
+    stages = STAGES[wildcards.pair]
+    shown = stages if page_has_figures(wildcards) else stages[-1:]
     return [
-        f"{stage_dir(wildcards.pair, stage)}/suggestions.parquet"
-        for stage in STAGES[wildcards.pair]
+        f"{stage_dir(wildcards.pair, stage)}/suggestions.parquet" for stage in shown
     ]
 
 

@@ -47,7 +47,6 @@ from ..hypotheses.outcome import displacement
 from ..hypotheses.steps import canonical_json, step_name
 from ..io.parquet_table import write_table
 from ..pair import RegisteredPair
-from .neighbour_file import carry_to_stage, write_changes
 from .tags import vector_tags, voxel_energy
 
 log = logging.getLogger(__name__)
@@ -242,29 +241,12 @@ def suggest_stage(
     out: str | Path,
     base_dir: str | Path = ".",
     defaults: bool = False,
-    neighbours: str | Path | None = None,
-    removed_paths: list[str | Path] = (),
-    change_paths: list[str | Path] = (),
-    changes_out: str | Path | None = None,
 ) -> dict[str, np.ndarray]:
     """``suggestions.parquet`` of a stage from its points and their metadata (as
-    :func:`~lidarfield.stage_points.read_stage_points` reads them); returns the table.
-
-    ``neighbours``: the pair's ``neighbours.parquet``, carried to this stage past what stages
-    1..k removed (``removed_paths``: their ``removed.parquet``) with the changes stages
-    1..k-1 made (``change_paths``) instead of a new search; ``changes_out``: where this stage's
-    changes go (see :mod:`.neighbour_file`; no rows without ``neighbours``).
-    """
+    :func:`~lidarfield.stage_points.read_stage_points` reads them); returns the table."""
     pair, meta = points
-    carried = (
-        carry_to_stage(pair, neighbours, list(removed_paths), list(change_paths), meta.get("moved") or ())
-        if neighbours
-        else {}
-    )
     table = suggestions(pair, field_settings_from_config(grid_section), candidates, base_dir, grid_section, defaults)
     write_suggestions(out, table, meta.get("stage"), candidates, grid_section)
-    if changes_out is not None:
-        write_changes(changes_out, carried)
     return table
 
 

@@ -72,19 +72,8 @@ def add_parser(subparsers) -> None:
     )
     p.add_argument("--grid", type=_json, required=True)
     p.add_argument("--out", required=True)
-    p.add_argument("--neighbours", default="", help="the pair's neighbours.parquet (none: searched here)")
-    p.add_argument("--removed", nargs="*", default=[], help="with --neighbours: the removed.parquet of stages 1..k")
-    p.add_argument(
-        "--changes", nargs="*", default=[], help="with --neighbours: the neighbour_changes.parquet of stages 1..k-1"
-    )
-    p.add_argument("--changes-out", help="this stage's neighbour_changes.parquet")
     p.set_defaults(func=_suggest)
 
-    p = jobs.add_parser("neighbours")
-    p.add_argument("--points", required=True, help="the registered pair")
-    p.add_argument("--k", type=int, nargs="*", default=[], help="the outliers candidates' neighbour counts")
-    p.add_argument("--out", required=True)
-    p.set_defaults(func=_neighbours)
     p = jobs.add_parser("rematch")
     add_stage_points(p)
     p.add_argument("--settings", type=_json, required=True, help="the validated rematch section")
@@ -209,17 +198,7 @@ def _suggest(args: argparse.Namespace) -> None:
         args.grid,
         args.out,
         defaults=args.default_candidates,
-        neighbours=args.neighbours,
-        removed_paths=args.removed,
-        change_paths=args.changes,
-        changes_out=args.changes_out,
     )
-
-
-def _neighbours(args: argparse.Namespace) -> None:
-    from ..analysis.neighbour_file import neighbours_job
-
-    neighbours_job(args.points, args.k, args.out)
 
 
 def _rematch(args: argparse.Namespace) -> None:

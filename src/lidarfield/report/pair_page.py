@@ -192,13 +192,13 @@ def stage_parts(
 
 def not_drawn_note(on_demand: str | None) -> str:
     how = (
-        f"<code>snakemake --cores 2 {esc(on_demand)}</code> draws them and writes that page, this one with its figures"
+        f"<code>snakemake --cores 2 {esc(on_demand)}</code> makes them and writes that page, this one with them"
         if on_demand
         else "<code>lidarfield plot STAGE_DIR --out STAGE_DIR/figures</code> draws a stage's figures"
     )
     return (
-        f'<p class="note">The figures of this pair are not drawn (the config\'s <code>plots.pairs</code> leaves it '
-        f"out): {how}.</p>"
+        f'<p class="note">The figures of this pair, and what to try next at its stages before the last, are not made '
+        f"(the config's <code>plots.pairs</code> leaves it out): {how}.</p>"
     )
 
 

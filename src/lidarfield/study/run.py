@@ -7,7 +7,6 @@ import json
 import logging
 from pathlib import Path
 
-from ..analysis.neighbour_file import write_neighbours
 from ..analysis.suggest import suggestions, write_suggestions
 from ..errors import ConfigError, InputError
 from ..io import read_scan, write_scan
@@ -134,7 +133,6 @@ def run_pair(
     write_scan(scans[0], out_dir / "scan1.parquet")
     write_scan(scans[1], out_dir / "scan2.parquet")
     write_pair(out_dir / "registered.parquet", pair)
-    write_neighbours(out_dir / "neighbours.parquet", pair)  # what stage 0's suggestions searched
     pair_name = out_dir.resolve().name
     folders = [out_dir / "stages" / stage_id for stage_id in ids]
     changes = [folder / CHANGES for folder in folders]

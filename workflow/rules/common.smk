@@ -1,4 +1,5 @@
 # Config validation and the input/params functions of every rule.
+import gc
 import inspect
 import sys
 from pathlib import Path
@@ -12,6 +13,12 @@ from lidarfield.layout import RESULTS_FOLDERS
 from lidarfield.plots.settings import figure_settings
 
 min_version("9.0")
+
+# Planning makes millions of objects that live for the whole run, and Python's cyclic garbage
+# collector would walk them again and again: 30% of the CPU of planning a 1,000-pair drive
+# (bench/RESULTS.md). Off while Snakemake plans; the run's start (onstart, worker.smk) freezes
+# what planning made and turns it back on.
+gc.disable()
 
 
 # The default study, unless the user names one with --configfile (the directive would merge

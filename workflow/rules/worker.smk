@@ -4,6 +4,8 @@
 # SLURM cluster (profiles/slurm) each allocation's Snakemake starts one of its own.
 # The end of a run also cancels the scheduler's pending re-evaluation timers (see
 # lidarfield.runner.scheduling), which would otherwise hold the exit for up to a minute.
+import gc
+
 from lidarfield.runner import launch, scheduling
 
 # Not in the Snakemake processes that run one job each (on a cluster node), nor when each job
@@ -25,6 +27,8 @@ elif NO_DEPLOYMENT and launch.in_allocation(workflow.remote_exec):
 
 
 onstart:
+    gc.freeze()  # the plan, out of the collections of the run (see common.smk)
+    gc.enable()
     if USE_WORKER and workflow.local_exec:
         launch.start(RESULTS)
     else:

@@ -17,8 +17,8 @@ rotations its z is the yaw), ``angle_deg`` (its norm), their standard errors
 ``translation_se_m`` and ``rotation_se_deg``, ``fitness`` (share of the cloud-2 points in the
 fit with a cloud-1 point within ``max_correspondence_m``), ``inlier_rmse_m``,
 ``correspondences`` and ``sigma_m``. All are computed from ICP's own correspondences, those
-Open3D finds after its last update (searching them again at ``T`` finds the same ones, a test
-checks it, and cost a tenth of the time). The standard errors are the point-to-plane least
+Open3D finds after its last update (a second search at ``T`` found the same ones, as a test
+checks, for a tenth of realign's time). The standard errors are the point-to-plane least
 squares' at ``T``: with one residual ``r_i = n_i . (T s_i - q_i)`` per correspondence and its
 Jacobian ``[(T s_i) x n_i, n_i]`` for a small rotation and translation applied after ``T``, the
 covariance is ``sigma^2 (J^T J)^-1`` with ``sigma^2 = sum r_i^2 / (m - 6)``, propagated to ``t``
@@ -120,8 +120,9 @@ def realign(pair: RegisteredPair, params: Params) -> Outcome:
         criteria,
     )
     T = _rounded(np.array(result.transformation, dtype=np.float64))
-    # ICP's correspondences are those at its final transform (Open3D finds them after the last
-    # update); T differs from it by the rounding, far below any nearest-neighbour tie.
+    # ICP's correspondences are those at its final transform (Open3D searches them after the last
+    # update); T is that transform rounded to 1e-9, so only a nearest-neighbour tie that close
+    # could tell them apart.
     pairs = np.asarray(result.correspondence_set).reshape(-1, 2)
     if len(pairs) < MIN_POINTS:
         raise HypothesisError(

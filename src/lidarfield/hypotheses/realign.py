@@ -1,8 +1,9 @@
 """``realign``: re-estimate the rigid transform of cloud 2 onto cloud 1 from the survivors, and apply it.
 
 A correcting hypothesis: it removes nothing, and moves cloud 2. Point-to-plane ICP (Open3D, as
-the registration uses it), source = cloud 2, target = cloud 1, on all their points (or
-voxel-downsampled, with ``voxel_m``), normals of cloud 1 from its neighbours within
+the registration uses it), source = cloud 2, target = cloud 1: every point of cloud 1 and at most
+``max_points`` of cloud 2, a random subset drawn with a fixed seed (both clouds voxel-downsampled
+first if ``voxel_m`` > 0; not by default), normals of cloud 1 from its neighbours within
 ``normal_radius_m``, starting from the identity (the pair is already registered: what is fitted
 is the correction). The fitted transform ``T``
 (a point ``p`` of cloud 2 becomes ``R p + t``) is applied to every point of cloud 2 and to
@@ -13,14 +14,19 @@ rerun writes the same files (Open3D's parallel sums vary in the last digits).
 What it records (the stage's ``correction``): ``translation_m`` (t, frame 1), ``rotation_deg``
 (the rotation vector of R, axis times angle, in degrees, about frame 1's x, y, z: for small
 rotations its z is the yaw), ``angle_deg`` (its norm), their standard errors
-``translation_se_m`` and ``rotation_se_deg``, ``fitness`` (share of the downsampled cloud-2
-points with a cloud-1 point within ``max_correspondence_m`` at ``T``), ``inlier_rmse_m``,
-``correspondences`` and ``sigma_m``. The standard errors are the point-to-plane least squares'
-at ``T``: with one residual ``r_i = n_i . (T s_i - q_i)`` per correspondence and its Jacobian
-``[(T s_i) x n_i, n_i]`` for a small rotation and translation applied after ``T``, the
+``translation_se_m`` and ``rotation_se_deg``, ``fitness`` (share of the cloud-2 points in the
+fit with a cloud-1 point within ``max_correspondence_m``), ``inlier_rmse_m``,
+``correspondences`` and ``sigma_m``. All are computed from ICP's own correspondences, those
+Open3D finds after its last update (a second search at ``T`` found the same ones, as a test
+checks, for a tenth of realign's time). The standard errors are the point-to-plane least
+squares' at ``T``: with one residual ``r_i = n_i . (T s_i - q_i)`` per correspondence and its
+Jacobian ``[(T s_i) x n_i, n_i]`` for a small rotation and translation applied after ``T``, the
 covariance is ``sigma^2 (J^T J)^-1`` with ``sigma^2 = sum r_i^2 / (m - 6)``, propagated to ``t``
-to first order. They treat the residuals as independent, which neighbouring points of a scan
-are not quite: read them as a lower bound.
+to first order. They are those of the points the fit used: on a subset of ``m`` of cloud 2's
+``n`` points about ``sqrt(n / m)`` times those of a fit on all of them (1.73 to 1.76 times for
+5,000 of 15,318 points), as the subset's fit is that much less certain. They treat the
+residuals as independent, which neighbouring points of a scan are not quite (a subset's points,
+farther apart, less so): read them as a lower bound.
 
 Why not downsampled by default: a downsampling voxel's centroid moves with which of the scan's
 points fall in it (the same partial-volume effect as the field's means), and that biases the
@@ -28,7 +34,15 @@ fit. Measured on the simulated intersection (two VLP-16 samplings, 2 cm noise, 0
 added): with 0.2 m voxels the fit stops 0.005 deg and 0.9 mm from the truth (four of its own
 standard errors; the field after it is ``patterned``), with 0.1 m voxels 0.003 deg and 1.4 mm,
 on all points 0.0015 deg and 0.4 mm from either start (the field after it ``random``), for
-0.06 s instead of 0.02 s.
+0.06 s instead of 0.02 s. A random subset of cloud 2's own points has no such bias: it only adds
+noise, which its standard errors measure; cloud 1 keeps every point, so the correspondences and
+normals stay at full resolution.
+
+Why at most 20,000 points of cloud 2: ICP's time grows with the source's points, its accuracy
+hardly does beyond a few thousand, and a VLP-16 scan (12,000 to 16,000 points) is still fitted
+on all of them, as before. What is left is mostly cloud 1's normals (about 70% of the time on a
+pair of 55,000-point scans), which a full-resolution target needs. Measured figures: the
+hypotheses page of the docs and ``bench/RESULTS.md``.
 """
 
 from __future__ import annotations
@@ -54,6 +68,9 @@ class Params:
     voxel_m: float = field(
         default=0.0, metadata=doc("both clouds are voxel-downsampled to this size first (m; 0: not, the default)")
     )
+    max_points: int = field(
+        default=20000, metadata=doc("at most this many points of cloud 2 in the fit (a random subset, fixed seed)")
+    )
     max_iterations: int = field(default=50, metadata=doc("ICP iterations at most"))
     normal_radius_m: float = field(
         default=1.0, metadata=doc("cloud 1's normals from its points within this radius (m)")
@@ -66,6 +83,8 @@ class Params:
                 f"need max_correspondence_m > 0, voxel_m >= 0 and max_iterations >= 1, got "
                 f"{self.max_correspondence_m}, {self.voxel_m} and {self.max_iterations}"
             )
+        if self.max_points < MIN_POINTS:
+            raise ValueError(f"need max_points >= {MIN_POINTS}, got {self.max_points}")
         if not self.normal_radius_m > 0 or self.normal_max_nn < 3:
             raise ValueError(
                 f"need normal_radius_m > 0 and normal_max_nn >= 3, got {self.normal_radius_m} and {self.normal_max_nn}"
@@ -79,7 +98,7 @@ def realign(pair: RegisteredPair, params: Params) -> Outcome:
     from ..registration.matching import point_cloud
 
     reg = o3d.pipelines.registration
-    source = point_cloud(pair.xyz2, params.voxel_m, 0.0)
+    source = _sample(point_cloud(pair.xyz2, params.voxel_m, 0.0), params.max_points)
     target = point_cloud(pair.xyz1, params.voxel_m, 0.0)
     for cloud, points in ((2, source), (1, target)):
         if len(points.points) < MIN_POINTS:
@@ -101,8 +120,10 @@ def realign(pair: RegisteredPair, params: Params) -> Outcome:
         criteria,
     )
     T = _rounded(np.array(result.transformation, dtype=np.float64))
-    evaluation = reg.evaluate_registration(source, target, params.max_correspondence_m, T)
-    pairs = np.asarray(evaluation.correspondence_set).reshape(-1, 2)
+    # ICP's correspondences are those at its final transform (Open3D searches them after the last
+    # update); T is that transform rounded to 1e-9, so only a nearest-neighbour tie that close
+    # could tell them apart.
+    pairs = np.asarray(result.correspondence_set).reshape(-1, 2)
     if len(pairs) < MIN_POINTS:
         raise HypothesisError(
             f"realign: too few correspondences: {len(pairs)} cloud-2 points have a cloud-1 point within "
@@ -112,7 +133,7 @@ def realign(pair: RegisteredPair, params: Params) -> Outcome:
     mapped = np.asarray(source.points)[pairs[:, 0]] @ T[:3, :3].T + T[:3, 3]
     fitted = {
         **_fitted(T, mapped, np.asarray(target.points)[pairs[:, 1]], np.asarray(target.normals)[pairs[:, 1]]),
-        "fitness": float(evaluation.fitness),
+        "fitness": float(result.fitness),
         "correspondences": len(pairs),
         "method": "icp_point_to_plane",
     }
@@ -153,6 +174,15 @@ def _fitted(T: np.ndarray, mapped: np.ndarray, target: np.ndarray, normals: np.n
         "inlier_rmse_m": float(np.sqrt(np.mean(np.sum((mapped - target) ** 2, axis=1)))),
         "sigma_m": float(np.sqrt(sigma2)),
     }
+
+
+def _sample(cloud, max_points: int):
+    """At most ``max_points`` of ``cloud``'s points, a random subset in their order, the same on
+    every run (a fixed seed)."""
+    if len(cloud.points) <= max_points:
+        return cloud
+    rows = np.random.default_rng(0).choice(len(cloud.points), max_points, replace=False)
+    return cloud.select_by_index(np.sort(rows).tolist())
 
 
 def _rounded(T: np.ndarray) -> np.ndarray:

@@ -23,10 +23,12 @@ from pathlib import Path
 
 import numpy as np
 
-from lidarfield.hypotheses import apply_step, free_space, parse_step
+from lidarfield.field import free_space
+from lidarfield.field.free_space import ranges
+from lidarfield.hypotheses import apply_step, parse_step
 from lidarfield.hypotheses import moving_objects as mo
 from lidarfield.hypotheses.field_of_view import field_of_view
-from lidarfield.hypotheses.geometry import in_sensor_frame, ranges
+from lidarfield.hypotheses.geometry import in_sensor_frame
 from lidarfield.hypotheses.shadow import first_cluster_keep, first_cluster_keep_loop, shadow
 from lidarfield.pair import RegisteredPair
 from lidarfield.poses import pose_from_xyzrpy
@@ -124,7 +126,7 @@ def bench_moving_objects(pair: RegisteredPair) -> None:
     params = mo.Params()
     t_fast = best_time(lambda: apply_step(pair, {"moving_objects": {}}))[0]
     images = [
-        free_space.range_image(xyz, mo.resolution_rad(model, params, k), *mo.sensor_view(model))
+        free_space.range_image(xyz, mo.resolution_rad(model, params, k), *free_space.sensor_view(model))
         for k, (xyz, model) in enumerate(
             ((pair.xyz1, pair.sensor1), (in_sensor_frame(pair.xyz2, pair.T_1_2), pair.sensor2)), 1
         )

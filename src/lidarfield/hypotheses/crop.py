@@ -10,9 +10,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..field.free_space import ranges
 from ..pair import RegisteredPair
 from .ego_vehicle import Box
-from .geometry import check_box, inside_box, own_frame_points, ranges
+from .geometry import check_box, inside_box, own_frame_points
 from .params import doc
 
 

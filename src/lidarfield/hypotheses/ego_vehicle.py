@@ -12,8 +12,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..field.free_space import ranges
 from ..pair import RegisteredPair
-from .geometry import check_box, inside_box, own_frame_points, ranges
+from .geometry import check_box, inside_box, own_frame_points
 from .params import doc
 
 Box = tuple[float, float, float, float, float, float]

@@ -25,11 +25,6 @@ def own_frame_points(pair: RegisteredPair) -> tuple[np.ndarray, np.ndarray]:
     return pair.xyz1, in_sensor_frame(pair.xyz2, pair.T_1_2)
 
 
-def ranges(xyz: np.ndarray) -> np.ndarray:
-    """3-D distance of each point from the origin of its frame."""
-    return np.sqrt(np.einsum("ij,ij->i", xyz, xyz))
-
-
 def elevation_deg(xyz: np.ndarray) -> np.ndarray:
     return np.degrees(np.arctan2(xyz[:, 2], np.hypot(xyz[:, 0], xyz[:, 1])))
 

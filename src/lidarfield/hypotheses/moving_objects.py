@@ -22,7 +22,7 @@ same object before or after it moved). Ground points are never removed. The remo
 ``reason`` column says why each point went: ``evidence``, or ``grown`` (the rest of a removed
 object).
 
-The free-space test is :mod:`.free_space`; the ground and the objects are :mod:`.voxel_objects`.
+The free-space test is :mod:`lidarfield.field.free_space`; the ground and the objects are :mod:`.voxel_objects`.
 """
 
 from __future__ import annotations
@@ -33,9 +33,16 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import NotApplicableError
+from ..field.free_space import (
+    BEAM_WIDTH_DEG,
+    MARGIN_M,
+    free_space_evidence,
+    range_image,
+    sensor_resolution_rad,
+    sensor_view,
+)
 from ..pair import RegisteredPair
 from ..sensors.models import SensorModel
-from .free_space import free_space_evidence, range_image
 from .geometry import in_sensor_frame
 from .outcome import Outcome
 from .params import doc
@@ -54,14 +61,14 @@ class Params:
         ),
     )
     margin_m: float = field(
-        default=0.2,
+        default=MARGIN_M,
         metadata=doc(
             "a point is evidence when nearer by more than this margin (plus the beam term) than every return of the "
             "other sensor within the margin across the ray from its direction: a ball of free space around it"
         ),
     )
     beam_width_deg: float = field(
-        default=0.2, metadata=doc("the beam's width: the margin grows by range x tan(beam_width_deg)")
+        default=BEAM_WIDTH_DEG, metadata=doc("the beam's width: the margin grows by range x tan(beam_width_deg)")
     )
     ground_height_m: float | None = field(
         default=0.3,
@@ -128,16 +135,7 @@ def resolution_rad(model: SensorModel | None, params: Params, sensor: int) -> tu
             f"moving_objects: sensor {sensor} has no sensor model, so its angular resolution is unknown: give the "
             "sensor (--sensor, or 'sensor' in the pair's config) or moving_objects' angular_resolution_deg"
         )
-    channels = np.sort(np.asarray(model.elevation_deg, dtype=float))
-    gap = float(np.diff(channels).max()) if len(channels) > 1 else model.azimuth_resolution_deg
-    return math.radians(model.azimuth_resolution_deg), math.radians(gap)
-
-
-def sensor_view(model: SensorModel | None) -> tuple[float, tuple[float, float] | None]:
-    """A sensor's minimum range and elevation limits (rad) from its model (none known: 0 and None)."""
-    if model is None:
-        return 0.0, None
-    return model.min_range_m, tuple(math.radians(v) for v in model.elevation_limits_deg)
+    return sensor_resolution_rad(model)
 
 
 def check_origins(pair: RegisteredPair) -> None:

@@ -21,9 +21,10 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from ..errors import ConfigError
+from ..field.free_space import ranges
 from ..field.grid import SphericalGrid, grid_from_config
 from ..pair import RegisteredPair
-from .geometry import in_sensor_frame, ranges
+from .geometry import in_sensor_frame
 from .params import doc
 
 # The keys of a grid section that shape the angular cells (range shells play no part: the

@@ -40,7 +40,8 @@ from timing import best_time, machine  # bench/timing.py
 GRID = {"kind": "spherical", "azimuth_bins": 36, "elevation_deg": [-22.5, 15.0], "elevation_bins": 5, "min_points": 30}
 
 
-def bench_pair(n: int):
+def ego_car_pair(n: int):
+    """The pair registered by the truth, each cloud subsampled to ``n`` points."""
     scene, sensor = load_scene("paper-intersection-ego-car"), PRESETS["paper-sim-80"]
     scans = [
         simulate_scan(scene, sensor, pose_from_xyzrpy(pose), time_s=t, seed=seed, range_noise_m=0.02)
@@ -49,7 +50,11 @@ def bench_pair(n: int):
     pair = register_pair(scans[0], scans[1], "truth")
     rng = np.random.default_rng(0)
     keep = [np.sort(rng.choice(len(xyz), size=min(n, len(xyz)), replace=False)) for xyz in (pair.xyz1, pair.xyz2)]
-    pair = pair.subset(*keep)
+    return pair.subset(*keep)
+
+
+def bench_pair(n: int):
+    pair = ego_car_pair(n)
     shift = pose_from_xyzrpy([0.3, 0, 0, 0, 0, 0])  # scan 2 registered 0.3 m off
     return dataclasses.replace(pair, xyz2=pair.xyz2 + shift[:3, 3], T_1_2=shift @ pair.T_1_2)
 

@@ -15,7 +15,11 @@ import numpy as np
 from lidarfield.field.grid import CartesianGrid, FieldSettings, SphericalGrid
 from lidarfield.field.kernel import discrepancy_field, field_from_voxel_ids
 from lidarfield.field.reference import discrepancy_field_reference, field_from_voxel_ids_reference
+from lidarfield.field.significance import Viewpoint
 from timing import best_time, machine  # bench/timing.py
+
+SENSOR2 = (1.0, 0.0, 0.0)
+SHARED = 0.9  # the share of each cloud's points the other sensor could see, drawn at random
 
 
 def clouds(n: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
@@ -45,6 +49,8 @@ def main() -> None:
         "cartesian 1 m": CartesianGrid(cell_m=1.0),
     }
     print("end to end: binning + aggregation (reference: plain binning in degrees); aggregation: from voxel ids")
+    rng = np.random.default_rng(1)
+    viewpoint = Viewpoint(SENSOR2, rng.random(args.points) < SHARED, rng.random(args.points) < SHARED)
     for name, grid in cases.items():
         settings = FieldSettings(grid)
         ids1, ids2 = grid.assign(xyz1), grid.assign(xyz2)
@@ -56,6 +62,12 @@ def main() -> None:
             "aggregation": (
                 lambda: field_from_voxel_ids(ids1, xyz1, ids2, xyz2, settings),
                 lambda: field_from_voxel_ids_reference(ids1, xyz1, ids2, xyz2, settings),
+            ),
+            # Sensor 2 1 m away: the vectors' covariance gains the change of viewpoint on the
+            # shared points (a second pass of sums over them).
+            "+ viewpoint": (
+                lambda: field_from_voxel_ids(ids1, xyz1, ids2, xyz2, settings, viewpoint=viewpoint),
+                lambda: field_from_voxel_ids_reference(ids1, xyz1, ids2, xyz2, settings, viewpoint=viewpoint),
             ),
         }
         for what, (fast, reference) in runs.items():

@@ -51,60 +51,71 @@ def paper_sim():
     return pair, study
 
 
+@pytest.fixture(scope="module")
+def paper_sim_off(paper_sim):
+    """The paper-sim pair with scan 2 registered 0.3 m off, and the study."""
+    pair, study = paper_sim
+    shift = pose_from_xyzrpy([0.3, 0, 0, 0, 0, 0])
+    return dataclasses.replace(pair, xyz2=pair.xyz2 + shift[:3, 3], T_1_2=shift @ pair.T_1_2), study
+
+
 def _explain(pair, study, explain: ExplainSettings = ExplainSettings(), suggest=None):
     return explain_pair(pair, study.grid, study.grid_section, explain, suggest, study.base_dir, "paper-sim")
 
 
 def test_on_the_methods_simulated_pair_the_first_step_is_field_of_view(paper_sim):
     """The authors' stack for their simulated pair is field_of_view then shadow: the loop finds
-    it without being told, and each step shrinks the field."""
+    field_of_view without being told, and what is left is random: the change of viewpoint (the
+    sensors are 1.4 m apart) on what both sensors saw is in the field's covariance, and the
+    shadows left are too few to make a pattern (docs/field.md). Registered 0.3 m off, it realigns
+    first and then finds the authors' stack, field_of_view then shadow; each step shrinks the field."""
     explanation = _explain(*paper_sim)
     names = [row["hypothesis"] for row in explanation.steps]
-    assert names[0] in ("field_of_view", "shadow"), names
-    assert names[:2] == ["field_of_view", "shadow"]
-    for row in explanation.steps:
-        assert row["energy_reduction"] >= ExplainSettings().min_energy_reduction
-        assert row["field_energy_after"] < row["field_energy_before"]
+    assert names == ["field_of_view"] and explanation.stop == "verdict random"
     first = explanation.steps[0]
+    assert first["verdict_before"] == "patterned" and first["verdict_after"] == "random"
     assert first["energy_reduction"] > 0.5 and first["removed_share"] < 0.15
     assert list(explanation.steps[0]) == list(STEP_COLUMNS)
 
 
+def test_registered_off_the_loop_realigns_then_finds_the_authors_stack(paper_sim_off):
+    explanation = _explain(*paper_sim_off)
+    names = [row["hypothesis"] for row in explanation.steps]
+    assert names[:3] == ["realign", "field_of_view", "shadow"], names
+    for row in explanation.steps:
+        assert row["energy_reduction"] >= ExplainSettings().min_energy_reduction
+        assert row["field_energy_after"] < row["field_energy_before"]
+
+
 def test_the_loop_stops_when_no_candidate_is_worth_it(paper_sim):
-    """A reduction threshold no candidate reaches: no step, the verdict unchanged; the default
-    settings end the simulated pair the same way once field_of_view and shadow are applied (what
-    is left, the parallax of a sensor moved 1.4 m, is no adversity of the candidates)."""
+    """A reduction threshold no candidate reaches: no step, the verdict unchanged."""
     pair, study = paper_sim
     strict = _explain(pair, study, ExplainSettings(min_energy_reduction=0.99))
     assert strict.steps == [] and strict.stop == STOP_NOTHING_HELPS and strict.stack == []
     assert strict.verdict == "patterned"
-    default = _explain(pair, study)
-    assert default.stop == STOP_NOTHING_HELPS and default.verdict == "patterned"
 
 
-def test_the_loop_stops_after_max_steps(paper_sim):
-    pair, study = paper_sim
+def test_the_loop_stops_after_max_steps(paper_sim_off):
+    pair, study = paper_sim_off
     explanation = _explain(pair, study, ExplainSettings(max_steps=1))
     assert len(explanation.steps) == 1 and explanation.stop == STOP_MAX_STEPS
 
 
-def test_the_loop_never_applies_a_hypothesis_twice_nor_a_useless_one(paper_sim):
+def test_the_loop_never_applies_a_hypothesis_twice_nor_a_useless_one(paper_sim_off):
     """Configured candidates are offered again at every step, but one already in the stack is
     not tried again: realign on 0.2 m voxels, run a second time on what it realigned, still lowers
     the energy by a hair, and with no reduction required the loop would apply it forever. A candidate that
     changes nothing (crop with its defaults removes no point) is never applied."""
-    pair, study = paper_sim
+    off, study = paper_sim_off
     anything = ExplainSettings(min_energy_reduction=0.0, min_reduction_per_removed=0.0)
     realign = [validate_step({"realign": {"voxel_m": 0.2}})]
-    shift = pose_from_xyzrpy([0.3, 0, 0, 0, 0, 0])  # scan 2 registered 0.3 m off
-    off = dataclasses.replace(pair, xyz2=pair.xyz2 + shift[:3, 3], T_1_2=shift @ pair.T_1_2)
     explanation = _explain(off, study, anything, realign)
     assert [row["hypothesis"] for row in explanation.steps] == ["realign"]
     assert explanation.stop == STOP_NO_CANDIDATES
     again = suggestions(explanation.stages[-1].stage.pair, study.grid, realign, ".", study.grid_section)
     assert again["energy_reduction"][0] > 0  # what the loop did not take
     useless = [validate_step({"field_of_view": {}}), validate_step({"crop": {}})]
-    explanation = _explain(pair, study, anything, useless)
+    explanation = _explain(off, study, anything, useless)
     assert [row["hypothesis"] for row in explanation.steps] == ["field_of_view"]
     assert explanation.stop == STOP_NOTHING_HELPS
 
@@ -236,8 +247,9 @@ def test_explain_finds_realign_ego_vehicle_and_moving_objects(ego_car_explanatio
 
 @pytest.mark.xfail(
     strict=True,
-    reason="known limitation (docs/field.md): the sensors are 1 m apart, and voxels that mix "
-    "surfaces change their mix with the viewpoint, which the field's covariance does not model",
+    reason="realign (fitted before moving_objects) leaves sensor 2 0.8 deg pitched (its cloud-1 normals "
+    "come from single rings on the ground), which the verdict rightly calls patterned; the same pair "
+    "registered by the truth is random once ego_vehicle is applied",
 )
 def test_explain_on_the_ego_car_pair_ends_random(ego_car_explanation):
     assert ego_car_explanation.verdict == "random" and ego_car_explanation.stop == "verdict random"

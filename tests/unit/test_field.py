@@ -11,6 +11,7 @@ from lidarfield.field.file import read_field, write_field
 from lidarfield.field.grid import CartesianGrid, FieldSettings, SphericalGrid
 from lidarfield.field.kernel import discrepancy_field, field_columns, field_from_voxel_ids
 from lidarfield.field.reference import discrepancy_field_reference, field_from_voxel_ids_reference
+from lidarfield.field.significance import Viewpoint
 
 GRID = SphericalGrid()  # the experimental grid: 36 x 10 deg, 5 x 8 deg from -20 to +20
 
@@ -137,6 +138,18 @@ def test_kernel_matches_reference(name):
         field_from_voxel_ids(ids1[keep], xyz1[keep], ids2, xyz2, settings),
         field_from_voxel_ids_reference(ids1[keep], xyz1[keep], ids2, xyz2, settings),
     )
+    # With sensor 2's origin and which points both sensors saw (the change of viewpoint on what
+    # both saw, in the vectors' covariance): the same field from both implementations, with the
+    # same vectors and larger se; no change when both are one place or when no point is shared.
+    shared = Viewpoint((1.2, -0.3, 0.4), rng.random(len(xyz1)) < 0.7, rng.random(len(xyz2)) < 0.7)
+    moved = discrepancy_field(xyz1, xyz2, settings, origin, shared)
+    assert_same_field(moved, discrepancy_field_reference(xyz1, xyz2, settings, origin, shared))
+    assert_same_field(field_from_voxel_ids(ids1, xyz1, ids2, xyz2, settings, origin, viewpoint=shared), moved)
+    assert_same_field(discrepancy_field(xyz1, xyz2, settings, origin, shared._replace(origin2=origin)), fast)
+    unseen = Viewpoint(shared.origin2, np.zeros(len(xyz1), bool), np.zeros(len(xyz2), bool))
+    assert_same_field(discrepancy_field(xyz1, xyz2, settings, origin, unseen), fast)
+    np.testing.assert_array_equal(moved["magnitude"], fast["magnitude"])
+    assert (moved["se"][spread] > fast["se"][spread]).all()
 
 
 def assert_same_field(a: dict, b: dict) -> None:

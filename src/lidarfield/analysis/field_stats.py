@@ -30,9 +30,10 @@ import math
 import numpy as np
 
 from ..defaults import default
+from ..field.free_space import shared_points
 from ..field.grid import FieldSettings
 from ..field.kernel import WHITENED_COLUMNS, field_from_voxel_ids
-from ..field.significance import ScanPattern
+from ..field.significance import ScanPattern, Viewpoint
 from ..pair import RegisteredPair
 from ..poses import weighted_rigid_transform  # noqa: F401 (re-exported: the tests' Kabsch)
 from .randomness import neighbour_pairs, randomness_tests
@@ -65,7 +66,11 @@ STATISTIC_KEYS = (
 def analyse_field(pair: RegisteredPair, settings: FieldSettings) -> tuple[dict[str, np.ndarray], dict]:
     """The field of a pair (binned about sensor 1) with its tag columns, and its statistics."""
     ids = settings.grid.assign(pair.xyz1), settings.grid.assign(pair.xyz2)  # binned once: the tags need them too
-    columns = field_from_voxel_ids(ids[0], pair.xyz1, ids[1], pair.xyz2, settings, patterns=scan_patterns(pair))
+    shared = shared_points(pair)
+    viewpoint = None if shared is None else Viewpoint(pair.origin2, *shared)
+    columns = field_from_voxel_ids(
+        ids[0], pair.xyz1, ids[1], pair.xyz2, settings, patterns=scan_patterns(pair), viewpoint=viewpoint
+    )
     columns.update(voxel_tags(columns, pair, settings, ids))
     return columns, field_statistics(columns, settings)
 

@@ -173,15 +173,17 @@ def co_visible(
     angle = math.radians(beam_width_deg) / 2
     lo, hi = image.elevation_limits
     in_view = (elevation >= lo - angle) & (elevation <= hi + angle)
-    seen = np.flatnonzero(in_view & (r >= image.min_range_m) & (r <= max_range_m) & (r > 0))
-    out = np.zeros(len(xyz), dtype=bool)
-    for at, margin, window in _windows(image, r[seen], margin_m, beam_width_deg):
-        cells = row[seen[at]], column[seen[at]]
-        at_r = r[seen[at]]
-        # Hidden: the rays nearest its direction (its azimuth cell, the beams on either side)
-        # all stopped short of it; a wider window would see past a pole's edge into its shadow.
-        behind = image.around(1, 0, farthest=True)[cells] >= at_r - margin
-        out[seen[at]] = behind & (image.around(*window)[cells] <= at_r + margin)  # not seen through
+    margin = margins(r, margin_m, beam_width_deg)
+    # Hidden: the rays nearest its direction (its azimuth cell, the beams on either side) all
+    # stopped short of it; a wider window would see past a pole's edge into its shadow.
+    out = in_view & (r >= image.min_range_m) & (r <= max_range_m) & (r > 0)
+    out &= image.around(1, 0, farthest=True)[row, column] >= r - margin
+    # Seen through: every return of its window farther by more than the margin. The window is
+    # at least a cell on each side, so a return that near settles most points at once.
+    unsettled = np.flatnonzero(out & (image.around(1, 1)[row, column] > r + margin))
+    for at, at_margin, window in _windows(image, r[unsettled], margin_m, beam_width_deg):
+        points = unsettled[at]
+        out[points] = image.around(*window)[row[points], column[points]] <= r[points] + at_margin
     return out
 
 

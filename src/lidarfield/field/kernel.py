@@ -17,14 +17,16 @@ from .grid import CARTESIAN_BITS, FieldSettings, Grid, SphericalGrid, relative_c
 from .significance import (
     COVARIANCE_ENTRIES,
     ScanPattern,
+    Viewpoint,
     covariance_from_sums,
     pattern_covariance,
     vector_covariance,
     vector_standard_error,
+    viewpoint_covariance,
     whitened_vectors,
     z_score,
 )
-from .surface import surface_normals
+from .surface import normals_from_covariance, pooled_covariance, shared_spread
 
 GRID_COLUMNS = {"spherical": ("az_bin", "el_bin", "r_bin"), "cartesian": ("ix", "iy", "iz")}
 VALUE_COLUMNS = ("n1", "n2", "x1", "y1", "z1", "x2", "y2", "z2", "u", "v", "w", "magnitude", "se", "z", "valid")
@@ -46,7 +48,11 @@ def field_columns(grid: Grid) -> tuple[str, ...]:
 
 
 def discrepancy_field(
-    xyz1: np.ndarray, xyz2: np.ndarray, settings: FieldSettings, origin=(0.0, 0.0, 0.0)
+    xyz1: np.ndarray,
+    xyz2: np.ndarray,
+    settings: FieldSettings,
+    origin=(0.0, 0.0, 0.0),
+    viewpoint: Viewpoint | None = None,
 ) -> dict[str, np.ndarray]:
     """The field of two clouds in the same frame, binned about ``origin`` (sensor 1).
 
@@ -55,7 +61,9 @@ def discrepancy_field(
     and ``magnitude`` are NaN and ``valid`` False where either count is below ``min_points``
     or, with ``max_component_m`` set, any |component| exceeds it; ``se`` and ``z`` (see
     ``significance``) and the surface columns ``nx, ny, nz, planarity`` (see ``surface``) are
-    NaN there too.
+    NaN there too. ``viewpoint``: sensor 2's origin and which points both sensors could see,
+    when known (the vectors' covariance then includes the change of viewpoint on what both
+    could see, see ``significance``).
     """
     grid = settings.grid
     columns1, columns2 = relative_columns(xyz1, origin), relative_columns(xyz2, origin)
@@ -67,7 +75,7 @@ def discrepancy_field(
         dense = (index1, index2, n, _identity)
     else:
         dense = _cartesian_dense_index(grid.assign_columns(*columns1), grid.assign_columns(*columns2))
-    return _aggregate(dense, columns1, columns2, origin, settings)
+    return _aggregate(dense, columns1, columns2, origin, settings, viewpoint=_viewpoint(viewpoint, origin))
 
 
 def field_from_voxel_ids(
@@ -78,13 +86,15 @@ def field_from_voxel_ids(
     settings: FieldSettings,
     origin=(0.0, 0.0, 0.0),
     patterns: tuple[ScanPattern | None, ScanPattern | None] = (None, None),
+    viewpoint: Viewpoint | None = None,
 ) -> dict[str, np.ndarray]:
     """The field from voxel ids already assigned by ``settings.grid`` (-1 = out of grid).
 
     For callers that bin once and aggregate several subsets (e.g. the survivors of each
     stage); same result as ``discrepancy_field`` when ``origin`` is the one the ids were
     assigned about (it only orients the normals). ``patterns``: each cloud's lattice of rays,
-    when known (its sampling noise then includes the lattice's phase, see ``significance``).
+    when known (its sampling noise then includes the lattice's phase, see ``significance``);
+    ``viewpoint``: as in ``discrepancy_field``.
     """
     grid = settings.grid
     ids1, ids2 = np.asarray(ids1, dtype=np.int64), np.asarray(ids2, dtype=np.int64)
@@ -94,7 +104,8 @@ def field_from_voxel_ids(
     else:
         dense = _cartesian_dense_index(ids1, ids2)
     zero = (0.0, 0.0, 0.0)
-    field = _aggregate(dense, relative_columns(xyz1, zero), relative_columns(xyz2, zero), zero, settings, patterns)
+    columns1, columns2 = relative_columns(xyz1, zero), relative_columns(xyz2, zero)
+    field = _aggregate(dense, columns1, columns2, zero, settings, patterns, _viewpoint(viewpoint, origin))
     if any(origin):
         _orient_normals(field, origin)
     return field
@@ -111,12 +122,21 @@ def _orient_normals(field: dict[str, np.ndarray], origin) -> None:
         field[axis] = np.where(away, -field[axis], field[axis])
 
 
+def _viewpoint(viewpoint: Viewpoint | None, origin) -> tuple | None:
+    """Both sensors' origins (sensor 1 at ``origin``) and the shared-point masks, or None."""
+    if viewpoint is None:
+        return None
+    origins = (np.asarray(origin, dtype=np.float64), np.asarray(viewpoint.origin2, dtype=np.float64))
+    return origins, (np.asarray(viewpoint.shared1, dtype=bool), np.asarray(viewpoint.shared2, dtype=bool))
+
+
 def _identity(occupied: np.ndarray) -> np.ndarray:
     return occupied
 
 
-def _aggregate(dense, columns1, columns2, origin, settings: FieldSettings, patterns=(None, None)) -> dict:
-    """Counts, sums and means per dense index, then the field columns (see module docstring)."""
+def _aggregate(dense, columns1, columns2, origin, settings: FieldSettings, patterns=(None, None), viewpoint=None):
+    """Counts, sums and means per dense index, then the field columns (see module docstring);
+    with ``viewpoint`` (origins, shared masks) the spread of each voxel's shared points too."""
     index1, index2, n, to_voxel = dense
     counts1, sums1, products1 = _bin_sums(index1, columns1, n)
     counts2, sums2, products2 = _bin_sums(index2, columns2, n)
@@ -131,8 +151,19 @@ def _aggregate(dense, columns1, columns2, origin, settings: FieldSettings, patte
     mean2 = _means(sums2, n2) + offset
     covariance1 = covariance_from_sums(n1, sums1, products1[:, occupied])
     covariance2 = covariance_from_sums(n2, sums2, products2[:, occupied])
+    shared = None
+    if viewpoint is not None:
+        origins, masks = viewpoint
+        spreads = []
+        for index, columns, mask in ((index1, columns1, masks[0]), (index2, columns2, masks[1])):
+            counts, sums, products = _bin_sums(np.where(mask, index, n), columns, n)
+            spreads += [
+                counts[occupied],
+                covariance_from_sums(counts[occupied], sums[:, occupied], products[:, occupied]),
+            ]
+        shared = origins, tuple(spreads)
     return assemble_field(
-        settings.grid, voxel, n1, n2, mean1, mean2, settings, covariance1, covariance2, origin, patterns
+        settings.grid, voxel, n1, n2, mean1, mean2, settings, covariance1, covariance2, origin, patterns, shared
     )
 
 
@@ -148,10 +179,13 @@ def assemble_field(
     covariance2: np.ndarray,
     origin=(0.0, 0.0, 0.0),
     patterns: tuple[ScanPattern | None, ScanPattern | None] = (None, None),
+    shared: tuple | None = None,
 ) -> dict[str, np.ndarray]:
     """The field columns from per-voxel counts, (3, V) means and (6, V) covariances (rows in
     ``significance.COVARIANCE_ENTRIES`` order): vectors, their se, z and whitened vectors
-    (with each cloud's scan ``patterns`` where given), validity, bins, and the local surface
+    (with each cloud's scan ``patterns`` where given, and with ``shared`` = (both sensors'
+    origins, (counts and covariances of each cloud's shared points: n1, C1, n2, C2)) the change
+    of viewpoint on what both sensors could see), validity, bins, and the local surface
     (normal and planarity, ``surface``; normals towards ``origin``) of each valid voxel."""
     valid = (n1 >= settings.min_points) & (n2 >= settings.min_points)
     uvw = mean2 - mean1
@@ -169,19 +203,25 @@ def assemble_field(
     columns["valid"] = valid
     # Normals of the valid voxels only: an eigen-decomposition per occupied voxel cost a fine
     # Cartesian grid more than the rest of the kernel.
-    centre = 0.5 * (mean1[:, valid] + mean2[:, valid]) - np.asarray(origin, dtype=np.float64).reshape(3, 1)
+    midpoint = 0.5 * (mean1[:, valid] + mean2[:, valid])
+    centre = midpoint - np.asarray(origin, dtype=np.float64).reshape(3, 1)
     normal = np.full((3, len(valid)), np.nan)
     planarity = np.full(len(valid), np.nan)
-    normal[:, valid], planarity[valid] = surface_normals(
-        n1[valid], covariance1[:, valid], n2[valid], covariance2[:, valid], centre
-    )
-    lattices = []
+    spread = pooled_covariance(n1[valid], covariance1[:, valid], n2[valid], covariance2[:, valid])
+    normal[:, valid], planarity[valid] = normals_from_covariance(spread, centre)
+    terms = []
     for pattern, mean in zip(patterns, (mean1, mean2)):
         if pattern is not None:
             lattice = np.zeros((6, len(valid)))
-            lattice[:, valid] = pattern_covariance(mean[:, valid], normal[:, valid], pattern)
-            lattices.append(lattice)
-    combined = vector_covariance(n1, covariance1, n2, covariance2, tuple(lattices))
+            lattice[:, valid] = pattern_covariance(mean[:, valid], normal[:, valid], spread, pattern)
+            terms.append(lattice)
+    if shared is not None:
+        origins, (ns1, cs1, ns2, cs2) = shared
+        seen_by_both = shared_spread(n1[valid] + n2[valid], ns1[valid], cs1[:, valid], ns2[valid], cs2[:, valid])
+        viewpoint = np.zeros((6, len(valid)))
+        viewpoint[:, valid] = viewpoint_covariance(midpoint, normal[:, valid], seen_by_both, origins)
+        terms.append(viewpoint)
+    combined = vector_covariance(n1, covariance1, n2, covariance2, tuple(terms))
     columns["se"] = vector_standard_error(uvw, combined)
     columns["z"] = z_score(columns["magnitude"], columns["se"])
     columns["nx"], columns["ny"], columns["nz"] = normal

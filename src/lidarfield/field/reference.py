@@ -14,18 +14,28 @@ import numpy as np
 import pandas as pd
 
 from .grid import CARTESIAN_BITS, CARTESIAN_OFFSET, CartesianGrid, FieldSettings, SphericalGrid
-from .significance import SPREAD_FLOOR_M, SPREAD_MIN_POINTS
+from .significance import (
+    GRAZING_MIN,
+    SPREAD_FLOOR_M,
+    SPREAD_MIN_POINTS,
+    VIEWPOINT_DENSITY_EXPONENT,
+    VIEWPOINT_MAX_REWEIGHT,
+    Viewpoint,
+)
 from .surface import MIN_SPREAD_M2
 
 
 def discrepancy_field_reference(
-    xyz1: np.ndarray, xyz2: np.ndarray, settings: FieldSettings, origin=(0.0, 0.0, 0.0)
+    xyz1: np.ndarray,
+    xyz2: np.ndarray,
+    settings: FieldSettings,
+    origin=(0.0, 0.0, 0.0),
+    viewpoint: Viewpoint | None = None,
 ) -> dict[str, np.ndarray]:
     """Same contract as ``field.discrepancy_field``, computed with a pandas groupby."""
     grid = settings.grid
-    return field_from_voxel_ids_reference(
-        plain_voxel_ids(grid, xyz1, origin), xyz1, plain_voxel_ids(grid, xyz2, origin), xyz2, settings, origin
-    )
+    ids1, ids2 = plain_voxel_ids(grid, xyz1, origin), plain_voxel_ids(grid, xyz2, origin)
+    return field_from_voxel_ids_reference(ids1, xyz1, ids2, xyz2, settings, origin, viewpoint)
 
 
 def plain_voxel_ids(grid: SphericalGrid | CartesianGrid, xyz: np.ndarray, origin=(0.0, 0.0, 0.0)) -> np.ndarray:
@@ -61,14 +71,20 @@ def field_from_voxel_ids_reference(
     xyz2: np.ndarray,
     settings: FieldSettings,
     origin=(0.0, 0.0, 0.0),
+    viewpoint: Viewpoint | None = None,
 ) -> dict[str, np.ndarray]:
-    """Same contract as ``field.field_from_voxel_ids``, computed with a pandas groupby."""
+    """Same contract as ``field.field_from_voxel_ids`` (without scan patterns), computed with a
+    pandas groupby."""
     grid = settings.grid
-    per_cloud, covariances = [], []
-    for k, xyz, ids in ((1, xyz1, ids1), (2, xyz2, ids2)):
+    per_cloud, covariances, shared = [], [], []
+    masks = (None, None) if viewpoint is None else (viewpoint.shared1, viewpoint.shared2)
+    for k, xyz, ids, mask in ((1, xyz1, ids1, masks[0]), (2, xyz2, ids2, masks[1])):
         frame = pd.DataFrame(np.asarray(xyz, dtype=np.float64), columns=["x", "y", "z"])
         frame["voxel"] = ids
+        frame["shared"] = True if mask is None else np.asarray(mask, dtype=bool)
         frame = frame[frame["voxel"] >= 0]
+        seen_by_both = frame[frame["shared"]]
+        shared += [seen_by_both.groupby("voxel").size().to_dict(), _covariances(seen_by_both)]
         grouped = frame.groupby("voxel").agg(
             **{f"n{k}": ("x", "size"), f"x{k}": ("x", "mean"), f"y{k}": ("y", "mean"), f"z{k}": ("z", "mean")}
         )
@@ -76,6 +92,9 @@ def field_from_voxel_ids_reference(
         covariances.append(_covariances(frame))
     table = per_cloud[0].join(per_cloud[1], how="outer").sort_index()
     table[["n1", "n2"]] = table[["n1", "n2"]].fillna(0).astype(np.int64)
+    viewpoints = (
+        None if viewpoint is None else (np.asarray(origin, float), np.asarray(viewpoint.origin2, float), shared)
+    )
 
     valid = (table["n1"] >= settings.min_points) & (table["n2"] >= settings.min_points)
     for out, a, b in (("u", "x2", "x1"), ("v", "y2", "y1"), ("w", "z2", "z1")):
@@ -86,7 +105,9 @@ def field_from_voxel_ids_reference(
         table.loc[~valid, out] = np.nan
     table["magnitude"] = np.sqrt(table["u"] ** 2 + table["v"] ** 2 + table["w"] ** 2)
     table["valid"] = valid
-    table["se"] = [_standard_error(row, *covariances) if row.valid else np.nan for row in table.itertuples()]
+    table["se"] = [
+        _standard_error(row, *covariances, viewpoints) if row.valid else np.nan for row in table.itertuples()
+    ]
     table["z"] = table["magnitude"] / table["se"]
 
     surfaces = [_surface(row, *covariances, origin) if row.valid else (np.nan,) * 4 for row in table.itertuples()]
@@ -98,7 +119,7 @@ def field_from_voxel_ids_reference(
         columns[name] = table[name].to_numpy()
     for name in ("nx", "ny", "nz", "planarity"):
         columns[name] = table[name].to_numpy()
-    whitened = [_whitened(row, *covariances) if row.valid else (np.nan,) * 3 for row in table.itertuples()]
+    whitened = [_whitened(row, *covariances, viewpoints) if row.valid else (np.nan,) * 3 for row in table.itertuples()]
     columns["wu"], columns["wv"], columns["ww"] = np.array(whitened, dtype=np.float64).reshape(-1, 3).T
     return columns
 
@@ -106,13 +127,10 @@ def field_from_voxel_ids_reference(
 def _surface(row, covariance1: dict, covariance2: dict, origin) -> tuple[float, float, float, float]:
     """Normal (towards ``origin``) and planarity (l2 - l3) / l2 of one voxel's pooled
     within-cloud covariance ((n1 - 1) S1 + (n2 - 1) S2) / (n1 + n2 - 2)."""
-    scatter = np.zeros((3, 3))
-    for n, covariance in ((row.n1, covariance1), (row.n2, covariance2)):
-        if n >= 2:
-            scatter += (n - 1) * covariance[row.Index]
-    if row.n1 + row.n2 < 3:
+    pooled = _pooled(row, covariance1, covariance2)
+    if pooled is None:
         return (np.nan,) * 4
-    values, vectors = np.linalg.eigh(scatter / (row.n1 + row.n2 - 2))
+    values, vectors = np.linalg.eigh(pooled)
     l3, l2 = max(values[0], 0.0), max(values[1], 0.0)
     if not l2 > MIN_SPREAD_M2:
         return (np.nan,) * 4
@@ -121,6 +139,19 @@ def _surface(row, covariance1: dict, covariance2: dict, origin) -> tuple[float, 
     if normal @ centre > 0:
         normal = -normal
     return (*normal, (l2 - l3) / l2)
+
+
+def _pooled(row, covariance1: dict, covariance2: dict, counts=None) -> np.ndarray | None:
+    """((n1 - 1) S1 + (n2 - 1) S2) / (n1 + n2 - 2) of one voxel (``counts``: n1 and n2 when not
+    the row's), a cloud of one point adding nothing; None with fewer than 3 points in all."""
+    n1, n2 = (row.n1, row.n2) if counts is None else counts
+    if n1 + n2 < 3:
+        return None
+    scatter = np.zeros((3, 3))
+    for n, covariance in ((n1, covariance1), (n2, covariance2)):
+        if n >= 2:
+            scatter += (n - 1) * covariance[row.Index]
+    return scatter / (n1 + n2 - 2)
 
 
 def _covariances(frame: pd.DataFrame) -> dict[int, np.ndarray]:
@@ -136,9 +167,13 @@ def _covariances(frame: pd.DataFrame) -> dict[int, np.ndarray]:
     return dict(zip(covariance.index, covariance.to_numpy().reshape(-1, 3, 3)))
 
 
-def _vector_covariance(row, covariance1: dict, covariance2: dict) -> np.ndarray | None:
+def _vector_covariance(row, covariance1: dict, covariance2: dict, viewpoints) -> np.ndarray | None:
     """S1/n1 + S2/n2 of one voxel, a cloud of fewer than SPREAD_MIN_POINTS points borrowing the
-    other's S, plus the floor on the diagonal; None where neither cloud has enough points."""
+    other's S, plus the floor on the diagonal, plus (with both sensors' origins and the shared
+    points' counts and covariances, ``viewpoints``) min((3 + 1 / facing) |b| / r, 1)^2 times the
+    pooled spread of the shared points times their share squared, r the nearer sensor's range to
+    the voxel's centre, facing |ray . normal| from sensor 1 (at least GRAZING_MIN); None where
+    neither cloud has enough points."""
     own = [row.n1 >= SPREAD_MIN_POINTS, row.n2 >= SPREAD_MIN_POINTS]
     if not any(own):
         return None
@@ -146,13 +181,32 @@ def _vector_covariance(row, covariance1: dict, covariance2: dict) -> np.ndarray 
     spread1 = spreads[0] if own[0] else spreads[1]
     spread2 = spreads[1] if own[1] else spreads[0]
     floor = SPREAD_FLOOR_M**2 * (1 / row.n1 + 1 / row.n2)
-    return spread1 / row.n1 + spread2 / row.n2 + floor * np.eye(3)
+    combined = spread1 / row.n1 + spread2 / row.n2 + floor * np.eye(3)
+    if viewpoints is not None:
+        count1, shared1, count2, shared2 = viewpoints[2]
+        counts = count1.get(row.Index, 0), count2.get(row.Index, 0)
+        pooled = _pooled(row, shared1, shared2, counts)
+        if pooled is not None:
+            pooled = pooled * ((counts[0] + counts[1]) / (row.n1 + row.n2)) ** 2
+        centre = 0.5 * np.array([row.x1 + row.x2, row.y1 + row.y2, row.z1 + row.z2])
+        r = min(np.linalg.norm(centre - viewpoints[0]), np.linalg.norm(centre - viewpoints[1]))
+        normal = np.array(_surface(row, covariance1, covariance2, viewpoints[0])[:3])
+        ray = (centre - viewpoints[0]) / np.linalg.norm(centre - viewpoints[0])
+        facing = abs(ray @ normal) if np.all(np.isfinite(normal)) else GRAZING_MIN
+        reweight = (
+            (VIEWPOINT_DENSITY_EXPONENT + 1 / max(facing, GRAZING_MIN))
+            * np.linalg.norm(viewpoints[1] - viewpoints[0])
+            / r
+        )
+        if pooled is not None:
+            combined += min(reweight, VIEWPOINT_MAX_REWEIGHT) ** 2 * pooled
+    return combined
 
 
-def _standard_error(row, covariance1: dict, covariance2: dict) -> float:
+def _standard_error(row, covariance1: dict, covariance2: dict, viewpoints) -> float:
     """se of one voxel's vector along its direction: sqrt(d^T C d) / |d|."""
     d = np.array([row.u, row.v, row.w])
-    combined = _vector_covariance(row, covariance1, covariance2)
+    combined = _vector_covariance(row, covariance1, covariance2, viewpoints)
     if not np.all(np.isfinite(d)) or combined is None:
         return np.nan
     length = np.linalg.norm(d)
@@ -160,10 +214,10 @@ def _standard_error(row, covariance1: dict, covariance2: dict) -> float:
     return float(np.sqrt(max(along, 0.0)))
 
 
-def _whitened(row, covariance1: dict, covariance2: dict) -> tuple[float, float, float]:
+def _whitened(row, covariance1: dict, covariance2: dict, viewpoints) -> tuple[float, float, float]:
     """C^-1/2 d of one voxel (the symmetric root)."""
     d = np.array([row.u, row.v, row.w])
-    combined = _vector_covariance(row, covariance1, covariance2)
+    combined = _vector_covariance(row, covariance1, covariance2, viewpoints)
     if not np.all(np.isfinite(d)) or combined is None:
         return (np.nan,) * 3
     values, vectors = np.linalg.eigh(combined)

@@ -28,13 +28,43 @@ cell's two sides (r cos(el) d_az along the azimuth, r d_el along the elevation, 
 mean range r) carried onto the voxel's surface along the ray (longer on a surface seen
 obliquely), variance side^2 / 12 along each. It lies in the surface's plane, so the part of d
 along the normal, which a misregistration or a range error moves, keeps its own standard error.
+A voxel holding one ring (its points spread less across the ray than a beam gap's side^2 / 12,
+a uniform phase's variance) shows no surface: its points' thin direction is across the ring,
+not the surface's normal (a ring on the ground seen from 11 m gave a "normal" 8 deg off
+vertical; a sensor moved 5 cm shifted that ring's mean 4 cm along the ground, 5 mm off that
+false plane: |w| = 9). There the beam gap's side stays across the ray and also runs along the
+ray, up to its length at grazing incidence (1 / ``GRAZING_MIN`` times): the ring may lie on any
+surface through it.
 
 ``whitened_vectors`` gives w = C^-1/2 d (symmetric root): under the null each w has mean 0 and
 covariance at most I (C is an upper estimate), which is what the randomness tests assume.
 
-What this still does not know: voxels mixing surfaces (a wall's foot on the ground) whose mix
-changes with the sensor's place (measured: two VLP-16 scans 5 cm or more apart). There the mean
-moves off the surface too, and the verdict can say ``patterned`` for the sampling itself.
+The viewpoint. Two sensors at different places sample the same surfaces with different
+densities: per unit area a sensor's density is cos(incidence) / range^2 = |n.(x - o)| / |x - o|^3
+(n the surface's normal, o the sensor). A voxel's mean is the density-weighted mean of its
+content, so when the weights change by a factor exp(g(x)) the mean moves by Cov(x, g(x)) to
+first order, which by Cauchy-Schwarz lies in the ellipsoid d^T S^-1 d <= Var(g) (S the voxel's
+pooled spread, ``surface.pooled_covariance``). Moving the sensor by b changes log |x - o| by at
+most |b| / r and log |n.(x - o)| by at most |b| / (r facing) (facing = |ray . n|, capped at
+``GRAZING_MIN`` like the pattern's), so |g| <= (3 + 1 / facing) |b| / r =: k, Var(g) <= k^2,
+and C gains the **viewpoint covariance** min(k, 1)^2 S, r the voxel's nearer range from the two
+sensors and n its normal (none: grazing). The cap: the bound is first order, valid while the
+weights change little; beyond, a voxel's mean is taken to move by at most its content's own
+spread (without it the vehicle body a scan carries, 1-2 m from both sensors, hid in its own
+spread). The term vanishes for one place (b = 0) and follows the voxel's content: a voxel
+mixing a wall's foot and the ground spreads off the surface and gets variance there, a flat
+patch only in its plane, so a misregistration or a range error keeps its standard error along
+the normal.
+
+It bounds the change of density on what both sensors could see, and only there: S is the
+spread of the voxel's **shared** points (``free_space.shared_points``: in the other sensor's
+view and range limits, neither hidden from it by something it measured in front, nor where its
+rays passed through), times the square of their share of the voxel's points (their mean makes
+up that share of the voxel's mean). What only one sensor saw (beyond the other's field of view
+or range limits, in its shadow, an object that moved) is no change of viewpoint on one surface
+but content the other sensor lacks: it adds no variance, and its discrepancy stays significant,
+which is what the hypotheses that prune it (``field_of_view``, ``shadow``, ``moving_objects``)
+are for.
 """
 
 from __future__ import annotations
@@ -49,6 +79,12 @@ SPREAD_MIN_POINTS = 5
 # mean says nothing either way.
 GRAZING_MIN = 0.1
 SPREAD_FLOOR_M = 0.001
+# A sensor's sampling density per unit area is |n.(x - o)| / |x - o|^3: the exponent of the
+# range, in the bound on how much a move of the sensor reweights a voxel's points.
+VIEWPOINT_DENSITY_EXPONENT = 3.0
+# The first-order bound holds while the reweighting is small; beyond it a voxel's mean is taken
+# to move by at most its content's own spread (standard deviation 1 in units of S).
+VIEWPOINT_MAX_REWEIGHT = 1.0
 # The order of the six distinct entries of a 3x3 covariance, as rows of a (6, V) array.
 COVARIANCE_ENTRIES = ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))
 
@@ -70,6 +106,15 @@ def covariance_from_sums(counts: np.ndarray, sums: np.ndarray, products: np.ndar
     return covariance
 
 
+class Viewpoint(NamedTuple):
+    """Sensor 2's origin (3,) in the field's frame, and per cloud the mask of its points the
+    other sensor could have seen (``free_space.shared_points``)."""
+
+    origin2: np.ndarray
+    shared1: np.ndarray
+    shared2: np.ndarray
+
+
 class ScanPattern(NamedTuple):
     """Where a cloud's lattice of rays comes from, in the field's frame: the sensor's origin (3,)
     and rotation axis (3,, unit), its azimuth step and its beam elevations (degrees)."""
@@ -89,10 +134,12 @@ def beam_spacing_deg(elevation_deg: np.ndarray, at_deg: np.ndarray) -> np.ndarra
     return np.interp(at_deg, 0.5 * (beams[1:] + beams[:-1]), np.diff(beams))
 
 
-def pattern_covariance(mean: np.ndarray, normal: np.ndarray, pattern: ScanPattern) -> np.ndarray:
+def pattern_covariance(mean: np.ndarray, normal: np.ndarray, spread: np.ndarray, pattern: ScanPattern) -> np.ndarray:
     """(6, V) covariance of a cloud's voxel means (3, V) from the phase of its lattice of rays,
     carried onto the surfaces with normals (3, V) (NaN normal: no surface, the cell's sides as
-    they are, across the ray). See the module docstring."""
+    they are, across the ray). Where the voxel's points, of (V, 3, 3) pooled ``spread``, span
+    less than one beam gap across the ray (one ring), their thin direction is not the
+    surface's: no surface either. See the module docstring."""
     relative = mean - np.asarray(pattern.origin, dtype=np.float64).reshape(3, 1)
     r = np.linalg.norm(relative, axis=0)
     with np.errstate(invalid="ignore", divide="ignore"):
@@ -103,14 +150,19 @@ def pattern_covariance(mean: np.ndarray, normal: np.ndarray, pattern: ScanPatter
         along_azimuth = across / cos_el
         along_elevation = np.cross(ray, along_azimuth, axis=0)
         elevation = np.degrees(np.arctan2(np.einsum("ij,ij->j", axis, ray), cos_el))
-        has_surface = np.all(np.isfinite(normal), axis=0)
+        beam_gap_m = r * np.radians(beam_spacing_deg(pattern.elevation_deg, elevation))
+        across_rings = np.einsum("ij,jik,kj->j", along_elevation, spread, along_elevation)
+        one_ring = across_rings < beam_gap_m**2 / 12.0
+        has_surface = np.all(np.isfinite(normal), axis=0) & ~one_ring
         surface = np.where(has_surface, normal, 0.0)
         facing = np.einsum("ij,ij->j", ray, surface)
         facing = np.where(np.abs(facing) < GRAZING_MIN, np.copysign(GRAZING_MIN, facing), facing)
         sides = []
         for tangent, side_m in (
             (along_azimuth, r * cos_el * np.radians(pattern.azimuth_step_deg)),
-            (along_elevation, r * np.radians(beam_spacing_deg(pattern.elevation_deg, elevation))),
+            (along_elevation, beam_gap_m),
+            # One ring on a surface it does not show: the beam gap along the ray, up to grazing.
+            (ray, np.where(one_ring, beam_gap_m / GRAZING_MIN, 0.0)),
         ):
             # A ray turned by the angle moves its hit point along the surface: t - (t.n / ray.n) ray.
             onto = tangent - np.where(has_surface, np.einsum("ij,ij->j", tangent, surface) / facing, 0.0) * ray
@@ -118,12 +170,28 @@ def pattern_covariance(mean: np.ndarray, normal: np.ndarray, pattern: ScanPatter
     return np.stack([sum(side[a] * side[b] for side in sides) / 12.0 for a, b in COVARIANCE_ENTRIES])
 
 
+def viewpoint_covariance(centre: np.ndarray, normal: np.ndarray, spread: np.ndarray, origins: tuple) -> np.ndarray:
+    """(6, V) covariance of a vector from the change of viewpoint between the two sensors'
+    ``origins`` ((3,) each), for voxels with (3, V) ``centre``s, normals (3, V; NaN: none,
+    taken as grazing) and (V, 3, 3) pooled spreads (NaN: none). See the module docstring."""
+    origin1, origin2 = (np.asarray(origin, dtype=np.float64).reshape(3, 1) for origin in origins)
+    baseline = float(np.linalg.norm(origin2 - origin1))
+    range1 = np.linalg.norm(centre - origin1, axis=0)
+    r = np.minimum(range1, np.linalg.norm(centre - origin2, axis=0))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        facing = np.abs(np.einsum("ij,ij->j", (centre - origin1) / range1, normal))
+        facing = np.maximum(np.where(np.isfinite(facing), facing, GRAZING_MIN), GRAZING_MIN)
+        reweight = (VIEWPOINT_DENSITY_EXPONENT + 1.0 / facing) * baseline / r
+        scale = np.minimum(reweight, VIEWPOINT_MAX_REWEIGHT) ** 2
+    return np.nan_to_num(np.stack([scale * spread[:, a, b] for a, b in COVARIANCE_ENTRIES]))
+
+
 def vector_covariance(
-    n1: np.ndarray, covariance1: np.ndarray, n2: np.ndarray, covariance2: np.ndarray, patterns: tuple = ()
+    n1: np.ndarray, covariance1: np.ndarray, n2: np.ndarray, covariance2: np.ndarray, terms: tuple = ()
 ) -> np.ndarray:
     """(6, V) covariance C of each vector: S1/n1 + S2/n2 (a cloud below ``SPREAD_MIN_POINTS``
-    borrows the other's spread), the per-axis floor, and the ``patterns``' covariances ((6, V)
-    each, ``pattern_covariance``). NaN where both counts are below ``SPREAD_MIN_POINTS``."""
+    borrows the other's spread), the per-axis floor, and the further ``terms`` ((6, V) each:
+    ``pattern_covariance``, ``viewpoint_covariance``). NaN where both counts are below ``SPREAD_MIN_POINTS``."""
     n1, n2 = n1.astype(np.float64), n2.astype(np.float64)
     own1, own2 = n1 >= SPREAD_MIN_POINTS, n2 >= SPREAD_MIN_POINTS
     spread1 = np.where(own1, covariance1, covariance2)
@@ -131,8 +199,8 @@ def vector_covariance(
     with np.errstate(invalid="ignore", divide="ignore"):
         combined = spread1 / n1 + spread2 / n2
         combined[:3] += SPREAD_FLOOR_M**2 * (1.0 / n1 + 1.0 / n2)
-    for pattern in patterns:
-        combined = combined + pattern
+    for term in terms:
+        combined = combined + term
     combined[:, ~(own1 | own2)] = np.nan
     return combined
 

@@ -77,9 +77,13 @@ def normals_from_covariance(covariance: np.ndarray, centre: np.ndarray) -> tuple
     return normal, planarity
 
 
-def surface_normals(
-    n1: np.ndarray, covariance1: np.ndarray, n2: np.ndarray, covariance2: np.ndarray, centre: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
-    """Per voxel: the normal (3, V) and planarity (V,) of the pooled within-cloud covariance
-    (see the module docstring); ``centre`` (3, V) orients the normals towards the origin."""
-    return normals_from_covariance(pooled_covariance(n1, covariance1, n2, covariance2), centre)
+def shared_spread(
+    n: np.ndarray, shared1: np.ndarray, covariance1: np.ndarray, shared2: np.ndarray, covariance2: np.ndarray
+) -> np.ndarray:
+    """(V, 3, 3) pooled covariance of the points both sensors could see, of counts ``shared1``,
+    ``shared2`` and (6, V) covariances, times the square of their share of the voxel's ``n``
+    points: the part of a voxel's mean that they make up moves by that share of their own
+    mean's move. Zero where fewer than 3 are shared."""
+    share = (shared1 + shared2) / np.maximum(np.asarray(n, np.float64), 1.0)
+    pooled = pooled_covariance(shared1, covariance1, shared2, covariance2)
+    return np.nan_to_num(pooled * (share**2)[:, None, None])

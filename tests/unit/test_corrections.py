@@ -379,27 +379,35 @@ def test_a_registration_offset_is_mostly_rigid_and_realign_comes_first_on_the_de
     assert truth["energy_reduction"][int(np.flatnonzero(truth["hypothesis"] == "realign")[0])] < 0.05
 
 
-def test_realign_on_the_real_expd_pair_lands_where_it_does_without_an_added_offset(expd):
+@pytest.mark.parametrize("models", [False, True], ids=["plain ICP", "with the sensor models"])
+def test_realign_on_the_real_expd_pair_lands_where_it_does_without_an_added_offset(expd, models):
     """The method's real VLP-16 pair (Cloud10 onto Cloud1 by its reference transform) with a known
-    offset added: realign lands on the same pose from every start. Measured on 2026-11-25: 6 mm,
-    38 mm, 1 mm and -0.098 deg from the reference transform, within 1 mm and 0.003 deg of that
-    from +-0.3 m in x, 0.3 m in y and 0.5 deg of yaw (the field's own rigid fit recovers 40-55%
-    of such an offset: test_rigid_fit)."""
+    offset added: realign lands on the same pose from every start. Measured on 2026-11-25 without
+    sensor models (plain ICP, the van in both clouds): 6 mm, 38 mm, 1 mm and -0.098 deg from the
+    reference transform, within 1 mm and 0.003 deg of that from +-0.3 m in x, 0.3 m in y and
+    0.5 deg of yaw (the field's own rigid fit recovers 40-55% of such an offset: test_rigid_fit).
+    With the models (ring normals, the refit on what both sensors saw), on the pair without the
+    van (ego_vehicle 4.1 m, as the authors' stack: on the raw pair the refit's shared points
+    differ with the start, and so does its landing, by 0.02 deg): -17, 94 and 32 mm and -0.157
+    deg of roll from the reference, within 1 mm and 0.002 deg from every start. The two land 5 cm
+    apart in y; the reference is no truth ("good to a few cm"), so which is nearer is not known."""
     from lidarfield.io import read_scan
     from lidarfield.io.pose_files import read_pose
 
     reference = read_pose(ROOT / "config" / "expd-T_1_10.txt")
     xyz1, xyz2 = (read_scan(expd / name).xyz for name in ("Cloud1_ExpD.txt", "Cloud10_ExpD.txt"))
     xyz1, xyz2 = xyz1[np.isfinite(xyz1).all(axis=1)], xyz2[np.isfinite(xyz2).all(axis=1)]
-    vlp16 = PRESETS["vlp16"]
+    vlp16 = PRESETS["vlp16"] if models else None
 
     def realigned(offset: list[float]) -> np.ndarray:
         T = pose_from_xyzrpy(offset) @ reference
         pair = RegisteredPair(xyz1, xyz2 @ T[:3, :3].T + T[:3, 3], T, vlp16, vlp16)
+        if models:
+            pair = pair.subset(*apply_step(pair, {"ego_vehicle": {"radius_m": 4.1}}))
         return apply_step(pair, {"realign": {}}).T_1_2 @ np.linalg.inv(reference)
 
     base = realigned([0, 0, 0, 0, 0, 0])
-    assert np.abs(base[:3, 3]).max() < 0.05  # the reference transform is itself good to a few cm
+    assert np.abs(base[:3, 3]).max() < 0.1  # the reference transform is itself good to a few cm
     for offset in ([0.3, 0, 0, 0, 0, 0], [-0.3, 0, 0, 0, 0, 0], [0, 0.3, 0, 0, 0, 0], [0, 0, 0, 0, 0, np.radians(0.5)]):
         landed = realigned(offset)
         difference = landed @ np.linalg.inv(base)

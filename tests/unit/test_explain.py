@@ -103,8 +103,8 @@ def test_the_loop_stops_after_max_steps(paper_sim_off):
 
 def test_the_loop_never_applies_a_hypothesis_twice_nor_a_useless_one(paper_sim_off):
     """Configured candidates are offered again at every step, but one already in the stack is
-    not tried again: realign on 0.2 m voxels, run a second time on what it realigned, still lowers
-    the energy by a hair, and with no reduction required the loop would apply it forever. A candidate that
+    not tried again: realign on 0.2 m voxels, run a second time on what it realigned, changes the
+    energy by a hair, and were that a reduction, with none required the loop would apply it forever. A candidate that
     changes nothing (crop with its defaults removes no point) is never applied."""
     off, study = paper_sim_off
     anything = ExplainSettings(min_energy_reduction=0.0, min_reduction_per_removed=0.0)
@@ -113,7 +113,7 @@ def test_the_loop_never_applies_a_hypothesis_twice_nor_a_useless_one(paper_sim_o
     assert [row["hypothesis"] for row in explanation.steps] == ["realign"]
     assert explanation.stop == STOP_NO_CANDIDATES
     again = suggestions(explanation.stages[-1].stage.pair, study.grid, realign, ".", study.grid_section)
-    assert again["energy_reduction"][0] > 0  # what the loop did not take
+    assert abs(again["energy_reduction"][0]) < 0.01  # what the loop did not take: a hair either way
     useless = [validate_step({"field_of_view": {}}), validate_step({"crop": {}})]
     explanation = _explain(off, study, anything, useless)
     assert [row["hypothesis"] for row in explanation.steps] == ["field_of_view"]
@@ -217,9 +217,10 @@ OFF_BEAM_GRID = {"kind": "spherical", "azimuth_bins": 36, "elevation_deg": [-22.
 
 
 @pytest.fixture(scope="module")
-def ego_car_explanation():
-    """Issue 25: a simulated pair registered 0.3 m off, with a carried vehicle body and a moving
-    car (the built-in scene paper-intersection-ego-car; sensor 2 1 m further, 0.5 s later)."""
+def ego_car():
+    """Issue 25: a simulated pair with a carried vehicle body and a moving car (the built-in scene
+    paper-intersection-ego-car; sensor 2 1 m further, 0.5 s later): registered by the truth, the
+    same registered 0.3 m off, and the study."""
     scene, sensor = load_scene("paper-intersection-ego-car"), PRESETS["vlp16"]
     scans = [
         simulate_scan(scene, sensor, pose_from_xyzrpy(pose), time_s=t, seed=seed, range_noise_m=0.02)
@@ -228,31 +229,31 @@ def ego_car_explanation():
     pair = register_pair(scans[0], scans[1], "truth")
     shift = pose_from_xyzrpy([0.3, 0, 0, 0, 0, 0])  # scan 2 registered 0.3 m off
     off = dataclasses.replace(pair, xyz2=pair.xyz2 + shift[:3, 3], T_1_2=shift @ pair.T_1_2)
-    study = validate_config({"grid": OFF_BEAM_GRID}, require_pairs=False)
+    return pair, off, validate_config({"grid": OFF_BEAM_GRID}, require_pairs=False)
+
+
+@pytest.fixture(scope="module")
+def ego_car_explanation(ego_car):
+    _, off, study = ego_car
     return _explain(off, study)
 
 
-def test_explain_finds_realign_ego_vehicle_and_moving_objects(ego_car_explanation):
+def test_explain_on_the_ego_car_pair_removes_the_body_realigns_and_ends_random(ego_car, ego_car_explanation):
     """The body is the largest discrepancy (its points sit at one place in each sensor's frame,
     so at two places in frame 1) and it pulls a rigid fit towards no motion: ego_vehicle comes
-    before realign. moving_objects comes after realign: its evidence is free space seen through
-    by the other sensor, and 0.3 m off every wall looks moved (before realign it would remove
-    about a third of the points and raise the energy)."""
+    before realign. realign lands within a few mm and hundredths of a degree of the truth (measured
+    3 mm and 0.009 deg; before its ring normals and its refit on what both sensors saw, 0.8 deg
+    of pitch), and then what is left is random: the change of viewpoint on what both sensors saw
+    is in the field's covariance (docs/field.md), and the moving car, in one voxel whose content
+    spans the cone (z about 2), makes no pattern. So the loop stops there, and moving_objects,
+    which would remove the car from scan 2, is not needed for the verdict."""
+    truth, _, _ = ego_car
     names = [row["hypothesis"] for row in ego_car_explanation.steps]
-    assert {"realign", "ego_vehicle", "moving_objects"} <= set(names), names
-    assert names.index("ego_vehicle") < names.index("realign") < names.index("moving_objects"), names
-    moving = ego_car_explanation.steps[names.index("moving_objects")]
-    assert moving["energy_reduction"] > 0.2 and moving["removed_share"] < 0.02
-
-
-@pytest.mark.xfail(
-    strict=True,
-    reason="realign (fitted before moving_objects) leaves sensor 2 0.8 deg pitched (its cloud-1 normals "
-    "come from single rings on the ground), which the verdict rightly calls patterned; the same pair "
-    "registered by the truth is random once ego_vehicle is applied",
-)
-def test_explain_on_the_ego_car_pair_ends_random(ego_car_explanation):
+    assert names == ["ego_vehicle", "realign"], names
     assert ego_car_explanation.verdict == "random" and ego_car_explanation.stop == "verdict random"
+    realigned = ego_car_explanation.stages[-1].stage.pair.T_1_2 @ np.linalg.inv(truth.T_1_2)
+    angle = np.degrees(np.arccos(min(1.0, (np.trace(realigned[:3, :3]) - 1) / 2)))
+    assert np.abs(realigned[:3, 3]).max() < 0.005 and angle < 0.02
 
 
 def test_the_study_section_counts_how_often_each_hypothesis_was_chosen(tmp_path):

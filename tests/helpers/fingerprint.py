@@ -8,7 +8,11 @@ e16a60a, the survivor copies, with the day's other work merged) with
     snakemake --cores 2 results/summary.parquet   # in a checkout of that commit
     python tests/helpers/fingerprint.py results tests/data/default_study.json
 
-and tests/workflow/test_stage_changes.py checks the code of today against it.
+and tests/workflow/test_stage_changes.py checks the code of today against it. Regenerated on
+branch covis (2026-11-25) the same way, when the vectors' covariance gained the change of
+viewpoint on what both sensors saw: every field's se, z, wu, wv and ww changed, and the
+summary's voxels_significant, share_significant, p_direction, p_coherence and verdict (the
+paper-sim pair's stages 1 and 2 went from patterned to random); nothing else did.
 """
 
 from __future__ import annotations

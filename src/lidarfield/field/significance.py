@@ -40,21 +40,21 @@ surface through it.
 covariance at most I (C is an upper estimate), which is what the randomness tests assume.
 
 The viewpoint. Two sensors at different places sample the same surfaces with different
-densities: per unit area a sensor's density is cos(incidence) / range^2 = |n.(x - o)| / |x - o|^3
-(n the surface's normal, o the sensor). A voxel's mean is the density-weighted mean of its
-content, so when the weights change by a factor exp(g(x)) the mean moves by Cov(x, g(x)) to
-first order, which by Cauchy-Schwarz lies in the ellipsoid d^T S^-1 d <= Var(g) (S the voxel's
-pooled spread, ``surface.pooled_covariance``). Moving the sensor by b changes log |x - o| by at
-most |b| / r and log |n.(x - o)| by at most |b| / (r facing) (facing = |ray . n|, capped at
-``GRAZING_MIN`` like the pattern's), so |g| <= (3 + 1 / facing) |b| / r =: k, Var(g) <= k^2,
-and C gains the **viewpoint covariance** min(k, 1)^2 S, r the voxel's nearer range from the two
-sensors and n its normal (none: grazing). The cap: the bound is first order, valid while the
-weights change little; beyond, a voxel's mean is taken to move by at most its content's own
-spread (without it the vehicle body a scan carries, 1-2 m from both sensors, hid in its own
-spread). The term vanishes for one place (b = 0) and follows the voxel's content: a voxel
-mixing a wall's foot and the ground spreads off the surface and gets variance there, a flat
-patch only in its plane, so a misregistration or a range error keeps its standard error along
-the normal.
+densities: per unit area a sensor's density is cos(incidence) / range^2 =
+|n.(x - o)| / |x - o|^3 (n the surface's normal, o the sensor). A voxel's mean is the
+density-weighted mean of its content, so when the weights change by a factor exp(g(x)) the mean
+moves by Cov(x, g(x)) to first order, which by Cauchy-Schwarz lies in the ellipsoid
+d^T S^-1 d <= Var(g) (S the spread of that content: of the voxel's shared points, below,
+``surface.shared_spread``). Moving the sensor by b changes log |x - o| by at most |b| / r and
+log |n.(x - o)| by at most |b| / (r facing) (facing = |ray . n|, capped at ``GRAZING_MIN`` like
+the pattern's), so |g| <= (3 + 1 / facing) |b| / r =: k, Var(g) <= k^2, and C gains the
+**viewpoint covariance** min(k, 1)^2 S, r the voxel's nearer range from the two sensors and n
+its normal (none: grazing). The cap: the bound is first order, valid while the weights change
+little; beyond, a voxel's mean is taken to move by at most its content's own spread (without it
+the vehicle body a scan carries, 1-2 m from both sensors, hid in its own spread). The term
+vanishes for one place (b = 0) and follows the voxel's content: a voxel mixing a wall's foot
+and the ground spreads off the surface and gets variance there, a flat patch only in its plane,
+so a misregistration or a range error keeps its standard error along the normal.
 
 It bounds the change of density on what both sensors could see, and only there: S is the
 spread of the voxel's **shared** points (``free_space.shared_points``: in the other sensor's

@@ -18,49 +18,26 @@ Run: ``python bench/explain.py [points_per_cloud]``.
 
 from __future__ import annotations
 
-import dataclasses
 import sys
 import tempfile
-
-import numpy as np
+from pathlib import Path
 
 from lidarfield.analysis.explain import ExplainSettings
 from lidarfield.analysis.field_stats import analyse_field
-from lidarfield.poses import pose_from_xyzrpy
-from lidarfield.registration import register_pair
 from lidarfield.report.explain import write_explanation
-from lidarfield.sensors.models import PRESETS
-from lidarfield.simulation.raycast import simulate_scan
-from lidarfield.simulation.scene import load_scene
 from lidarfield.study.config import validate_config
 from lidarfield.study.explain import explain_pair, format_step
 from lidarfield.study.stack import apply_stack
 from timing import best_time, machine  # bench/timing.py
 
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+from helpers.ego_car import ego_car_pair, registered_off  # noqa: E402 (the tests' ego-car drive)
+
 GRID = {"kind": "spherical", "azimuth_bins": 36, "elevation_deg": [-22.5, 15.0], "elevation_bins": 5, "min_points": 30}
 
 
-def ego_car_pair(n: int):
-    """The pair registered by the truth, each cloud subsampled to ``n`` points."""
-    scene, sensor = load_scene("paper-intersection-ego-car"), PRESETS["paper-sim-80"]
-    scans = [
-        simulate_scan(scene, sensor, pose_from_xyzrpy(pose), time_s=t, seed=seed, range_noise_m=0.02)
-        for seed, pose, t in ((1, [0, 0, 2, 0, 0, 0], 0.0), (2, [1, 0, 2, 0, 0, 0.0037], 0.5))
-    ]
-    pair = register_pair(scans[0], scans[1], "truth")
-    rng = np.random.default_rng(0)
-    keep = [np.sort(rng.choice(len(xyz), size=min(n, len(xyz)), replace=False)) for xyz in (pair.xyz1, pair.xyz2)]
-    return pair.subset(*keep)
-
-
-def bench_pair(n: int):
-    pair = ego_car_pair(n)
-    shift = pose_from_xyzrpy([0.3, 0, 0, 0, 0, 0])  # scan 2 registered 0.3 m off
-    return dataclasses.replace(pair, xyz2=pair.xyz2 + shift[:3, 3], T_1_2=shift @ pair.T_1_2)
-
-
 def main(n: int) -> None:
-    pair = bench_pair(n)
+    pair = registered_off(ego_car_pair("paper-sim-80", points=n))
     study = validate_config({"grid": GRID}, require_pairs=False)
     print(machine())
     print(f"pair: {len(pair.xyz1):,} + {len(pair.xyz2):,} points; default candidates and explain settings; best of 2")

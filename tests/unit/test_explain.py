@@ -3,7 +3,6 @@ and stops where it should."""
 
 from __future__ import annotations
 
-import dataclasses
 import json
 import math
 from pathlib import Path
@@ -11,6 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from helpers.ego_car import ego_car_pair, registered_off
 from lidarfield.analysis.explain import (
     STOP_MAX_STEPS,
     STOP_NO_CANDIDATES,
@@ -27,12 +27,8 @@ from lidarfield.errors import ConfigError
 from lidarfield.field.grid import field_settings_from_config
 from lidarfield.hypotheses import validate_step
 from lidarfield.pair import RegisteredPair
-from lidarfield.poses import pose_from_xyzrpy
 from lidarfield.registration import register_pair
 from lidarfield.report.explain import read_explanations, study_explain_parts
-from lidarfield.sensors.models import PRESETS
-from lidarfield.simulation.raycast import simulate_scan
-from lidarfield.simulation.scene import load_scene
 from lidarfield.study.config import load_config, validate_config
 from lidarfield.study.explain import STEP_COLUMNS, explain_pair
 from lidarfield.study.jobs import simulated_scan
@@ -55,8 +51,7 @@ def paper_sim():
 def paper_sim_off(paper_sim):
     """The paper-sim pair with scan 2 registered 0.3 m off, and the study."""
     pair, study = paper_sim
-    shift = pose_from_xyzrpy([0.3, 0, 0, 0, 0, 0])
-    return dataclasses.replace(pair, xyz2=pair.xyz2 + shift[:3, 3], T_1_2=shift @ pair.T_1_2), study
+    return registered_off(pair), study
 
 
 def _explain(pair, study, explain: ExplainSettings = ExplainSettings(), suggest=None):
@@ -221,14 +216,8 @@ def ego_car():
     """Issue 25: a simulated pair with a carried vehicle body and a moving car (the built-in scene
     paper-intersection-ego-car; sensor 2 1 m further, 0.5 s later): registered by the truth, the
     same registered 0.3 m off, and the study."""
-    scene, sensor = load_scene("paper-intersection-ego-car"), PRESETS["vlp16"]
-    scans = [
-        simulate_scan(scene, sensor, pose_from_xyzrpy(pose), time_s=t, seed=seed, range_noise_m=0.02)
-        for seed, pose, t in ((1, [0, 0, 2, 0, 0, 0], 0.0), (2, [1, 0, 2, 0, 0, 0.0037], 0.5))
-    ]
-    pair = register_pair(scans[0], scans[1], "truth")
-    shift = pose_from_xyzrpy([0.3, 0, 0, 0, 0, 0])  # scan 2 registered 0.3 m off
-    off = dataclasses.replace(pair, xyz2=pair.xyz2 + shift[:3, 3], T_1_2=shift @ pair.T_1_2)
+    pair = ego_car_pair("vlp16")
+    off = registered_off(pair)
     return pair, off, validate_config({"grid": OFF_BEAM_GRID}, require_pairs=False)
 
 
@@ -264,16 +253,7 @@ def test_explain_on_the_ego_car_pair_seen_by_80_channels_also_removes_the_moving
     object labels: the car is gone from scan 2, and the static scene is kept. In scan 1 it stays,
     rightly: it drives towards the sensors, so where it was at scan 1 lies behind where it is at
     scan 2, hidden from sensor 2, and a direction the other sensor did not see is no evidence."""
-    scene, sensor = load_scene("paper-intersection-ego-car"), PRESETS["paper-sim-80"]
-    scans = [
-        simulate_scan(scene, sensor, pose_from_xyzrpy(pose), time_s=t, seed=seed, range_noise_m=0.02)
-        for seed, pose, t in ((1, [0, 0, 2, 0, 0, 0], 0.0), (2, [1, 0, 2, 0, 0, 0.0037], 0.5))
-    ]
-    pair = register_pair(scans[0], scans[1], "truth")
-    rng = np.random.default_rng(0)
-    pair = pair.subset(*[np.sort(rng.choice(len(xyz), size=60_000, replace=False)) for xyz in (pair.xyz1, pair.xyz2)])
-    shift = pose_from_xyzrpy([0.3, 0, 0, 0, 0, 0])
-    off = dataclasses.replace(pair, xyz2=pair.xyz2 + shift[:3, 3], T_1_2=shift @ pair.T_1_2)
+    off = registered_off(ego_car_pair("paper-sim-80", points=60_000))
     study = load_config(ROOT / "config" / "config.yaml", ROOT)
     explanation = _explain(off, study)
     names = [row["hypothesis"] for row in explanation.steps]

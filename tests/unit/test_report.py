@@ -155,6 +155,41 @@ def test_a_pair_without_figures_says_how_to_draw_them(plotted_study, tmp_path):
     assert "snakemake --cores 2 results/pair-01/stages.html" in page and "plots.pairs" in page
 
 
+def test_a_pair_page_shows_what_to_try_next_only_for_the_stages_it_was_given(plotted_study, tmp_path):
+    """A workflow page shows the suggestions its job was given (suggest_pairs), never a file of
+    another run: every stage's file exists here, yet only the named stages' tables show."""
+    root, pairs = plotted_study
+    found, rows = discover(root)
+    rows = [r for r in rows if r["pair"] == "pair-01"]
+    dirs = found["pair-01"]
+
+    def page(suggested: set[str]) -> str:
+        out = tmp_path / "pair-01" / "report.html"
+        return write_pair_page(
+            "pair-01", dirs, rows, out, with_figures=False, on_demand="x/stages.html", suggested=suggested
+        ).read_text()
+
+    last = page({dirs[-1].name})
+    assert last.count("<b>What to try next.</b>") == 1 and "before the last" in last and "suggest_pairs" not in last
+    none = page(set())
+    assert none.count("<b>What to try next.</b>") == 0 and "suggest_pairs</code> leaves it out" in none
+    assert 'class="missing"' not in none  # not computed on purpose: a note, not a missing file
+
+
+def test_the_overview_says_how_many_pairs_have_next_steps(plotted_study, tmp_path):
+    from lidarfield.report import write_overview
+    from lidarfield.study.tables import compute_study_tables
+
+    root, pairs = plotted_study
+    found, rows = discover(root)
+    tables = compute_study_tables(found, rows)
+    one = {"pair-00": found["pair-00"][-1]}
+    html = write_overview({}, tables, tmp_path / "report.html", last_stages=one).read_text()
+    part = html.split("<h2>What to try next</h2>", 1)[1].split("<h2>", 1)[0]
+    assert "computed for 1 of the study&#x27;s 2 pairs" in part or "computed for 1 of the study's 2 pairs" in part
+    assert "pair-01" not in part and "pair-00" in part
+
+
 def test_report_links_3d_views_relative_to_itself(plotted_study):
     root, _ = plotted_study
     found, rows = discover(root)

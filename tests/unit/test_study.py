@@ -18,7 +18,7 @@ from lidarfield.cli import main
 from lidarfield.errors import ConfigError, InputError
 from lidarfield.plots import plot_pair
 from lidarfield.plots.study import _polar_cells, plot_study
-from lidarfield.study.config import AUTO_PLOT_PAIRS, plot_pairs
+from lidarfield.study.config import AUTO_PLOT_PAIRS, AUTO_SUGGEST_PAIRS, selected_pairs, validate_config
 from lidarfield.study.tables import group_medians, read_study_tables, write_study_tables, write_study_voxels
 
 
@@ -156,6 +156,10 @@ def test_study_figures_are_written_one_per_stage_level_plus_three_and_keep_their
     plt.close("all")
 
 
+def plot_pairs(setting, names):
+    return selected_pairs(setting, names, AUTO_PLOT_PAIRS, "plots.pairs")
+
+
 def test_plots_pairs_chooses_the_pairs_that_get_stage_figures():
     few = [f"p{i:02d}" for i in range(AUTO_PLOT_PAIRS)]
     assert plot_pairs("auto", few) == few
@@ -168,6 +172,28 @@ def test_plots_pairs_chooses_the_pairs_that_get_stage_figures():
     assert plot_pairs(["drive-042", "drive-007"], drive) == ["drive-007", "drive-042"]
     with pytest.raises(ConfigError, match=r"plots.pairs: unknown pair\(s\) \['drive-777'\]"):
         plot_pairs(["drive-777"], drive)
+
+
+def test_suggest_pairs_spreads_the_last_stages_suggestions_over_a_long_drive():
+    def study(frames: int, **settings) -> object:
+        circle = {"center_xy": [0, 0], "radius_m": 2, "start_angle_rad": 0, "speed_mps": 1, "frames": frames}
+        drive = {"scene": "paper-intersection", "sensor": "paper-sim-80", "trajectory": circle}
+        return validate_config({"sequences": {"drive": {"simulate": drive}}, **settings})
+
+    short = study(AUTO_SUGGEST_PAIRS + 1)  # frames: one pair fewer
+    assert short.suggest_pairs == sorted(short.pairs)
+    long = study(250)
+    names = sorted(long.pairs)
+    assert len(long.suggest_pairs) == AUTO_SUGGEST_PAIRS
+    assert set(long.plot_pairs) <= set(long.suggest_pairs)  # the plotted pairs' every stage
+    assert long.suggest_pairs[0] == names[0] and long.suggest_pairs[-1] == names[-1]
+    gaps = np.diff([names.index(p) for p in long.suggest_pairs])
+    assert gaps.min() >= 2 and gaps.max() <= 3
+    chosen = study(250, suggest_pairs=["drive-007"], plots={"pairs": ["drive-100"]})
+    assert chosen.suggest_pairs == ["drive-007", "drive-100"]
+    assert study(250, suggest_pairs="none", plots={"pairs": "none"}).suggest_pairs == []
+    with pytest.raises(ConfigError, match=r"suggest_pairs: unknown pair\(s\) \['drive-777'\]"):
+        study(250, suggest_pairs=["drive-777"])
 
 
 @pytest.mark.slow

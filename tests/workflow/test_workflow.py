@@ -203,6 +203,24 @@ def test_a_pair_left_out_of_plots_pairs_gets_its_figures_on_demand(study_dir):
     )
 
 
+def test_a_pair_left_out_of_suggest_pairs_gets_no_suggest_job(study_dir):
+    """Without turn's last-stage suggestions on disk: the default (every pair of a small study)
+    plans its suggest job; suggest_pairs without it (and plots.pairs without it) plans none,
+    and its page and the overview are rewritten without them."""
+    results = study_dir / "results"
+    last = sorted((results / "turn" / "stages").iterdir())[-1] / "suggestions.parquet"
+    last.rename(last.with_name("suggestions.away"))
+    try:
+        left_out = planned_after(
+            study_dir, lambda s: s.update(suggest_pairs=["shift"], plots={**s["plots"], "pairs": ["shift"]})
+        )
+        default = planned_after(study_dir, lambda s: s["plots"].update(pairs=["shift"]))
+    finally:
+        last.with_name("suggestions.away").rename(last)
+    assert left_out == {"pair_report": 1, "report": 1}
+    assert default == {"suggest": 1, "pair_report": 1, "report": 1}
+
+
 def test_asking_for_rematch_plans_rematch_jobs_and_what_reads_them(study_dir):
     # The field jobs do not depend on rematching: only the summary, pair figures and report rerun.
     planned = planned_after(study_dir, lambda s: s.update(rematch={"methods": ["icp"], "trials": 1}))

@@ -49,9 +49,11 @@ STAGES = {pair: STUDY.stage_ids(pair) for pair in PAIRS}
 CANDIDATES = [STUDY.candidates(level) for level in range(len(STUDY.hypotheses) + 1)]
 # Default candidates (no suggest: section) that cannot apply to a pair are skipped, not errors.
 CANDIDATES_FLAG = "--default-candidates" if STUDY.suggest is None else ""
-# The pairs whose stage figures and every stage's suggestions the study makes (plots.pairs); any
-# other pair's are made on demand, by asking for its page with them: results/{pair}/stages.html.
+# The pairs whose stage figures and every stage's suggestions the study makes (plots.pairs), and
+# those with their last stage's (suggest_pairs and the plotted ones); any other pair's are made
+# on demand, by asking for its page with them: results/{pair}/stages.html.
 PLOT_PAIRS = STUDY.plot_pairs
+SUGGEST_PAIRS = set(STUDY.suggest_pairs)
 
 
 # A pair is any folder of the results but the study's own. Not the list of the pairs: Snakemake
@@ -188,11 +190,15 @@ def all_stage_files(name):
 @planned
 def pair_suggestions(wildcards):
     """What a pair's page shows to try next: every stage's where it shows the stage figures
-    (plots.pairs, or its stages.html), else its last stage's: in a drive of thousands of pairs
-    the earlier stages' would be most of the study's work, and the next step is the last one's.
+    (plots.pairs, or its stages.html), else its last stage's where suggest_pairs selects it: in
+    a drive of thousands of pairs every stage's of every pair would be most of the study's work,
+    the next step is the last stage's, and the study's next steps need a spread of pairs.
     """
     stages = STAGES[wildcards.pair]
-    shown = stages if page_has_figures(wildcards) else stages[-1:]
+    if page_has_figures(wildcards):
+        shown = stages
+    else:
+        shown = stages[-1:] if wildcards.pair in SUGGEST_PAIRS else []
     return [
         f"{stage_dir(wildcards.pair, stage)}/suggestions.parquet" for stage in shown
     ]
@@ -200,9 +206,11 @@ def pair_suggestions(wildcards):
 
 @planned
 def last_stage_suggestions(wildcards):
-    """The study's next steps: each pair's suggestions at its last stage."""
+    """The study's next steps: the suggestions of each pair of suggest_pairs at its last stage."""
     return [
-        f"{stage_dir(pair, STAGES[pair][-1])}/suggestions.parquet" for pair in PAIRS
+        f"{stage_dir(pair, STAGES[pair][-1])}/suggestions.parquet"
+        for pair in PAIRS
+        if pair in SUGGEST_PAIRS
     ]
 
 

@@ -53,7 +53,7 @@ rule pair_report:
         max_mb=config["report"]["max_mb"],
     shell:
         "lidarfield job pair-report --pair {wildcards.pair} --stats {input.stats:q}"
-        " --rematch {input.rematch:q}"
+        " --rematch {input.rematch:q} --suggestions {input.suggestions:q}"
         " --stage-dirs {params.stage_dirs:q} --plots {params.plots:q} {params.figures}"
         " --on-demand {params.on_demand:q} --max-mb {params.max_mb} --out {output:q} > {log:q} 2>&1"
 

@@ -1,8 +1,8 @@
 # What to try next: every candidate hypothesis applied on its own to a stage's survivors, and
 # the field it would leave. A rule of its own so that it never delays the stages: the next
-# stage's mitigate job does not wait for it. Every pair gets its last stage's suggestions (the
-# study's next steps); the pairs that plots.pairs selects get every stage's, as any pair's
-# stages.html does when it is asked for (suggested_stages in common.smk).
+# stage's mitigate job does not wait for it. The pairs that suggest_pairs selects get their last
+# stage's suggestions (the study's next steps); those that plots.pairs selects get every stage's,
+# as any pair's stages.html does when it is asked for (pair_suggestions in common.smk).
 
 
 rule suggest:

@@ -127,6 +127,9 @@ def add_parser(subparsers) -> None:
     p.add_argument("--pair", required=True)
     p.add_argument("--stats", nargs="+", required=True)
     p.add_argument("--rematch", nargs="*", default=[], help="the stages' rematch.parquet files (rematch studies)")
+    p.add_argument(
+        "--suggestions", nargs="*", default=[], help="the suggestions.parquet of the stages it shows them for"
+    )
     p.add_argument("--stage-dirs", nargs="+", required=True)
     p.add_argument("--plots", type=_json, required=True)
     p.add_argument("--figures", action=argparse.BooleanOptionalAction, required=True, help="the pair and stage figures")
@@ -146,7 +149,9 @@ def add_parser(subparsers) -> None:
     p.add_argument("--study-dir", required=True)
     p.add_argument("--figures", required=True, help="the study figures' folder")
     p.add_argument("--plotted", type=_json, required=True, help="the pairs whose stage figures are drawn (JSON list)")
-    p.add_argument("--suggestions", nargs="+", required=True, help="each pair's suggestions.parquet at its last stage")
+    p.add_argument(
+        "--suggestions", nargs="*", default=[], help="the suggestions.parquet of suggest_pairs at their last stage"
+    )
     p.add_argument("--explain", nargs="*", default=[], help="the pairs' explain.json (those built)")
     p.add_argument("--out", required=True)
     p.set_defaults(func=_report)
@@ -259,6 +264,8 @@ def _study_figures(args: argparse.Namespace) -> None:
 
 
 def _pair_report(args: argparse.Namespace) -> None:
+    from pathlib import Path
+
     from ..report import write_pair_page
     from ..study.summary import read_stats
 
@@ -272,6 +279,7 @@ def _pair_report(args: argparse.Namespace) -> None:
         overview_href="../report.html",
         on_demand=args.on_demand,
         max_mb=args.max_mb,
+        suggested={Path(p).parent.name for p in args.suggestions},
     )
 
 

@@ -179,15 +179,20 @@ def ranking_parts(tables: StudyTables, stage_figures: set[str]) -> list[str]:
 
 def next_steps_parts(tables: StudyTables, last_stages: dict[str, Path]) -> list[str]:
     """The best candidates at the last stage of the pairs with the most left, in rank order."""
-    ranked = [p for p in tables.pairs["pair"] if p in last_stages][:SUGGESTED_PAIRS]
-    note = (
-        ""
-        if len(last_stages) <= SUGGESTED_PAIRS
-        else (
-            f'<p class="note">The {SUGGESTED_PAIRS} pairs with the most left at their last stage, in rank order; '
-            "every pair's page has its own tables.</p>"
+    pairs = list(tables.pairs["pair"])
+    ranked = [p for p in pairs if p in last_stages][:SUGGESTED_PAIRS]
+    notes = []
+    if len(last_stages) < len(pairs):
+        notes.append(
+            f"What to try next is computed for {len(last_stages)} of the study's {len(pairs)} pairs, spread over "
+            "them (the config's <code>suggest_pairs</code>); any other pair's page says how to make its own."
         )
-    )
+    if len(last_stages) > SUGGESTED_PAIRS:
+        notes.append(
+            f"The {SUGGESTED_PAIRS} of them with the most left at their last stage, in rank order; "
+            "every pair's page has its own tables."
+        )
+    note = f'<p class="note">{" ".join(notes)}</p>' if notes else ""
     return ["<h2>What to try next</h2>", note, study_suggestions({p: [last_stages[p]] for p in ranked})]
 
 

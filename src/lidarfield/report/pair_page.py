@@ -172,12 +172,19 @@ def pair_figures(name: str, pair_dir: Path | None, rows: list[dict], out_dir: Pa
 
 
 def stage_parts(
-    name: str, stage_dir: Path, out_dir: Path, settings: PlotSettings, with_figures: bool = True
+    name: str,
+    stage_dir: Path,
+    out_dir: Path,
+    settings: PlotSettings,
+    with_figures: bool = True,
+    with_suggestions: bool = True,
 ) -> list[Figure | str]:
-    """A stage's heading, what to try next, and (``with_figures``) the link to its 3-D view
-    and the figures the settings draw for it."""
+    """A stage's heading, (``with_suggestions``) what to try next, and (``with_figures``) the
+    link to its 3-D view and the figures the settings draw for it."""
     fig_dir = stage_dir / "figures"
-    parts = [f"<h3>{esc(name)} · stage {esc(stage_dir.name)}</h3>", stage_suggestions(stage_dir)]
+    parts = [f"<h3>{esc(name)} · stage {esc(stage_dir.name)}</h3>"]
+    if with_suggestions:
+        parts.append(stage_suggestions(stage_dir))
     if not with_figures:
         return parts
     view = fig_dir / "field_3d.html"
@@ -190,14 +197,19 @@ def stage_parts(
     return parts + ['<div class="figures">', *figures, "</div>"]
 
 
-def not_drawn_note(on_demand: str | None) -> str:
+def not_drawn_note(on_demand: str | None, last_suggested: bool) -> str:
     how = (
         f"<code>snakemake --cores 2 {esc(on_demand)}</code> makes them and writes that page, this one with them"
         if on_demand
         else "<code>lidarfield plot STAGE_DIR --out STAGE_DIR/figures</code> draws a stage's figures"
     )
+    what = (
+        "what to try next at its stages before the last"
+        if last_suggested
+        else "what to try next at its stages (the config's <code>suggest_pairs</code> leaves it out too)"
+    )
     return (
-        f'<p class="note">The figures of this pair, and what to try next at its stages before the last, are not made '
+        f'<p class="note">The figures of this pair, and {what}, are not made '
         f"(the config's <code>plots.pairs</code> leaves it out): {how}.</p>"
     )
 
@@ -224,8 +236,11 @@ def pair_page_parts(
     with_figures: bool = True,
     overview_href: str | None = None,
     on_demand: str | None = None,
+    suggested: set[str] | None = None,
 ) -> list:
-    """The pair's page as parts (its figures still to be embedded or linked)."""
+    """The pair's page as parts (its figures still to be embedded or linked); ``suggested``:
+    the names of the stages whose suggestions it shows (None: every stage's)."""
+    suggested = {d.name for d in stage_dirs} if suggested is None else suggested
     pair_dir = stage_dirs[0].parent.parent if stage_dirs else None
     parts = header_parts(name, stage_dirs, overview_href) + findings_parts(rows)
     parts += ["<h2>Stages</h2>", stages_table(rows), pair_rematch_table(rows)]
@@ -238,9 +253,9 @@ def pair_page_parts(
         ]
     parts += ["<h2>Each stage: what to try next" + (", and its figures</h2>" if with_figures else "</h2>")]
     if not with_figures:
-        parts.append(not_drawn_note(on_demand))
+        parts.append(not_drawn_note(on_demand, bool(stage_dirs) and stage_dirs[-1].name in suggested))
     for stage_dir in stage_dirs:
-        parts += stage_parts(name, stage_dir, out_dir, settings, with_figures)
+        parts += stage_parts(name, stage_dir, out_dir, settings, with_figures, stage_dir.name in suggested)
     return parts
 
 
@@ -254,6 +269,7 @@ def write_pair_page(
     overview_href: str | None = None,
     on_demand: str | None = None,
     max_mb: float | None = None,
+    suggested: set[str] | None = None,
 ) -> Path:
     """Write one pair's page; returns its path.
 
@@ -261,7 +277,9 @@ def write_pair_page(
     figures a stage has: a drawn one that is missing is flagged); ``with_figures`` False for a
     pair that ``plots.pairs`` leaves out: no pair or stage figures (``on_demand``: the target
     that draws them);
-    ``max_mb``: the page's size budget (default: the schema's ``report.max_mb``)."""
+    ``max_mb``: the page's size budget (default: the schema's ``report.max_mb``);
+    ``suggested``: the names of the stages whose what to try next it shows (None: every stage's;
+    a workflow page shows those its job was given, never a file left from another run)."""
     out_html = Path(out_html)
     rows = sorted(rows, key=lambda r: float(r.get("level", 0)))
     parts = pair_page_parts(
@@ -273,5 +291,6 @@ def write_pair_page(
         with_figures,
         overview_href,
         on_demand,
+        suggested,
     )
     return write_within_budget(parts, TIERS, f"lidarfield: pair {name}", out_html, budget_mb(None, max_mb))

@@ -37,6 +37,8 @@ class Study:
     scans: dict[str, ScanSpec] = field(default_factory=dict)
     suggest: list[dict] | None = None  # the config's candidates, normalised; None: the default
     plot_pairs: list[str] = field(default_factory=list)  # the pairs that get per-stage figures
+    # the pairs that get what to try next at their last stage (suggest_pairs) and the plotted ones
+    suggest_pairs: list[str] = field(default_factory=list)
     rematch: dict | None = None  # the validated rematch section; None: no rematching
 
     @property
@@ -98,32 +100,43 @@ def validate_config(
     for pair in pairs.values():
         scans[pair.scan1.id] = pair.scan1
         scans[pair.scan2.id] = pair.scan2
-    plotted = plot_pairs(config["plots"]["pairs"], sorted(pairs), source)
-    return Study(config, base_dir, pairs, grid, hypotheses, plots, scans, suggest, plotted, config.get("rematch"))
+    names = sorted(pairs)
+    plotted = selected_pairs(config["plots"]["pairs"], names, AUTO_PLOT_PAIRS, "plots.pairs", source)
+    suggested = selected_pairs(config["suggest_pairs"], names, AUTO_SUGGEST_PAIRS, "suggest_pairs", source)
+    suggested = sorted(set(suggested) | set(plotted))
+    return Study(
+        config, base_dir, pairs, grid, hypotheses, plots, scans, suggest, plotted, suggested, config.get("rematch")
+    )
 
 
 # A study of up to this many pairs gets every pair's stage figures by default; a larger one
 # gets this many, evenly spaced (a drive's pairs are named in driving order).
 AUTO_PLOT_PAIRS = 12
+# The same for what to try next at the last stage. Its candidates fit corrections: more than
+# half of a drive's job time when every pair of 1,000 had them (bench/RESULTS.md), and the
+# study's next steps need a spread of pairs, not every one.
+AUTO_SUGGEST_PAIRS = 100
 
 
-def plot_pairs(setting: str | list[str], names: list[str], source: str = "config") -> list[str]:
-    """The pairs that get per-stage figures, in name order, for the ``plots.pairs`` setting.
+def selected_pairs(
+    setting: str | list[str], names: list[str], auto: int, key: str, source: str = "config"
+) -> list[str]:
+    """The pairs a selection setting (``plots.pairs``, ``suggest_pairs``) names, in name order:
+    all, none, a list of names, or auto (every pair of a study of up to ``auto`` pairs, else
+    ``auto`` pairs evenly spaced in name order, first and last included).
 
     Decided when the config is read (the workflow knows its jobs when it is parsed), so
     ``auto`` goes by the number of pairs, not by any result."""
-    if setting == "all" or (setting == "auto" and len(names) <= AUTO_PLOT_PAIRS):
+    if setting == "all" or (setting == "auto" and len(names) <= auto):
         return list(names)
     if setting == "none":
         return []
     if setting == "auto":
-        picks = np.unique(np.round(np.linspace(0, len(names) - 1, AUTO_PLOT_PAIRS)).astype(int))
+        picks = np.unique(np.round(np.linspace(0, len(names) - 1, auto)).astype(int))
         return [names[i] for i in picks]
     unknown = [name for name in setting if name not in names]
     if unknown and names:
-        raise ConfigError(
-            f"config key plots.pairs: unknown pair(s) {unknown}; the study's pairs are {names[:20]}", source
-        )
+        raise ConfigError(f"config key {key}: unknown pair(s) {unknown}; the study's pairs are {names[:20]}", source)
     return [name for name in names if name in setting]
 
 

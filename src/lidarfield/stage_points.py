@@ -1,7 +1,9 @@
 """A stage's points, stored as what the stage changed: the registered pair is kept once.
 
-Stage k's points are the registered pair with the changes of stages 0..k applied in order.
-Each stage folder holds ``changes.parquet``, one row per point the stage changed:
+Stage k's points are the registered pair with the changes of stages 1..k applied in order.
+Stage 0 applies no hypothesis and changes nothing: its points are the registered pair and its
+folder has no changes file (nor ``removed.parquet``). Each later stage folder holds
+``changes.parquet``, one row per point the stage changed:
 
 - ``cloud`` (1 or 2) and ``row``: the point's row among its cloud's points in the registered
   pair (the ``row`` attribute every stage's points carry);
@@ -13,7 +15,9 @@ A removing stage writes its removed rows only; a correcting one also the survivo
 coordinates it changed, never the unchanged ones. The file's metadata is the stage's (``stage``,
 ``level``, ``hypothesis``, ``spec``, and a correcting stage's ``correction``, ``moved``,
 ``displacement``) with ``T_1_2``: sensor 2's pose in frame 1 after the stage, and
-``previous``: the previous stage's id (None for stage 0).
+``previous``: the id of the stage whose changes come before its own (None for stage 1: only
+the registered pair comes before it; a results folder written before stage 0 lost its file
+names stage 0 there, whose file is empty).
 :func:`read_stage_points` is the one reader: the workflow's jobs, ``lidarfield run``, the
 figures and the Python API all read a stage's points through it; :func:`stage_files` finds
 what it reads for a stage folder of a study's (or ``lidarfield run``'s) results.
@@ -28,9 +32,11 @@ import numpy as np
 
 from .errors import InputError
 from .io.parquet_table import read_metadata, read_table, write_table
+from .layout import level_of
 from .pair import RegisteredPair, read_pair
 
 CHANGES = "changes.parquet"  # the file of a stage folder that holds what the stage changed
+NO_MITIGATION = "none"  # the hypothesis name of stage 0, which changes nothing
 ROW = "row"  # the points' attribute: each point's row among its cloud's points in the registered pair
 COLUMNS = ("cloud", ROW, "removed", "x", "y", "z")
 
@@ -113,13 +119,20 @@ def apply_changes(kept: list[np.ndarray], xyz: list[np.ndarray], columns: dict[s
                 xyz[index][wanted] = np.column_stack([columns[axis][moved] for axis in "xyz"])
 
 
-def read_stage_points(registered: str | Path, changes: Sequence[str | Path]) -> tuple[RegisteredPair, dict]:
+def stage_zero_keys(stage_id: str | None) -> dict:
+    """The stage keys of stage 0 (``stage_id``), as a later stage's changes file holds its own."""
+    return {"stage": stage_id, "level": 0, "hypothesis": NO_MITIGATION, "spec": None}
+
+
+def read_stage_points(
+    registered: str | Path, changes: Sequence[str | Path], stage_id: str | None = None
+) -> tuple[RegisteredPair, dict]:
     """Stage k's points and their metadata: the ``registered.parquet`` of a pair with the
-    ``changes.parquet`` of its stages 0..k applied in order (``changes[-1]`` is stage k's).
+    ``changes.parquet`` of its stages 1..k applied in order (``changes[-1]`` is stage k's).
 
     The metadata is the registered pair's with stage k's keys over it (``stage``, ``level``,
-    ``hypothesis``, ``T_1_2``, ...), as a file of the survivors would hold. No changes: the
-    registered pair (numbered by ``row``)."""
+    ``hypothesis``, ``T_1_2``, ...), as a file of the survivors would hold. No changes: stage 0,
+    the registered pair (numbered by ``row``), with stage 0's keys when ``stage_id`` names it."""
     pair, meta = read_pair(registered)  # arrays of its own: moved in place
     pair = with_rows(pair)
     kept = [np.ones(len(pair.xyz1), dtype=bool), np.ones(len(pair.xyz2), dtype=bool)]
@@ -131,14 +144,20 @@ def read_stage_points(registered: str | Path, changes: Sequence[str | Path]) -> 
         apply_changes(kept, xyz, columns, path)
     if stage_meta:
         pair.T_1_2 = np.asarray(stage_meta["T_1_2"], dtype=np.float64)
+    elif stage_id is not None:
+        stage_meta = stage_zero_keys(stage_id)
     return pair.subset(*kept), {**meta, **stage_meta}
 
 
 def stage_files(stage_dir: str | Path) -> tuple[Path, list[Path]]:
-    """The ``registered.parquet`` and the ``changes.parquet`` of stages 0..k that stage folder
-    ``stage_dir`` (``{pair}/stages/{stage}``) reads, following each stage's ``previous``."""
+    """The ``registered.parquet`` and the ``changes.parquet`` of stages 1..k that stage folder
+    ``stage_dir`` (``{pair}/stages/{stage}``) reads, following each stage's ``previous``; none
+    for stage 0."""
     stage_dir = Path(stage_dir)
+    registered = stage_dir.parent.parent / "registered.parquet"
+    if level_of(stage_dir.name) == 0 and not (stage_dir / CHANGES).exists():
+        return registered, []
     changes = [stage_dir / CHANGES]
     while (previous := read_metadata(changes[0]).get("previous")) is not None:
         changes.insert(0, stage_dir.parent / previous / CHANGES)
-    return stage_dir.parent.parent / "registered.parquet", changes
+    return registered, changes

@@ -22,7 +22,7 @@ from lidarfield.sensors.models import PRESETS
 from lidarfield.simulation.raycast import simulate_scan
 from lidarfield.simulation.scene import load_scene
 from lidarfield.stage_points import CHANGES, read_stage_points
-from lidarfield.study.jobs import field_stage, mitigate_stage
+from lidarfield.study.jobs import stack_jobs
 from lidarfield.study.stack import apply_stack
 from lidarfield.study.summary import CORRECTION_COLUMNS, write_summary
 
@@ -242,22 +242,11 @@ def test_a_correcting_stages_files_and_summary_row(tmp_path):
     rng = np.random.default_rng(1)
     pair = RegisteredPair(rng.normal(scale=10, size=(4000, 3)), rng.normal(scale=10, size=(3000, 3)))
     write_pair(tmp_path / "registered.parquet", pair)
-    steps = [None, {"ego_vehicle": {"radius_m": 8.0}}, SHIFT]
-    dirs = [tmp_path / f"0{level}" for level in range(3)]
-    registered, changes = tmp_path / "registered.parquet", []
-    for level, (step, folder) in enumerate(zip(steps, dirs)):
-        stage_id = f"0{level}-x-0000000{level}"
-        mitigate_stage(registered, changes, step, stage_id, level, folder / CHANGES, folder / "removed.parquet", ROOT)
-        changes.append(folder / CHANGES)
-        field_stage(
-            registered,
-            changes,
-            folder / "removed.parquet",
-            GRID,
-            "demo",
-            folder / "field.parquet",
-            folder / "stats.json",
-        )
+    steps = [{"ego_vehicle": {"radius_m": 8.0}}, SHIFT]
+    dirs = [tmp_path / f"0{level}-x-0000000{level}" for level in range(3)]
+    registered = tmp_path / "registered.parquet"
+    changes = stack_jobs(registered, steps, dirs, GRID, "demo", ROOT)
+    assert not (dirs[0] / CHANGES).exists() and not (dirs[0] / "removed.parquet").exists()  # stage 0: no job
     stage2, meta = read_stage_points(registered, changes)
     row2 = stage2.attributes2["row"]
     assert np.allclose(stage2.xyz2, pair.xyz2[row2] + [-0.3, 0, 0], atol=1e-12)
@@ -265,7 +254,7 @@ def test_a_correcting_stages_files_and_summary_row(tmp_path):
     assert meta["moved"] == [2] and meta["correction"] == {"shift_m": [-0.3, 0.0, 0.0]}
     assert np.allclose(stage2.T_1_2[:3, 3], [-0.3, 0, 0])
     # its changes: every survivor of cloud 2 moved, nothing removed; not cloud 1's survivors
-    moved, _ = read_table(changes[2])
+    moved, _ = read_table(changes[1])
     assert set(moved["cloud"]) == {2} and not moved["removed"].any()
     assert np.array_equal(moved["row"], row2)
     removed, _ = read_table(dirs[2] / "removed.parquet")

@@ -26,7 +26,7 @@ from lidarfield.sensors.models import PRESETS
 from lidarfield.simulation.raycast import simulate_scan
 from lidarfield.simulation.scene import Scene, SceneObject, load_scene, scene_from_dict
 from lidarfield.study.config import load_config
-from lidarfield.study.jobs import field_stage, mitigate_stage
+from lidarfield.study.jobs import stack_jobs
 from lidarfield.study.stack import next_stage
 from lidarfield.study.summary import write_summary
 
@@ -246,22 +246,9 @@ def test_the_summary_scores_each_stage_against_the_labels(tmp_path, traffic_pair
     the static points kept; ego_vehicle (3 m) removes no car point, moving_objects the cars."""
     write_pair(tmp_path / "registered.parquet", traffic_pair)
     grid = {"kind": "spherical", "azimuth_bins": 36, "elevation_deg": [-22.5, 15], "elevation_bins": 5}
-    registered, changes, folders = tmp_path / "registered.parquet", [], []
-    for level, step in enumerate([None, {"ego_vehicle": {}}, {"moving_objects": {}}]):
-        folder = tmp_path / f"0{level}"
-        changes_out = folder / "changes.parquet"
-        mitigate_stage(registered, changes, step, f"0{level}-x", level, changes_out, folder / "removed.parquet")
-        changes.append(changes_out)
-        field_stage(
-            registered,
-            list(changes),
-            folder / "removed.parquet",
-            grid,
-            "traffic",
-            folder / "f.parquet",
-            folder / "stats.json",
-        )
-        folders.append(folder)
+    registered = tmp_path / "registered.parquet"
+    folders = [tmp_path / f"0{level}-x" for level in range(3)]
+    stack_jobs(registered, [{"ego_vehicle": {}}, {"moving_objects": {}}], folders, grid, "traffic")
     write_summary([f / "stats.json" for f in folders], tmp_path / "summary.parquet", tmp_path / "summary.csv")
     table = pd.read_parquet(tmp_path / "summary.parquet")
     label = np.concatenate([traffic_pair.attributes1["object"], traffic_pair.attributes2["object"]])

@@ -15,7 +15,7 @@ from conftest import ROOT
 from lidarfield.cli import main
 from lidarfield.errors import InputError
 from lidarfield.io import read_scan, write_scan
-from lidarfield.io.parquet_table import read_table
+from lidarfield.io.parquet_table import read_metadata, read_table
 from lidarfield.pair import RegisteredPair, read_pair, write_pair
 from lidarfield.poses import pose_from_xyzrpy
 from lidarfield.sensors.models import PRESETS
@@ -100,17 +100,16 @@ def test_stage_functions_write_the_layout(tmp_path):
         registration={"method": "icp", "fitness": 0.8, "converged": True},
     )
     write_pair(tmp_path / "registered.parquet", pair)
-    s0, s1 = tmp_path / "00", tmp_path / "01"
+    s0, s1 = tmp_path / "00-none-aaaaaaaa", tmp_path / "01-ego_vehicle-bbbbbbbb"
     registered, c0, c1 = tmp_path / "registered.parquet", s0 / CHANGES, s1 / CHANGES
-    mitigate_stage(registered, [], None, "00-none-aaaaaaaa", 0, c0, s0 / "removed.parquet")
     step = {"ego_vehicle": {"radius_m": 8.0}}
-    mitigate_stage(registered, [c0], step, "01-ego_vehicle-bbbbbbbb", 1, c1, s1 / "removed.parquet")
+    mitigate_stage(registered, [], step, "01-ego_vehicle-bbbbbbbb", 1, c1, s1 / "removed.parquet")
+    assert read_metadata(c1)["previous"] is None  # stage 0 changes nothing: only the registered pair before
 
-    stage0, meta0 = read_stage_points(registered, [c0])
+    stage0, meta0 = read_stage_points(registered, [], "00-none-aaaaaaaa")  # stage 0: no changes file
     assert np.array_equal(stage0.xyz1, pair.xyz1) and meta0["stage"] == "00-none-aaaaaaaa" and meta0["level"] == 0
-    removed0, _ = read_table(s0 / "removed.parquet")
-    assert len(removed0["cloud"]) == 0 and "hypothesis" in removed0
-    stage1, meta1 = read_stage_points(registered, [c0, c1])
+    assert meta0["hypothesis"] == "none" and not c0.exists()
+    stage1, meta1 = read_stage_points(registered, [c1])
     removed1, rmeta1 = read_table(s1 / "removed.parquet")
     near1 = np.linalg.norm(pair.xyz1, axis=1) < 8.0
     assert len(stage1.xyz1) == np.count_nonzero(~near1) and np.count_nonzero(removed1["cloud"] == 1) == near1.sum()
@@ -124,12 +123,13 @@ def test_stage_functions_write_the_layout(tmp_path):
         rows.append(
             field_stage(
                 registered,
-                [c0, c1][: level + 1],
-                folder / "removed.parquet",
+                [c1][:level],
+                folder / "removed.parquet" if level else None,
                 GRID,
                 "demo",
                 folder / "field.parquet",
                 folder / "stats.json",
+                folder.name,
             )
         )
         assert json.loads((folder / "stats.json").read_text()) == rows[-1]
@@ -166,8 +166,9 @@ def test_run_writes_every_stage_and_prints_the_table(tmp_path, paper_scans, caps
     summary = pd.read_parquet(out / "summary.parquet")
     assert list(summary["hypothesis"]) == ["none", "field_of_view", "shadow"]
     ids = list(summary["stage"])
-    for stage_id in ids:
-        files = {"changes.parquet", "removed.parquet", "field.parquet", "stats.json", "suggestions.parquet"}
+    for level, stage_id in enumerate(ids):
+        files = {"field.parquet", "stats.json", "suggestions.parquet"}
+        files |= {"changes.parquet", "removed.parquet"} if level else set()  # stage 0 changes nothing
         assert {p.name for p in (out / "stages" / stage_id).iterdir()} == files
         assert stage_id in printed
     assert printed.splitlines()[0].split() == [

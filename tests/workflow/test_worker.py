@@ -76,11 +76,11 @@ def pair_jobs(hypothesis: dict, base_dir: Path) -> list[list[list[str]]]:
             "--registered",
             "registered.parquet",
             "--stage-changes",
-            *[f"{d}/changes.parquet" for d in stages[:up_to]],
+            *[f"{d}/changes.parquet" for d in stages[1:up_to]],
         ]
 
     def mitigate(level: int) -> list[str]:
-        step = canonical_json(s.hypotheses[level - 1] if level else None)
+        step = canonical_json(s.hypotheses[level - 1])
         return [
             "mitigate",
             *changes(level),
@@ -101,8 +101,9 @@ def pair_jobs(hypothesis: dict, base_dir: Path) -> list[list[list[str]]]:
         return [
             "field",
             *changes(level + 1),
-            "--removed",
-            f"{d}/removed.parquet",
+            "--stage",
+            stages[level],
+            *(["--removed", f"{d}/removed.parquet"] if level else []),
             "--grid",
             canonical_json(s.grid_section),
             "--pair",
@@ -113,7 +114,7 @@ def pair_jobs(hypothesis: dict, base_dir: Path) -> list[list[list[str]]]:
             f"{d}/stats.json",
         ]
 
-    return [scans, [register], [mitigate(0)], [field(0), mitigate(1)], [field(1)]]
+    return [scans, [register], [field(0), mitigate(1)], [field(1)]]
 
 
 def start_job(argv: list[str], cwd: Path, worker: str, log: Path) -> subprocess.Popen:
@@ -228,19 +229,19 @@ def test_killed_job_leaves_other_jobs_and_the_worker_sound(tmp_path, worker):
     waves = pair_jobs({"field_of_view": {}}, forked)
     run_waves(waves, plain, "off")
 
-    run_waves(waves[:3], forked, sock)
-    sleeper_stage = pair_jobs({"plugin": {"file": "sleeper.py", "params": {"pid_file": "sleeper.pid"}}}, forked)[3][1]
+    run_waves(waves[:2], forked, sock)
+    sleeper_stage = pair_jobs({"plugin": {"file": "sleeper.py", "params": {"pid_file": "sleeper.pid"}}}, forked)[2][1]
     sleeper = start_job(sleeper_stage, forked, sock, forked / "sleeper.log")
     wait_for(lambda: (forked / "sleeper.pid").exists() and (forked / "sleeper.pid").read_text())
     child = int((forked / "sleeper.pid").read_text())
     assert child not in (sleeper.pid, proc.pid), "the job runs in a child forked from the worker"
-    others = [start_job(argv, forked, sock, forked / f"other-{j}.log") for j, argv in enumerate(waves[3])]
+    others = [start_job(argv, forked, sock, forked / f"other-{j}.log") for j, argv in enumerate(waves[2])]
     os.kill(child, signal.SIGKILL)
 
     assert sleeper.wait(timeout=60) == -signal.SIGKILL, "the client dies of its job's signal"
     for j, job in enumerate(others):
         assert job.wait(timeout=120) == 0, (forked / f"other-{j}.log").read_text()
-    run_waves(waves[4:], forked, sock)  # the worker still serves after the kill
+    run_waves(waves[3:], forked, sock)  # the worker still serves after the kill
     assert proc.poll() is None
 
     sleeper_dir = forked / sleeper_stage[sleeper_stage.index("--stage") + 1]
@@ -248,9 +249,9 @@ def test_killed_job_leaves_other_jobs_and_the_worker_sound(tmp_path, worker):
     (forked / "sleeper.pid").unlink()
     # Byte for byte what the same jobs write as plain processes, logs aside.
     assert outputs(forked) == outputs(plain)
-    assert len(outputs(plain)) == 11  # 2 scans, registered pair, 2 stages x 4 files
+    assert len(outputs(plain)) == 9  # 2 scans, registered pair, stage 0's field and stats, stage 1's 4 files
     # The job's log is written as by a plain process (clock times aside).
-    logs = [re.sub(r"\d\d:\d\d:\d\d", "T", log.read_text()) for log in (plain / "job-3-1.log", forked / "other-1.log")]
+    logs = [re.sub(r"\d\d:\d\d:\d\d", "T", log.read_text()) for log in (plain / "job-2-1.log", forked / "other-1.log")]
     assert logs[0] == logs[1] and "removed" in logs[0]
 
 
@@ -260,6 +261,8 @@ def test_a_failing_job_reports_the_same_exit_code_and_message_on_both_paths(tmp_
         "field",
         "--registered",
         "missing.parquet",
+        "--stage",
+        "01-crop-00000000",
         "--removed",
         "missing.parquet",
         "--grid",
@@ -287,8 +290,8 @@ def test_a_killed_client_takes_its_job_with_it(tmp_path, worker):
     _, sock = worker
     (tmp_path / "sleeper.py").write_text(SLEEPER)
     waves = pair_jobs({"plugin": {"file": "sleeper.py", "params": {"pid_file": "sleeper.pid"}}}, tmp_path)
-    run_waves(waves[:3], tmp_path, sock)
-    client = start_job(waves[3][1], tmp_path, sock, tmp_path / "sleeper.log")
+    run_waves(waves[:2], tmp_path, sock)
+    client = start_job(waves[2][1], tmp_path, sock, tmp_path / "sleeper.log")
     wait_for(lambda: (tmp_path / "sleeper.pid").exists() and (tmp_path / "sleeper.pid").read_text())
     child = int((tmp_path / "sleeper.pid").read_text())
     client.kill()

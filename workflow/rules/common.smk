@@ -56,12 +56,16 @@ PLOT_PAIRS = STUDY.plot_pairs
 SUGGEST_PAIRS = set(STUDY.suggest_pairs)
 
 
+# A stage's id: {k:02d}-{hypothesis}-{hash8} (lidarfield.study.stage_ids).
+STAGE_ID = r"\d\d-[A-Za-z0-9_]+-[0-9a-f]{8}"
+
+
 # A pair is any folder of the results but the study's own. Not the list of the pairs: Snakemake
 # writes a constraint into every path pattern, and matching a list of 1,000 names made
 # planning a 1,000-pair study take minutes.
 wildcard_constraints:
     pair=rf"(?!(?:{'|'.join(RESULTS_FOLDERS)})/)[A-Za-z0-9][A-Za-z0-9_.-]*",
-    stage=r"\d\d-[A-Za-z0-9_]+-[0-9a-f]{8}",
+    stage=STAGE_ID,
     scan=r"[A-Za-z0-9][A-Za-z0-9_.-]*",
     page="report|stages",
 
@@ -109,15 +113,24 @@ def this_stage_dir(wildcards):
 
 @planned
 def stage_changes(wildcards):
-    """Stage k's points are the registered pair with the changes of stages 0..k."""
-    stages = STAGES[wildcards.pair][: stage_level(wildcards) + 1]
+    """Stage k's points are the registered pair with the changes of stages 1..k (stage 0
+    changes nothing: it has no mitigate job and no changes file)."""
+    stages = STAGES[wildcards.pair][1 : stage_level(wildcards) + 1]
     return [f"{stage_dir(wildcards.pair, stage)}/changes.parquet" for stage in stages]
 
 
 @planned
 def previous_stage_changes(wildcards):
-    """What stage k starts from: the registered pair with the changes of stages 0..k-1."""
+    """What stage k >= 1 starts from: the registered pair with the changes of stages 1..k-1."""
     return stage_changes(wildcards)[:-1]
+
+
+@planned
+def stage_removed(wildcards):
+    """The points stage k removed: none for stage 0."""
+    if stage_level(wildcards) == 0:
+        return []
+    return f"{this_stage_dir(wildcards)}/removed.parquet"
 
 
 # Each stage level's step as its job's params (canonical JSON), made once here rather than at

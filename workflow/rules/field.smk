@@ -6,7 +6,7 @@ rule field:
     input:
         registered=f"{RESULTS}/{{pair}}/registered.parquet",
         stage_changes=stage_changes,
-        removed=f"{RESULTS}/{{pair}}/stages/{{stage}}/removed.parquet",
+        removed=stage_removed,
     output:
         field=f"{RESULTS}/{{pair}}/stages/{{stage}}/field.parquet",
         stats=f"{RESULTS}/{{pair}}/stages/{{stage}}/stats.json",
@@ -23,6 +23,6 @@ rule field:
         grid=GRID,
     shell:
         "lidarfield job field --registered {input.registered:q} --stage-changes {input.stage_changes:q}"
-        " --removed {input.removed:q}"
+        " --stage {wildcards.stage} --removed {input.removed:q}"
         " --grid {params.grid:q} --pair {wildcards.pair} --field-out {output.field:q}"
         " --stats-out {output.stats:q} > {log:q} 2>&1"

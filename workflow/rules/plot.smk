@@ -7,7 +7,7 @@ rule plot_stage:
         field=f"{RESULTS}/{{pair}}/stages/{{stage}}/field.parquet",
         registered=f"{RESULTS}/{{pair}}/registered.parquet",
         stage_changes=stage_changes,
-        removed=f"{RESULTS}/{{pair}}/stages/{{stage}}/removed.parquet",
+        removed=stage_removed,
         previous=previous_stage_file("field.parquet"),
         plotly=f"{RESULTS}/assets/plotly.min.js",
     output:

@@ -22,5 +22,5 @@ rule rematch:
     params:
         settings=REMATCH,
     shell:
-        "lidarfield job rematch --registered {input.registered:q} --stage-changes {input.stage_changes:q} --settings {params.settings:q}"
+        "lidarfield job rematch --registered {input.registered:q} --stage-changes {input.stage_changes:q} --stage {wildcards.stage} --settings {params.settings:q}"
         " --out {output:q} > {log:q} 2>&1"

@@ -27,5 +27,6 @@ rule suggest:
         grid=GRID,
     shell:
         "lidarfield job suggest --registered {input.registered:q} --stage-changes {input.stage_changes:q}"
+        " --stage {wildcards.stage}"
         " --candidates {params.candidates:q} {params.defaults}"
         " --grid {params.grid:q} --out {output:q} > {log:q} 2>&1"

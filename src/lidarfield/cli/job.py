@@ -21,12 +21,15 @@ def _json_or_stdin(text: str):
     return json.loads(sys.stdin.read() if text == "-" else text)
 
 
-def add_stage_points(parser: argparse.ArgumentParser, stages: str = "0..k") -> None:
-    """The options naming a stage's points: the registered pair and the stages' changes."""
+def add_stage_points(parser: argparse.ArgumentParser, stages: str = "1..k", stage_id: bool = True) -> None:
+    """The options naming a stage's points: the registered pair, the stages' changes and
+    (``stage_id``) the stage's id, which stage 0 (no changes file) takes its keys from."""
     parser.add_argument("--registered", required=True, help="the pair's registered.parquet")
     parser.add_argument(
         "--stage-changes", nargs="*", default=[], help=f"the changes.parquet of stages {stages}, in order"
     )
+    if stage_id:
+        parser.add_argument("--stage", required=True, help="the stage's id (its folder's name)")
 
 
 def add_parser(subparsers) -> None:
@@ -47,9 +50,8 @@ def add_parser(subparsers) -> None:
     p.set_defaults(func=_register)
 
     p = jobs.add_parser("mitigate")
-    add_stage_points(p, "0..k-1")
+    add_stage_points(p, "1..k-1")
     p.add_argument("--step", type=_json, required=True)
-    p.add_argument("--stage", required=True)
     p.add_argument("--level", type=int, required=True)
     p.add_argument("--changes-out", required=True)
     p.add_argument("--removed-out", required=True)
@@ -57,7 +59,7 @@ def add_parser(subparsers) -> None:
 
     p = jobs.add_parser("field")
     add_stage_points(p)
-    p.add_argument("--removed", required=True)
+    p.add_argument("--removed", nargs="?", help="the stage's removed.parquet (none for stage 0)")
     p.add_argument("--grid", type=_json, required=True)
     p.add_argument("--pair", required=True)
     p.add_argument("--field-out", required=True)
@@ -81,7 +83,7 @@ def add_parser(subparsers) -> None:
     p.set_defaults(func=_rematch)
 
     p = jobs.add_parser("plot-stage")
-    add_stage_points(p)
+    add_stage_points(p, stage_id=False)
     p.add_argument("--stage-dir", required=True)
     p.add_argument("--previous", default="", help="the previous stage's folder ('' for stage 0)")
     p.add_argument("--plots", type=_json, required=True)
@@ -190,7 +192,16 @@ def _mitigate(args: argparse.Namespace) -> None:
 def _field(args: argparse.Namespace) -> None:
     from ..study.jobs import field_stage
 
-    field_stage(args.registered, args.stage_changes, args.removed, args.grid, args.pair, args.field_out, args.stats_out)
+    field_stage(
+        args.registered,
+        args.stage_changes,
+        args.removed,
+        args.grid,
+        args.pair,
+        args.field_out,
+        args.stats_out,
+        args.stage,
+    )
 
 
 def _suggest(args: argparse.Namespace) -> None:
@@ -198,7 +209,7 @@ def _suggest(args: argparse.Namespace) -> None:
     from ..stage_points import read_stage_points
 
     suggest_stage(
-        read_stage_points(args.registered, args.stage_changes),
+        read_stage_points(args.registered, args.stage_changes, args.stage),
         args.candidates,
         args.grid,
         args.out,
@@ -210,7 +221,7 @@ def _rematch(args: argparse.Namespace) -> None:
     from ..analysis.rematch import rematch_stage
     from ..stage_points import read_stage_points
 
-    rematch_stage(read_stage_points(args.registered, args.stage_changes), args.settings, args.out)
+    rematch_stage(read_stage_points(args.registered, args.stage_changes, args.stage), args.settings, args.out)
 
 
 def _plot_stage(args: argparse.Namespace) -> None:

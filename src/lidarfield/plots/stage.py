@@ -49,7 +49,7 @@ def plot_stage(
     """Write every figure of one stage; returns the paths written.
 
     ``points``: the files of the stage's points, the pair's ``registered.parquet`` and the
-    ``changes.parquet`` of stages 0..k (the previous stage's: all but the last); found from
+    ``changes.parquet`` of stages 1..k (the previous stage's: all but the last); found from
     the results' layout when None (:func:`~lidarfield.stage_points.stage_files`).
     ``settings`` is the config's ``plots`` section. Axis limits come from the previous stage
     when given (its points are a superset of this stage's), so that both halves of

@@ -103,13 +103,13 @@ def vector_field(columns: dict[str, np.ndarray], meta: dict) -> VectorField:
 
 def load_stage(stage_dir: str | Path, points: tuple[str | Path, Sequence[str | Path]] | None = None) -> StageData:
     """Read a stage folder; a missing or malformed file raises InputError naming it. ``points``:
-    the pair's ``registered.parquet`` and the ``changes.parquet`` of stages 0..k (found from the
+    the pair's ``registered.parquet`` and the ``changes.parquet`` of stages 1..k (found from the
     results' layout when None)."""
     stage_dir = Path(stage_dir)
     if not stage_dir.is_dir():
         raise InputError("stage folder not found", stage_dir)
     field = read_vector_field(stage_dir / "field.parquet")
-    pair, points_meta = read_stage_points(*(points or stage_files(stage_dir)))
+    pair, points_meta = read_stage_points(*(points or stage_files(stage_dir)), stage_id=stage_dir.name)
     removed_path = stage_dir / "removed.parquet"
     if removed_path.exists():
         removed, _ = read_table(removed_path, required=("cloud", "x", "y", "z"))

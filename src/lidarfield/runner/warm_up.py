@@ -21,14 +21,13 @@ from ..registration import register_pair
 from ..sensors.models import sensor_model
 from ..simulation.raycast import simulate_scan
 from ..simulation.scene import load_scene
-from ..stage_points import CHANGES
-from ..study.jobs import field_stage, mitigate_stage
+from ..study.jobs import stack_jobs
 
 WARM_UP_FIGURES = ("field_top", "field_perspective")
 # The default study's simulated pair, with the 16-beam VLP-16: about 20,000 points a scan.
 SCENE, SENSOR = "paper-intersection", "vlp16"
 POSES = ([0, 0, 3, 0, 0, 0], [1, 1, 3, 0, 0, 0.05])
-STACK = (None, {"field_of_view": {}})
+STACK = ({"field_of_view": {}},)
 
 
 def write_warm_up_stages(folder: Path) -> list[Path]:
@@ -38,15 +37,8 @@ def write_warm_up_stages(folder: Path) -> list[Path]:
     scans = [simulate_scan(scene, sensor, pose_from_xyzrpy(pose)) for pose in POSES]
     registered = folder / "registered.parquet"
     write_pair(registered, register_pair(*scans, "truth"))
-    stages, changes = [], []
-    for level, step in enumerate(STACK):
-        stage = folder / "stages" / f"{level:02d}-warm-up"
-        mitigate_stage(registered, changes, step, stage.name, level, stage / CHANGES, stage / "removed.parquet")
-        changes.append(stage / CHANGES)
-        field_stage(
-            registered, changes, stage / "removed.parquet", {}, "warm-up", stage / "field.parquet", stage / "stats.json"
-        )
-        stages.append(stage)
+    stages = [folder / "stages" / f"{level:02d}-warm-up" for level in range(len(STACK) + 1)]
+    stack_jobs(registered, list(STACK), stages, {}, "warm-up")
     return stages
 
 

@@ -24,8 +24,8 @@ from ..pair import write_pair
 from ..scan import Scan
 from ..sensors.fit import log_fit
 from ..sensors.models import sensor_model
-from ..stage_points import read_stage_points, write_changes
-from .stack import Stage, initial_stage, next_stage
+from ..stage_points import CHANGES, read_stage_points, write_changes
+from .stack import Stage, next_stage
 from .summary import summary_row
 
 log = logging.getLogger(__name__)
@@ -100,7 +100,7 @@ def write_stage(
 def mitigate_stage(
     registered: str | Path,
     changes_in: list[str | Path],
-    step: dict | None,
+    step: dict,
     stage_id: str,
     level: int,
     changes_out: str | Path,
@@ -108,11 +108,11 @@ def mitigate_stage(
     base_dir: str | Path = ".",
     study_grid: dict | None = None,
 ) -> None:
-    """Stage ``level``: apply ``step`` to the points of the previous stage (the registered pair
-    with ``changes_in``, the changes of stages 0..level-1; stage 0, where ``step`` is None and
-    nothing changes, has none)."""
+    """Stage ``level`` >= 1: apply ``step`` to the points of the previous stage (the registered
+    pair with ``changes_in``, the changes of stages 1..level-1). Stage 0 changes nothing and has
+    no job: its points are the registered pair."""
     pair, meta = read_stage_points(registered, changes_in)
-    stage = initial_stage(pair) if step is None else next_stage(pair, step, level, base_dir, study_grid)
+    stage = next_stage(pair, step, level, base_dir, study_grid)
     log.info("stage %s: removed %d + %d points", stage_id, stage.removed1, stage.removed2)
     if stage.correction is not None:
         log.info("stage %s: corrected, %s", stage_id, stage.correction_json())
@@ -122,16 +122,20 @@ def mitigate_stage(
 def field_stage(
     registered: str | Path,
     changes: list[str | Path],
-    removed_path: str | Path,
+    removed_path: str | Path | None,
     grid_section: dict,
     pair_name: str,
     field_out: str | Path,
     stats_out: str | Path,
+    stage_id: str | None = None,
 ) -> dict:
     """The field of a stage's points (the registered pair with ``changes``, those of stages
-    0..k) and its summary row (``stats.json``); returns the row."""
-    pair, meta = read_stage_points(registered, changes)
-    removed, _ = read_table(removed_path, columns=("cloud",))
+    1..k) and its summary row (``stats.json``); returns the row. Stage 0 (no changes, its id
+    ``stage_id``) has no removed points (``removed_path`` None)."""
+    pair, meta = read_stage_points(registered, changes, stage_id)
+    removed = {"cloud": np.zeros(0, np.uint8)}
+    if removed_path is not None:
+        removed, _ = read_table(removed_path, columns=("cloud",))
     settings = field_settings_from_config(grid_section)
     columns, statistics = analyse_field(pair, settings)
     statistics = summary_json_safe(statistics)
@@ -139,3 +143,44 @@ def field_stage(
     row = summary_row(pair_name, pair, meta, removed["cloud"], statistics)
     write_text(stats_out, json.dumps(row, indent=1) + "\n")
     return row
+
+
+def stack_jobs(
+    registered: str | Path,
+    steps: list[dict],
+    folders: list[Path],
+    grid_section: dict,
+    pair_name: str,
+    base_dir: str | Path = ".",
+) -> list[Path]:
+    """A stack's stages through the workflow's jobs, in the order it runs them: stage 0's field
+    (the registered pair), then each step's mitigate and field jobs. ``folders``: stage 0's and
+    each step's folder, named by its stage id. Returns the changes files of stages 1..N."""
+    changes = []
+    for level, folder in enumerate(folders):
+        removed = None
+        if level:  # stage 0 changes nothing: it has no mitigate job
+            removed = folder / "removed.parquet"
+            mitigate_stage(
+                registered,
+                changes,
+                steps[level - 1],
+                folder.name,
+                level,
+                folder / CHANGES,
+                removed,
+                base_dir,
+                grid_section,
+            )
+            changes.append(folder / CHANGES)
+        field_stage(
+            registered,
+            changes,
+            removed,
+            grid_section,
+            pair_name,
+            folder / "field.parquet",
+            folder / "stats.json",
+            folder.name,
+        )
+    return changes

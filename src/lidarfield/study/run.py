@@ -135,24 +135,27 @@ def run_pair(
     write_pair(out_dir / "registered.parquet", pair)
     pair_name = out_dir.resolve().name
     folders = [out_dir / "stages" / stage_id for stage_id in ids]
-    changes = [folder / CHANGES for folder in folders]
+    changes = [folder / CHANGES for folder in folders]  # stage 0's is never written: it changes nothing
     for stage, stage_id, folder, table in zip(stages, ids, folders, tables):
         level = stage.level
-        write_stage(stage, stage_id, ids[level - 1] if level else None, changes[level], folder / "removed.parquet")
+        removed = folder / "removed.parquet" if level else None
+        if level:
+            write_stage(stage, stage_id, ids[level - 1] if level > 1 else None, changes[level], removed)
         field_stage(
             out_dir / "registered.parquet",
-            changes[: level + 1],
-            folder / "removed.parquet",
+            changes[1 : level + 1],
+            removed,
             study.grid_section,
             pair_name,
             folder / "field.parquet",
             folder / "stats.json",
+            stage_id,
         )
         write_suggestions(folder / "suggestions.parquet", table, stage_id, candidates[level], study.grid_section)
         if study.rematch:
             from ..analysis.rematch import rematch_stage
 
-            points = read_stage_points(out_dir / "registered.parquet", changes[: level + 1])
+            points = read_stage_points(out_dir / "registered.parquet", changes[1 : level + 1], stage_id)
             rematch_stage(points, study.rematch, folder / "rematch.parquet")
     stats = [folder / "stats.json" for folder in folders]
     rematched = [folder / "rematch.parquet" for folder in folders] if study.rematch else []

@@ -26,9 +26,7 @@ from ..hypotheses.outcome import displacement, reasons_of_removed
 from ..hypotheses.outliers import carry_neighbours
 from ..hypotheses.steps import canonical_json, step_name
 from ..pair import RegisteredPair
-from ..stage_points import ROW, change_columns, with_rows
-
-NO_MITIGATION = "none"  # the hypothesis name of stage 0
+from ..stage_points import NO_MITIGATION, ROW, change_columns, with_rows
 
 
 @dataclass

@@ -5,14 +5,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from helpers.drive import drive_pair
 from helpers.ring_normals_reference import reference_ring_normals
 from lidarfield.hypotheses.ring_normals import ring_normals
 from lidarfield.poses import pose_from_xyzrpy
 from lidarfield.registration.matching import point_cloud
 from lidarfield.sensors.models import PRESETS
 from lidarfield.simulation.raycast import simulate_scan
-from lidarfield.simulation.scene import load_scene, scene_from_dict
-from lidarfield.simulation.trajectory import arc_trajectory
+from lidarfield.simulation.scene import scene_from_dict
 
 
 def test_the_ground_under_a_vlp16_gets_vertical_normals_and_a_wall_keeps_its_own():
@@ -62,25 +62,13 @@ def _equals_the_reference(xyz: np.ndarray, elevation_deg, k: int = 30) -> float:
 
 
 def test_the_fast_ring_normals_equal_the_plain_ones_on_a_simulated_80_channel_scan():
-    """Issue 27's drive (the paper intersection, the 80-channel sensor 3 m up, 3 m/s round the
-    centre, rolling shutter, 1 cm noise), its second frame: 87,000 points, every one with another
-    ring among its 30 nearest (most settled on their 8 nearest); among their 10 nearest about a
-    quarter have none, and take their rings' normals."""
-    frame = arc_trajectory([0, 0], 2.5, 0.0, 3.0, 10.0, 2, 3.0)[1]
-    model = PRESETS["paper-sim-80"]
-    xyz = simulate_scan(
-        load_scene("paper-intersection"),
-        model,
-        frame.pose,
-        time_s=0.1,
-        seed=2,
-        range_noise_m=0.01,
-        rolling_shutter=True,
-        linear_velocity_mps=frame.linear_velocity_mps,
-        angular_velocity_rps=frame.angular_velocity_rps,
-    ).xyz
-    assert _equals_the_reference(xyz, model.elevation_deg) == 0
-    assert 0.1 < _equals_the_reference(xyz, model.elevation_deg, k=10) < 0.5
+    """Issue 27's drive, its first frame (``helpers.drive``: 87,000 points): every point has
+    another ring among its 30 nearest (most settled on their 8 nearest); among their 10 nearest
+    about a quarter have none, and take their rings' normals."""
+    xyz = drive_pair().xyz1  # frame 0, its own sensor's frame
+    elevation_deg = PRESETS["paper-sim-80"].elevation_deg
+    assert _equals_the_reference(xyz, elevation_deg) == 0
+    assert 0.1 < _equals_the_reference(xyz, elevation_deg, k=10) < 0.5
 
 
 @pytest.mark.parametrize("name", ["Cloud1_ExpD.txt", "Cloud10_ExpD.txt"])

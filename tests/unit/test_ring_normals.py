@@ -84,3 +84,21 @@ def test_the_fast_ring_normals_equal_the_plain_ones_on_the_real_vlp16_scans(expd
     xyz = xyz[np.isfinite(xyz).all(axis=1)]
     xyz = xyz[np.abs(np.degrees(np.arctan2(xyz[:, 1], xyz[:, 0]))) <= sector_deg]
     assert 0.1 < _equals_the_reference(xyz, PRESETS["vlp16"].elevation_deg) < 0.5
+
+
+@pytest.mark.parametrize("k", [1, 2, 8, 9, 30, 1000])
+def test_the_fast_ring_normals_equal_the_plain_ones_for_any_number_of_neighbours(expd, k):
+    """A 6 deg sector of a real VLP-16 scan (65 points, channels with none or a few): from one
+    neighbour to more than the cloud has, within 1 mm (no point has another), 1 m and 20 m, the
+    same normals."""
+    from lidarfield.io import read_scan
+
+    xyz = read_scan(expd / "Cloud1_ExpD.txt").xyz
+    xyz = xyz[np.isfinite(xyz).all(axis=1)]
+    xyz = xyz[np.abs(np.degrees(np.arctan2(xyz[:, 1], xyz[:, 0]))) <= 3]
+    given = np.full_like(xyz, np.nan)
+    for radius_m in (0.001, 1.0, 20.0):
+        fast, plain = (
+            f(xyz, given, PRESETS["vlp16"].elevation_deg, radius_m, k) for f in (ring_normals, reference_ring_normals)
+        )
+        np.testing.assert_array_equal(fast, plain)

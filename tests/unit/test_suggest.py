@@ -148,6 +148,8 @@ def test_the_suggest_job_skips_default_candidates_that_cannot_apply(tmp_path, ca
         "suggest",
         "--registered",
         str(tmp_path / "registered.parquet"),
+        "--stage",
+        "00-none-00000000",
         "--candidates",
         json.dumps(candidates),
         "--grid",

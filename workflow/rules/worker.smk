@@ -2,11 +2,14 @@
 # stopped when the run ends (or at exit, when the run executes nothing): jobs then skip
 # Python's start and imports. With LIDARFIELD_WORKER=off every job is its own process. On a
 # SLURM cluster (profiles/slurm) each allocation's Snakemake starts one of its own.
-# The end of a run also cancels the scheduler's pending re-evaluation timers (see
-# lidarfield.runner.scheduling), which would otherwise hold the exit for up to a minute.
+# The scheduler keeps one pending re-evaluation timer, not one chain of them per job done, and
+# the end of a run cancels it (see lidarfield.runner.scheduling): it would otherwise hold the
+# exit for up to a minute.
 import gc
 
 from lidarfield.runner import launch, scheduling
+
+scheduling.coalesce_reevaluations()
 
 # Not in the Snakemake processes that run one job each (on a cluster node), nor when each job
 # runs in its rule's own software environment (--sdm conda / apptainer): the worker runs the

@@ -32,6 +32,9 @@ from study_time import job_seconds  # bench/study_time.py
 from timing import machine  # bench/timing.py
 
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "tests"))
+from helpers.drive import SIMULATION  # noqa: E402 (the drive, defined once with the tests' pair of it)
+
 APPENDED = {"crop": {"max_range_m": 60}}
 TIME = "/usr/bin/time"  # GNU time
 
@@ -41,24 +44,7 @@ def drive(pairs: int) -> dict:
         "results": "results",
         "sequences": {
             "drive": {
-                "simulate": {
-                    "scene": "paper-intersection",
-                    "sensor": "paper-sim-80",
-                    # 3 m/s round the crossing's centre, 10 frames a second: 0.3 m and 6.9 deg
-                    # from frame to frame, every pose at least 3.1 m from every building, so a
-                    # drive of any length sees the whole scene (a straight drive out of the
-                    # 26 m scene would see less and less of it, and nothing past its range)
-                    "trajectory": {
-                        "center_xy": [0, 0],
-                        "radius_m": 2.5,
-                        "start_angle_rad": 0,
-                        "speed_mps": 3,
-                        "rate_hz": 10,
-                        "frames": pairs + 1,
-                        "height_m": 3,
-                    },
-                    "options": {"rolling_shutter": True, "range_noise_m": 0.01},
-                },
+                "simulate": {**SIMULATION, "trajectory": {**SIMULATION["trajectory"], "frames": pairs + 1}},
                 "register": "truth",
             }
         },

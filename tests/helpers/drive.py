@@ -1,6 +1,7 @@
-"""The first pair of issue 27's drive (bench/drive.py): the paper intersection seen by the
-80-channel sensor 3 m up, driving at 3 m/s round the crossing's centre (radius 2.5 m), 10 frames
-a second, rolling shutter, 1 cm range noise; for the ring-normal tests and bench/ring_normals.py."""
+"""Issue 27's drive, defined once: the paper intersection seen by the 80-channel sensor 3 m up,
+driving at 3 m/s round the crossing's centre (radius 2.5 m), 10 frames a second, rolling
+shutter, 1 cm range noise. ``SIMULATION`` is its config entry (``bench/drive.py`` runs it through
+the workflow); ``drive_pair`` its first pair, for the ring-normal tests and bench/ring_normals.py."""
 
 from __future__ import annotations
 
@@ -11,22 +12,30 @@ from lidarfield.simulation.raycast import simulate_scan
 from lidarfield.simulation.scene import load_scene
 from lidarfield.simulation.trajectory import arc_trajectory
 
-RATE_HZ = 10.0
+# 3 m/s round the crossing's centre, 10 frames a second: 0.3 m and 6.9 deg from frame to frame,
+# every pose at least 3.1 m from every building, so a drive of any length sees the whole scene
+# (a straight drive out of the 26 m scene would see less and less of it, and nothing past its range).
+TRAJECTORY = {"center_xy": [0, 0], "radius_m": 2.5, "start_angle_rad": 0, "speed_mps": 3, "rate_hz": 10, "height_m": 3}
+OPTIONS = {"rolling_shutter": True, "range_noise_m": 0.01}
+SIMULATION = {"scene": "paper-intersection", "sensor": "paper-sim-80", "trajectory": TRAJECTORY, "options": OPTIONS}
 
 
 def drive_pair() -> RegisteredPair:
     """Frames 0 and 1 (about 87,000 points each), registered by the truth."""
-    scene, model = load_scene("paper-intersection"), PRESETS["paper-sim-80"]
-    frames = arc_trajectory([0, 0], 2.5, 0.0, 3.0, RATE_HZ, 2, 3.0)
+    scene, model = load_scene(SIMULATION["scene"]), PRESETS[SIMULATION["sensor"]]
+    t = TRAJECTORY
+    frames = arc_trajectory(
+        t["center_xy"], t["radius_m"], t["start_angle_rad"], t["speed_mps"], t["rate_hz"], 2, t["height_m"]
+    )
     scans = [
         simulate_scan(
             scene,
             model,
             frame.pose,
-            time_s=k / RATE_HZ,
+            time_s=k / t["rate_hz"],
             seed=k + 1,
-            range_noise_m=0.01,
-            rolling_shutter=True,
+            range_noise_m=OPTIONS["range_noise_m"],
+            rolling_shutter=OPTIONS["rolling_shutter"],
             linear_velocity_mps=frame.linear_velocity_mps,
             angular_velocity_rps=frame.angular_velocity_rps,
         )

@@ -112,8 +112,8 @@ def validate_config(
 # A study of up to this many pairs gets every pair's stage figures by default; a larger one
 # gets this many, evenly spaced (a drive's pairs are named in driving order).
 AUTO_PLOT_PAIRS = 12
-# The same for what to try next at the last stage. Its candidates fit corrections: more than
-# half of a drive's job time when every pair of 1,000 had them (bench/RESULTS.md), and the
+# The same for what to try next at the last stage. Its candidates fit corrections: 44% of a
+# 1,000-pair drive's job time when every pair had them (bench/RESULTS.md), and the
 # study's next steps need a spread of pairs, not every one.
 AUTO_SUGGEST_PAIRS = 100
 

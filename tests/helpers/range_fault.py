@@ -1,4 +1,4 @@
-"""The range-fault pair of ``tests/unit/test_range_calibration.py`` and ``bench/range_calibration.py``:
+"""The range-fault pair of ``tests/unit/test_range_calibration.py`` and ``bench/range_faults.py``:
 the paper's intersection seen twice by one sensor model from about the same place, 3 m up."""
 
 from __future__ import annotations

@@ -160,7 +160,7 @@ def test_a_fit_beyond_any_calibration_is_refused_not_applied():
 def test_the_field_after_it_is_the_fault_free_pairs_on_other_sensors(sensor, scale, offset):
     """Issue 35's case (an HDL-32E, scale 0.998 and -2 cm) and the grid's corners: the field's
     RMS after it within 20% of the fault-free pair's, on a grid whose elevation edges fall between
-    the channels. Measured on 2026-11-27 (bench/range_calibration.py: 72 cases on hdl32, vlp32c
+    the channels. Measured on 2026-11-27 (bench/range_faults.py: 72 cases on hdl32, vlp32c
     and vlp16): 0.98 to 1.02 of it, scale within 0.0004 and offset within 2.4 mm of the fault's."""
     settings = field_settings_from_config(OFF_CHANNEL_GRID)
     truth, faulty = (

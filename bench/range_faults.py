@@ -11,7 +11,7 @@ sensors (``[-20.5, 19.5]`` deg; the default's edges at -20, -12, -4 and +4 deg a
 channels, -4 a ``vlp32c`` one). The fault-free pair's own field is given too (the ratio's
 denominator), with ``range_calibration`` applied to it.
 
-Run: ``python bench/range_calibration.py [--sensors hdl32,vlp32c,vlp16] [--scales ...] [--offsets ...]``.
+Run: ``python bench/range_faults.py [--sensors hdl32,vlp32c,vlp16] [--scales ...] [--offsets ...]``.
 """
 
 from __future__ import annotations

@@ -9,7 +9,9 @@ disagreement says what a reference is worth). ``realign`` runs as the suggestion
 pair registered at the start (a transform), with both sensor models, default parameters. The
 registrations: ``register_pair`` with ``guess`` the start, default settings. ``--variants`` adds
 realign's diagnostic variants (without the sensor models: no ring normals and no refit on the
-shared points; without the refit only; 200 iterations; every point of cloud 2).
+shared points; 200 iterations; every point of cloud 2), and GICP, NDT and point-to-plane ICP on
+the points both sensors could see with sensor 2 where ``realign`` lands (the points its refit
+uses).
 
 Run: ``OMP_NUM_THREADS=1 python bench/realign_real.py [--variants] [--pairs expd,hdl32,...]``.
 """
@@ -37,6 +39,7 @@ from helpers.real_pairs import (  # noqa: E402 (the tests' pairs)
     real_pair,
     realigned,
     registered,
+    shared_pair,
 )
 
 
@@ -48,6 +51,8 @@ def runs(real, diagnose: bool) -> dict:
         out["realign, no models"] = lambda s: realigned(real, s, models=False)
         out["realign, 200 iterations"] = lambda s: realigned(real, s, {"max_iterations": 200})
         out["realign, all of cloud 2"] = lambda s: realigned(real, s, {"max_points": 10**7})
+        for m in REGISTRATIONS[:3]:  # on what both sensors saw, as realign's refit
+            out[f"{m} on the shared points"] = lambda s, m=m: registered(shared_pair(real, realigned(real, s)), m, s)
     return out
 
 

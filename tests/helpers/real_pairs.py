@@ -11,16 +11,17 @@ poses, from scan matching). None of the references is a truth: each is a registr
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
 
+from lidarfield.field.free_space import shared_points
 from lidarfield.hypotheses import apply_step
 from lidarfield.io import read_scan
 from lidarfield.io.pose_files import read_kitti_poses, read_pose
 from lidarfield.pair import RegisteredPair
-from lidarfield.poses import pose_from_xyzrpy, relative_pose
+from lidarfield.poses import apply_pose, pose_from_xyzrpy, relative_pose
 from lidarfield.registration import register_pair
 from lidarfield.scan import Scan
 from lidarfield.sensors.models import PRESETS
@@ -84,3 +85,11 @@ def realigned(real: RealPair, start: np.ndarray, params: dict | None = None, mod
     xyz2 = real.scan2.xyz @ start[:3, :3].T + start[:3, 3]
     pair = RegisteredPair(real.scan1.xyz, xyz2, start, model, model, registration={"method": "transform"})
     return apply_step(pair, {"realign": params or {}}).T_1_2
+
+
+def shared_pair(real: RealPair, T: np.ndarray) -> RealPair:
+    """``real`` cut to the points both sensors could see with sensor 2 at ``T`` (the field's
+    shared points, as ``realign``'s refit takes them)."""
+    model = PRESETS[real.sensor]
+    shared1, shared2 = shared_points(RegisteredPair(real.scan1.xyz, apply_pose(T, real.scan2.xyz), T, model, model))
+    return replace(real, scan1=real.scan1.subset(shared1), scan2=real.scan2.subset(shared2))

@@ -1,0 +1,29 @@
+"""``realign`` against the tool's registrations on real pairs started 0.3 m and 0.5 deg off their
+reference pose (``tests/helpers/real_pairs.py``; the full table: ``bench/realign_real.py``,
+docs/hypotheses.md)."""
+
+from __future__ import annotations
+
+import pytest
+
+from helpers.real_pairs import OFFSETS, point_distance_cm, real_pair, realigned, registered, shared_pair
+
+# Measured on 2026-11-27 from the "+x, yaw" start (cm from the reference, median point distance),
+# GICP, NDT, point-to-plane ICP and realign: hdl32 1.40, 3.97, 2.42 and 2.05; os1 0->1 2.22, 2.29,
+# 2.05 and 1.97. ExpD, whose sensors stood 3 m apart and saw half their points alone: on all
+# points 2.97, 8.76, 3.70 (realign 9.00); on the points both sensors saw, as realign's refit
+# takes them, 8.44, 9.14 and 9.18. The tolerance, 1 cm, is under half the distance between the
+# HDL-32E pair's two published references (2.2 cm): what a reference is worth.
+TOLERANCE_CM = 1.0
+SPREAD = ("gicp", "ndt", "icp_point_to_plane")
+
+
+@pytest.mark.parametrize("name, shared", [("hdl32", False), ("os1 0->1", False), ("expd", True)])
+def test_realign_lands_no_worse_than_the_best_registration(shared_data, name, shared):
+    real = real_pair(shared_data, name)
+    start = OFFSETS["+x, yaw"] @ real.reference
+    landed = realigned(real, start)
+    matched = shared_pair(real, landed) if shared else real
+    distance = {m: point_distance_cm(registered(matched, m, start), real.reference, real.scan2.xyz) for m in SPREAD}
+    own = point_distance_cm(landed, real.reference, real.scan2.xyz)
+    assert own <= min(distance.values()) + TOLERANCE_CM, (own, distance)

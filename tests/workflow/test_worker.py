@@ -362,18 +362,23 @@ def test_a_worker_stopped_while_importing_exits_at_once(tmp_path):
         assert "stopped" in log.read_text()
 
 
-def test_a_run_that_executes_nothing_stops_the_worker_it_started(tmp_path):
-    """Snakemake starts the worker while it plans (lidarfield.runner.launch.spawn); a dry run never
-    points a job at it, and stops it at exit: no worker process and no socket are left."""
+def test_a_run_with_nothing_to_do_stops_the_worker_it_started(tmp_path):
+    """Snakemake starts the worker as it plans a run (lidarfield.runner.launch.spawn_when_planning);
+    a run with nothing to do never points a job at it, and stops it at exit: no worker process
+    and no socket are left. (A dry run starts none: tests/workflow/test_command_line.py.)"""
     from helpers.workflow import snakemake, tiny_study, write_study
 
     write_study(tmp_path, tiny_study())
-    proc = snakemake(tmp_path, "--dry-run", "--cores", "1")
-    assert "Job stats" in proc.stdout
-    log = (tmp_path / "results" / "logs" / "worker.log").read_text()
-    started = [int(pid) for pid in re.findall(r"worker (\d+) (?:on|stopped)", log)]
-    assert started and "stopped" in log
-    assert not any(alive(pid) for pid in started)
+    # Everything omitted: the run plans the study, then has nothing to do.
+    proc = snakemake(tmp_path, "--cores", "1", "--omit-from", "simulate", "plotly_js")
+    assert "Nothing to be done" in proc.stdout + proc.stderr
+    assert (tmp_path / "results" / "logs" / "worker.log").exists()  # spawned (it may not have logged yet)
+    workers = [
+        cmdline
+        for cmdline in (p.read_bytes() for p in Path("/proc").glob("[0-9]*/cmdline") if p.exists())
+        if b"lidarfield.runner.server" in cmdline and str(tmp_path).encode() in cmdline
+    ]
+    assert workers == []
     assert not list((tmp_path / "results").glob(".worker-*.sock"))
 
 
@@ -383,7 +388,9 @@ def test_no_worker_when_jobs_run_in_their_own_software_environments(tmp_path):
     from helpers.workflow import snakemake, tiny_study, write_study
 
     write_study(tmp_path, tiny_study())
-    snakemake(tmp_path, "--dry-run", "--cores", "1", "--sdm", "conda", check=False)
+    # Everything omitted: the run plans the study (then, without conda, fails or has nothing to do).
+    proc = snakemake(tmp_path, "--cores", "1", "--sdm", "conda", "--omit-from", "simulate", "plotly_js", check=False)
+    assert "Building DAG of jobs" in proc.stdout + proc.stderr
     assert not (tmp_path / "results" / "logs" / "worker.log").exists()
 
 

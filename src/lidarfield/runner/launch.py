@@ -1,6 +1,7 @@
 """Starting and stopping the job worker of a workflow run (see :mod:`lidarfield.runner.server`).
 
-The workflow spawns it while Snakemake reads the Snakefile (its imports overlap the planning),
+The workflow spawns it when Snakemake starts planning a run that executes jobs here (its
+imports overlap the planning; a dry run, ``--lint``, ``--dag`` or ``--summary`` starts none),
 points the jobs at it when the run starts executing locally (``start``), and stops it when the
 run ends (``stop``). Inside a SLURM allocation (the ``slurm-allocation`` executor, whose one
 Snakemake runs a job group's jobs) it is started while Snakemake reads the Snakefile, since
@@ -66,12 +67,37 @@ _running: subprocess.Popen | None = None
 _socket: str | None = None
 
 
+def executes_here(workflow) -> bool:
+    """Whether Snakemake's ``workflow`` is set to run its jobs on this machine: not before it
+    knows (while it reads the Snakefile), not when it only reads (``--lint``) or prints the
+    plan (``--dag``, ``--summary``: no executor), nor for a dry run or ``--touch``."""
+    return workflow.executor_plugin is not None and workflow.local_exec and not (workflow.dryrun or workflow.touch)
+
+
+def spawn_when_planning(workflow, results: str | Path, figure_jobs: int = 0) -> None:
+    """Have Snakemake's ``workflow`` ``spawn`` the worker as it starts planning a run that
+    executes here (its imports overlap the planning): the first moment it knows whether the
+    run executes anything. A run that only reads or prints the workflow, or a dry run, starts
+    no process and writes nothing. Without that moment (another Snakemake), ``start`` spawns
+    the worker when the run starts."""
+    build_dag = getattr(workflow, "_build_dag", None)
+    if build_dag is None:
+        return
+
+    def spawn_then_build_dag():
+        if executes_here(workflow):
+            spawn(results, figure_jobs=figure_jobs)
+        return build_dag()
+
+    workflow._build_dag = spawn_then_build_dag
+
+
 def spawn(results: str | Path, idle_timeout_s: float = IDLE_TIMEOUT_S, figure_jobs: int = 0) -> subprocess.Popen | None:
     """Start this workflow run's worker importing, without pointing jobs at it yet: called
-    while Snakemake reads the Snakefile, its imports overlap Snakemake's planning. ``start``
-    then uses it; a run that executes nothing (a dry run, nothing to do) stops it at exit.
-    ``figure_jobs``: the study's stage-figure jobs, which decide the figure warm-up (see
-    ``WARM_UP_MIN_FIGURE_JOBS``). None when ``LIDARFIELD_WORKER=off``."""
+    when Snakemake starts planning (``spawn_when_planning``). ``start`` then uses it; a run
+    with nothing to do stops it at exit. ``figure_jobs``: the study's stage-figure jobs, which
+    decide the figure warm-up (see ``WARM_UP_MIN_FIGURE_JOBS``). None when
+    ``LIDARFIELD_WORKER=off``."""
     results = Path(results)
     return _spawn(results, LOCAL_RUN_STEM, results / "logs" / "worker.log", idle_timeout_s, figure_jobs)
 

@@ -15,6 +15,7 @@ import atexit
 import os
 import shutil
 import socket
+import stat
 import subprocess
 import sys
 import tempfile
@@ -41,22 +42,54 @@ HOST = socket.gethostname()
 LOCAL_RUN_STEM = ".worker"
 
 
-def socket_path(folder: str | Path, stem: str, owner_pid: int) -> str:
-    """The socket, in ``folder``, of the worker of the workflow run ``owner_pid`` on this host;
-    a relative path where the absolute one is too long for a Unix socket (108 bytes)."""
-    path = Path(folder).absolute() / f"{stem}-{HOST}-{owner_pid}.sock"
+SOCKET_NAME = "socket"
+
+
+def private_folder(folder: str | Path, stem: str, owner_pid: int) -> Path | None:
+    """A folder in ``folder`` that only this user can enter (0700) for the socket of the worker
+    of the workflow run ``owner_pid`` on this host: ``{stem}-{host}-{pid}``. None when one of
+    that name exists that is not this user's folder (in a shared temporary folder another user
+    could have made it): then there is no worker."""
+    path = Path(folder) / f"{stem}-{HOST}-{owner_pid}"
+    try:
+        path.mkdir(mode=0o700)
+    except FileExistsError:  # left by a killed run of the same process id, or not ours
+        status = path.lstat()
+        if not stat.S_ISDIR(status.st_mode) or status.st_uid != os.getuid():
+            return None
+        path.chmod(0o700)
+        (path / SOCKET_NAME).unlink(missing_ok=True)
+    return path
+
+
+def socket_path(private: str | Path) -> str:
+    """The worker's socket in its ``private`` folder; a relative path where the absolute one
+    is too long for a Unix socket (108 bytes)."""
+    path = Path(private).absolute() / SOCKET_NAME
     return str(path) if len(str(path)) < 100 else os.path.relpath(path)
 
 
+def remove_private_folder(private: Path) -> None:
+    """A worker's folder and its socket, if still there."""
+    (private / SOCKET_NAME).unlink(missing_ok=True)
+    try:
+        private.rmdir()
+    except FileNotFoundError:
+        pass
+
+
 def remove_stale_sockets(folder: Path, stem: str) -> None:
-    """This host's sockets in ``folder`` whose workflow run is gone (killed before it could stop
-    its worker). Another host's sockets are never touched: their PIDs mean nothing here."""
+    """This host's worker folders in ``folder`` whose workflow run is gone (killed before it
+    could stop its worker). Another host's are never touched: their PIDs mean nothing here."""
     prefix = f"{stem}-{HOST}-"
-    for path in folder.glob(f"{prefix}*.sock"):
+    for path in folder.glob(f"{prefix}*"):
         try:
-            os.kill(int(path.name[len(prefix) : -len(".sock")]), 0)
+            os.kill(int(path.name[len(prefix) :]), 0)
         except ProcessLookupError:
-            path.unlink(missing_ok=True)
+            try:
+                remove_private_folder(path)
+            except OSError:
+                pass  # not a worker's folder, or another user's: not ours to remove
         except (ValueError, PermissionError):
             pass
 
@@ -107,12 +140,16 @@ def _spawn(folder: Path, stem: str, log: Path, idle_timeout_s: float, figure_job
     global _running, _socket
     if ENV in os.environ and worker_socket() is None:
         return None
+    if not hasattr(socket, "SO_PEERCRED"):
+        return None  # the worker could not tell who connects (not Linux): jobs run as processes
     if _running is None:
         folder.mkdir(parents=True, exist_ok=True)
         log.parent.mkdir(parents=True, exist_ok=True)
         remove_stale_sockets(folder, stem)
-        _socket = socket_path(folder, stem, os.getpid())
-        Path(_socket).unlink(missing_ok=True)
+        private = private_folder(folder, stem, os.getpid())
+        if private is None:
+            return None
+        _socket = socket_path(private)
         env = {**os.environ, **{name: "1" for name in THREAD_VARS}}
         env.pop(ENV, None)
         with open(log, "a") as log_file:
@@ -201,3 +238,5 @@ def stop() -> None:
         worker.wait(timeout=10)
     except subprocess.TimeoutExpired:
         worker.kill()
+        worker.wait()
+    remove_private_folder(Path(_socket).parent)

@@ -343,8 +343,13 @@ def main(argv: list[str] | None = None) -> None:
     )
     parser.add_argument("--warm-up", action="store_true", help="draw a few figures between jobs first (runner.warm_up)")
     args = parser.parse_args(argv)
+    from ..cli import stderr_log_handler
+
     logging.basicConfig(
-        level=logging.INFO, format="%(asctime)s %(levelname)s %(name)s: %(message)s", datefmt="%H:%M:%S"
+        level=logging.INFO,
+        format="%(asctime)s %(levelname)s %(name)s: %(message)s",
+        datefmt="%H:%M:%S",
+        handlers=[stderr_log_handler()],  # its log is in the results folder, which can fill up
     )
     serve(args.socket, args.parent_pid, args.idle_timeout, args.warm_up)
 

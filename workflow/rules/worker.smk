@@ -1,7 +1,7 @@
 # A local run hands each job to a pre-imported worker (lidarfield.runner.server), started as the
 # run's planning starts and stopped when the run ends (or at exit, when it has nothing to do):
-# jobs then skip Python's start and imports. With LIDARFIELD_WORKER=off every job is its own process. On a
-# SLURM cluster (profiles/slurm) each allocation's Snakemake starts one of its own.
+# jobs then skip Python's start and imports. With LIDARFIELD_WORKER=off every job is its own
+# process. On a SLURM cluster (profiles/slurm) each allocation's Snakemake starts one of its own.
 # The scheduler keeps one pending re-evaluation timer, not one chain of them per job done, and
 # the end of a run cancels it (see lidarfield.runner.scheduling): it would otherwise hold the
 # exit for up to a minute.

@@ -307,10 +307,10 @@ def serve(socket_path: str, parent_pid: int, idle_timeout_s: float = IDLE_TIMEOU
     """Listen on ``socket_path`` at once (clients queue while the imports run), then serve."""
 
     def stop_while_importing(signum, frame):
-        # A dry run ends while the worker imports. Exit at once: an exception raised here, in
-        # the middle of a compiled module's import (Open3D's), comes out as that import
-        # failing ("initialization failed"), and the imports would go on. Worker.serve
-        # installs its own handler afterwards.
+        # A run with nothing to do ends while the worker imports. Exit at once: an exception
+        # raised here, in the middle of a compiled module's import (Open3D's), comes out as
+        # that import failing ("initialization failed"), and the imports would go on.
+        # Worker.serve installs its own handler afterwards.
         Path(socket_path).unlink(missing_ok=True)
         log.info("worker %d stopped while importing", os.getpid())
         os._exit(0)

@@ -1,8 +1,8 @@
 """The one error type of lidarfield.
 
-Every failure a user can cause (a bad file, a bad config, a hypothesis that breaks) raises a
-``LidarfieldError`` whose message names the thing at fault and the problem, so that the CLI
-and the workflow can print one readable line and exit non-zero.
+Every failure a user can cause (a bad file, a bad config, a hypothesis that breaks, a full
+disk) raises a ``LidarfieldError`` whose message names the thing at fault and the problem, so
+that the CLI and the workflow can print one readable line and exit non-zero.
 """
 
 from __future__ import annotations
@@ -33,6 +33,10 @@ class HypothesisError(LidarfieldError):
 class NotApplicableError(HypothesisError):
     """A hypothesis that cannot apply to this pair as it is (e.g. ``field_of_view`` without
     sensor models): an error in a stack, a skipped default candidate in the suggestions."""
+
+
+class StorageError(LidarfieldError):
+    """An output that could not be written: its file system is full or the user's quota spent."""
 
 
 class RegistrationError(LidarfieldError):

@@ -5,6 +5,7 @@ cluster (tests/workflow/test_slurm.py runs them on one)."""
 from __future__ import annotations
 
 import os
+import stat
 import subprocess
 import sys
 from types import SimpleNamespace
@@ -61,19 +62,45 @@ def ended_pid() -> int:
 
 def test_stale_socket_clean_up_removes_only_this_hosts_sockets_of_ended_runs(tmp_path):
     gone = ended_pid()
-    stale = tmp_path / f".worker-{launch.HOST}-{gone}.sock"
-    live = tmp_path / f".worker-{launch.HOST}-{os.getpid()}.sock"
-    other_host = tmp_path / f".worker-{launch.HOST}x-{gone}.sock"  # another node's, same PID
-    dashed_host = tmp_path / f".worker-{launch.HOST}-2-{gone}.sock"  # node "HOST-2"
-    other_stem = tmp_path / f"lidarfield-slurm-7-{launch.HOST}-{gone}.sock"
+    stale = tmp_path / f".worker-{launch.HOST}-{gone}"
+    live = tmp_path / f".worker-{launch.HOST}-{os.getpid()}"
+    other_host = tmp_path / f".worker-{launch.HOST}x-{gone}"  # another node's, same PID
+    dashed_host = tmp_path / f".worker-{launch.HOST}-2-{gone}"  # node "HOST-2"
+    other_stem = tmp_path / f"lidarfield-slurm-7-{launch.HOST}-{gone}"
     for path in (stale, live, other_host, dashed_host, other_stem):
-        path.touch()
+        path.mkdir()
+        (path / launch.SOCKET_NAME).touch()
     launch.remove_stale_sockets(tmp_path, launch.LOCAL_RUN_STEM)
     assert sorted(p.name for p in tmp_path.iterdir()) == sorted(
         p.name for p in (live, other_host, dashed_host, other_stem)
     )
 
 
-def test_a_socket_is_named_after_its_host_and_run(tmp_path):
-    path = launch.socket_path(tmp_path, "lidarfield-slurm-42", 1234)
-    assert path == str(tmp_path / f"lidarfield-slurm-42-{launch.HOST}-1234.sock")
+def test_a_socket_is_named_after_its_host_and_run_in_a_folder_of_its_own(tmp_path):
+    folder = launch.private_folder(tmp_path, "lidarfield-slurm-42", 1234)
+    assert launch.socket_path(folder) == str(tmp_path / f"lidarfield-slurm-42-{launch.HOST}-1234" / "socket")
+    assert stat.S_IMODE(folder.stat().st_mode) == 0o700
+    # A killed run's folder of the same process id is this user's: used again, made private again.
+    folder.chmod(0o755)
+    assert launch.private_folder(tmp_path, "lidarfield-slurm-42", 1234) == folder
+    assert stat.S_IMODE(folder.stat().st_mode) == 0o700
+
+
+def test_no_worker_folder_where_another_user_made_one_of_its_name(tmp_path):
+    """In a shared temporary folder another user could make the worker's folder first: the
+    worker is then not started (its jobs run as plain processes), never in their folder."""
+    theirs = tmp_path / f"lidarfield-slurm-42-{launch.HOST}-1234"
+    theirs.symlink_to(tmp_path)  # not a folder of its own (and lstat sees that)
+    assert launch.private_folder(tmp_path, "lidarfield-slurm-42", 1234) is None
+
+
+@pytest.mark.skipif(os.getuid() != 0, reason="needs root, to make a folder another user's")
+def test_no_worker_folder_in_another_users_folder_of_its_name(tmp_path):
+    import pwd
+
+    theirs = tmp_path / f"lidarfield-slurm-42-{launch.HOST}-1234"
+    theirs.mkdir()
+    theirs.chmod(0o777)
+    os.chown(theirs, pwd.getpwnam("nobody").pw_uid, -1)
+    assert launch.private_folder(tmp_path, "lidarfield-slurm-42", 1234) is None
+    assert stat.S_IMODE(theirs.stat().st_mode) == 0o777  # left as it is

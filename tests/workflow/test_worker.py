@@ -5,17 +5,22 @@ from __future__ import annotations
 
 import json
 import os
+import pwd
 import re
+import shutil
 import signal
 import socket
+import stat
 import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
 import pyarrow.parquet as pq
 import pytest
 
+from lidarfield.cli.worker_client import recv_message, send_message
 from lidarfield.hypotheses.steps import canonical_json
 from lidarfield.runner.launch import THREAD_VARS
 from lidarfield.study.config import validate_config
@@ -313,6 +318,88 @@ def test_without_a_reachable_worker_the_job_runs_in_process(tmp_path):
         (tmp_path / "plotly.min.js").unlink()
 
 
+def test_the_workers_socket_is_private_to_its_user_whatever_the_umask(tmp_path, monkeypatch):
+    """0600 in a new 0700 folder of the results folder, also under a group-shared cluster's umask
+    (002); the folder is removed when the worker stops."""
+    from lidarfield.runner import launch
+
+    monkeypatch.delenv("LIDARFIELD_WORKER", raising=False)
+    umask = os.umask(0o002)
+    try:
+        assert launch.start(tmp_path / "results") is not None
+    finally:
+        os.umask(umask)
+    try:
+        sock = Path(os.environ["LIDARFIELD_WORKER"]).absolute()
+        folder = sock.parent
+        assert stat.S_ISSOCK(sock.stat().st_mode)
+        assert stat.S_IMODE(sock.stat().st_mode) == 0o600
+        assert stat.S_IMODE(folder.lstat().st_mode) == 0o700 and folder.lstat().st_uid == os.getuid()
+        assert folder.parent == tmp_path / "results"
+    finally:
+        launch.stop()
+    assert sorted(p.name for p in (tmp_path / "results").iterdir()) == ["logs"]
+
+
+def connect_as(user: pwd.struct_passwd, sock: str, argv: list[str], cwd: Path) -> int:
+    """Send a job request to the worker on ``sock`` from a forked child running as ``user``:
+    0 when the worker closed the connection without starting the job, 1 when it started it,
+    2 when the child could not connect at all."""
+    pid = os.fork()
+    if pid == 0:
+        status = 3
+        try:
+            os.setgroups([])
+            os.setgid(user.pw_gid)
+            os.setuid(user.pw_uid)
+            client = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+            try:
+                client.connect(sock)
+            except OSError:
+                os._exit(2)
+            try:
+                socket.send_fds(client, [b"J"], [0, 1, 2])
+                send_message(client, {"argv": argv, "cwd": str(cwd), "env": dict(os.environ)})
+                recv_message(client)
+                status = 1
+            except (OSError, EOFError):
+                status = 0
+        finally:
+            os._exit(status)
+    return os.waitstatus_to_exitcode(os.waitpid(pid, 0)[1])
+
+
+@pytest.mark.skipif(os.getuid() != 0, reason="needs root, to connect as another user")
+def test_the_worker_refuses_another_users_requests(tmp_path):
+    """Even with its socket opened to everyone (a folder and socket anyone may use), the worker
+    serves no other user: it checks the peer's user id before reading the request."""
+    nobody = pwd.getpwnam("nobody")
+    shared = Path(tempfile.mkdtemp(prefix="lidarfield-shared-"))  # outside pytest's 0700 folders
+    try:
+        shared.chmod(0o777)
+        sock = shared / "w.sock"
+        with open(tmp_path / "worker.log", "w") as log:
+            proc = start_worker(sock, log)
+        try:
+            sock.chmod(0o666)
+            request = ["job", "plotly-js", "--out", str(shared / "theirs.js")]
+            assert connect_as(nobody, str(sock), request, shared) == 0
+            assert not (shared / "theirs.js").exists()
+            wait_for(lambda: "refused" in (tmp_path / "worker.log").read_text(), timeout=30)
+            assert (
+                f"refused a connection from another user (uid {nobody.pw_uid}," in (tmp_path / "worker.log").read_text()
+            )
+            # The worker's own user is served as before.
+            log = tmp_path / "ours.log"
+            assert start_job(["plotly-js", "--out", "ours.js"], shared, str(sock), log).wait(timeout=60) == 0
+            assert re.search(r"job \d+ plotly-js: \{'exit': 0\}", (tmp_path / "worker.log").read_text())
+        finally:
+            proc.terminate()
+            proc.wait(timeout=30)
+    finally:
+        shutil.rmtree(shared)
+
+
 def test_the_client_imports_none_of_the_numeric_libraries(tmp_path, worker):
     _, sock = worker
     code = (
@@ -362,19 +449,24 @@ def test_a_worker_stopped_while_importing_exits_at_once(tmp_path):
         assert "stopped" in log.read_text()
 
 
-def test_a_run_that_executes_nothing_stops_the_worker_it_started(tmp_path):
-    """Snakemake starts the worker while it plans (lidarfield.runner.launch.spawn); a dry run never
-    points a job at it, and stops it at exit: no worker process and no socket are left."""
+def test_a_run_with_nothing_to_do_stops_the_worker_it_started(tmp_path):
+    """Snakemake starts the worker as it plans a run (lidarfield.runner.launch.spawn_when_planning);
+    a run with nothing to do never points a job at it, and stops it at exit: no worker process
+    and no socket are left. (A dry run starts none: tests/workflow/test_command_line.py.)"""
     from helpers.workflow import snakemake, tiny_study, write_study
 
     write_study(tmp_path, tiny_study())
-    proc = snakemake(tmp_path, "--dry-run", "--cores", "1")
-    assert "Job stats" in proc.stdout
-    log = (tmp_path / "results" / "logs" / "worker.log").read_text()
-    started = [int(pid) for pid in re.findall(r"worker (\d+) (?:on|stopped)", log)]
-    assert started and "stopped" in log
-    assert not any(alive(pid) for pid in started)
-    assert not list((tmp_path / "results").glob(".worker-*.sock"))
+    # Everything omitted: the run plans the study, then has nothing to do.
+    proc = snakemake(tmp_path, "--cores", "1", "--omit-from", "simulate", "plotly_js")
+    assert "Nothing to be done" in proc.stdout + proc.stderr
+    assert (tmp_path / "results" / "logs" / "worker.log").exists()  # spawned (it may not have logged yet)
+    workers = [
+        cmdline
+        for cmdline in (p.read_bytes() for p in Path("/proc").glob("[0-9]*/cmdline") if p.exists())
+        if b"lidarfield.runner.server" in cmdline and str(tmp_path).encode() in cmdline
+    ]
+    assert workers == []
+    assert not list((tmp_path / "results").glob(".worker-*"))
 
 
 def test_no_worker_when_jobs_run_in_their_own_software_environments(tmp_path):
@@ -383,7 +475,9 @@ def test_no_worker_when_jobs_run_in_their_own_software_environments(tmp_path):
     from helpers.workflow import snakemake, tiny_study, write_study
 
     write_study(tmp_path, tiny_study())
-    snakemake(tmp_path, "--dry-run", "--cores", "1", "--sdm", "conda", check=False)
+    # Everything omitted: the run plans the study (then, without conda, fails or has nothing to do).
+    proc = snakemake(tmp_path, "--cores", "1", "--sdm", "conda", "--omit-from", "simulate", "plotly_js", check=False)
+    assert "Building DAG of jobs" in proc.stdout + proc.stderr
     assert not (tmp_path / "results" / "logs" / "worker.log").exists()
 
 

@@ -4,8 +4,9 @@ import inspect
 import sys
 from pathlib import Path
 
+import yaml
 from snakemake.common import overwrite_function_params
-from snakemake.utils import min_version
+from snakemake.utils import min_version, update_config
 
 import lidarfield.study.config
 from lidarfield.hypotheses.steps import canonical_json
@@ -21,11 +22,32 @@ min_version("9.0")
 gc.disable()
 
 
-# The default study, unless the user names one with --configfile (the directive would merge
-# the default's pairs into theirs).
-if not config:
+# The default study, with the keys of --config on top (Snakemake's convention: `--config
+# results=DIR`, or a nested key such as `grid="{azimuth_bins: 18}"`, changes only that key). A
+# study named with --configfile replaces it: the directive would merge the default's pairs
+# into theirs.
+if not workflow.overwrite_configfiles:
 
     configfile: "config/config.yaml"
+
+
+def nested_config_overrides(config_args):
+    """The nested values of --config's key=value pairs, read as YAML: Snakemake reads them with
+    YAML's base loader, which leaves every number in `grid={azimuth_bins: 18}` a string.
+    """
+    overrides = {}
+    for arg in config_args or ():
+        key, _, value = arg.partition("=")
+        try:
+            parsed = yaml.safe_load(value)
+        except yaml.YAMLError:
+            continue  # Snakemake's reading (a string) stands
+        if isinstance(parsed, (dict, list)):
+            overrides[key] = parsed
+    return overrides
+
+
+update_config(config, nested_config_overrides(workflow.config_settings.config_args))
 
 
 # Validated once against workflow/schemas/config.schema.yaml, with defaults filled in: the

@@ -1,7 +1,7 @@
-# A local run hands each job to a pre-imported worker (lidarfield.runner.server), started here and
-# stopped when the run ends (or at exit, when the run executes nothing): jobs then skip
-# Python's start and imports. With LIDARFIELD_WORKER=off every job is its own process. On a
-# SLURM cluster (profiles/slurm) each allocation's Snakemake starts one of its own.
+# A local run hands each job to a pre-imported worker (lidarfield.runner.server), started as the
+# run's planning starts and stopped when the run ends (or at exit, when it has nothing to do):
+# jobs then skip Python's start and imports. With LIDARFIELD_WORKER=off every job is its own
+# process. On a SLURM cluster (profiles/slurm) each allocation's Snakemake starts one of its own.
 # The scheduler keeps one pending re-evaluation timer, not one chain of them per job done, and
 # the end of a run cancels it (see lidarfield.runner.scheduling): it would otherwise hold the
 # exit for up to a minute.
@@ -16,10 +16,13 @@ scheduling.coalesce_reevaluations()
 # jobs with its own imports, those of the environment Snakemake runs in.
 NO_DEPLOYMENT = not workflow.deployment_settings.deployment_method
 USE_WORKER = workflow.is_main_process and NO_DEPLOYMENT
-# Started importing now, while Snakemake plans: the run's first jobs need not wait for it. It
+# Started importing as Snakemake starts planning a run that executes jobs here, so the run's
+# first jobs need not wait for it; a dry run, --lint, --dag or --summary starts nothing. It
 # warms up for the figures when the study draws enough of them.
 if USE_WORKER:
-    launch.spawn(RESULTS, figure_jobs=sum(len(STAGES[pair]) for pair in PLOT_PAIRS))
+    launch.spawn_when_planning(
+        workflow, RESULTS, figure_jobs=sum(len(STAGES[pair]) for pair in PLOT_PAIRS)
+    )
 # The one Snakemake of a SLURM allocation (profiles/slurm) runs a batch of jobs: its worker
 # starts now, as hooks do not run there. The batch's jobs are its command line's
 # --target-jobs (RULE:WILDCARDS), which Snakemake has not parsed yet.
@@ -32,10 +35,10 @@ elif NO_DEPLOYMENT and launch.in_allocation(workflow.remote_exec):
 onstart:
     gc.freeze()  # the plan, out of the collections of the run (see common.smk)
     gc.enable()
-    if USE_WORKER and workflow.local_exec:
+    if USE_WORKER and launch.executes_here(workflow):
         launch.start(RESULTS)
     else:
-        launch.stop()  # jobs run on cluster nodes or in their own environments
+        launch.stop()  # jobs run on cluster nodes, in their own environments, or not (--touch)
 
 
 onsuccess:

@@ -39,11 +39,29 @@ def main(argv: list[str] | None = None) -> int:
     return run_in_process(argv)
 
 
+def stderr_log_handler():
+    """Log lines to stderr; one that finds no room (a job's log is on the disk that filled up)
+    is dropped quietly, not reported with a traceback: the command's one error line says what
+    happened."""
+    import logging
+
+    from ..io.atomic import NO_ROOM
+
+    class StderrHandler(logging.StreamHandler):
+        def handleError(self, record):
+            error = sys.exc_info()[1]
+            if not (isinstance(error, OSError) and error.errno in NO_ROOM):
+                super().handleError(record)
+
+    return StderrHandler()
+
+
 def run_in_process(argv: list[str]) -> int:
     """``lidarfield ARGV`` in this process."""
     import logging
 
     from ..errors import LidarfieldError
+    from ..io.atomic import storage_error
 
     parser = build_parser()
     args = parser.parse_args(argv)
@@ -51,11 +69,15 @@ def run_in_process(argv: list[str]) -> int:
         level=logging.DEBUG if args.verbose else logging.INFO,
         format="%(asctime)s %(levelname)s %(name)s: %(message)s",
         datefmt="%H:%M:%S",
+        handlers=[stderr_log_handler()],
     )
     try:
         return args.func(args) or 0
-    except LidarfieldError as e:
-        print(f"lidarfield {args.command}: error: {e}", file=sys.stderr)
+    except (LidarfieldError, OSError) as e:
+        error = e if isinstance(e, LidarfieldError) else storage_error(e)
+        if error is None:
+            raise
+        print(f"lidarfield {args.command}: error: {error}", file=sys.stderr)
         return 2
 
 

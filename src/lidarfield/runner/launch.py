@@ -1,6 +1,7 @@
 """Starting and stopping the job worker of a workflow run (see :mod:`lidarfield.runner.server`).
 
-The workflow spawns it while Snakemake reads the Snakefile (its imports overlap the planning),
+The workflow spawns it when Snakemake starts planning a run that executes jobs here (its
+imports overlap the planning; a dry run, ``--lint``, ``--dag`` or ``--summary`` starts none),
 points the jobs at it when the run starts executing locally (``start``), and stops it when the
 run ends (``stop``). Inside a SLURM allocation (the ``slurm-allocation`` executor, whose one
 Snakemake runs a job group's jobs) it is started while Snakemake reads the Snakefile, since
@@ -14,6 +15,7 @@ import atexit
 import os
 import shutil
 import socket
+import stat
 import subprocess
 import sys
 import tempfile
@@ -40,22 +42,54 @@ HOST = socket.gethostname()
 LOCAL_RUN_STEM = ".worker"
 
 
-def socket_path(folder: str | Path, stem: str, owner_pid: int) -> str:
-    """The socket, in ``folder``, of the worker of the workflow run ``owner_pid`` on this host;
-    a relative path where the absolute one is too long for a Unix socket (108 bytes)."""
-    path = Path(folder).absolute() / f"{stem}-{HOST}-{owner_pid}.sock"
+SOCKET_NAME = "socket"
+
+
+def private_folder(folder: str | Path, stem: str, owner_pid: int) -> Path | None:
+    """A folder in ``folder`` that only this user can enter (0700) for the socket of the worker
+    of the workflow run ``owner_pid`` on this host: ``{stem}-{host}-{pid}``. None when one of
+    that name exists that is not this user's folder (in a shared temporary folder another user
+    could have made it): then there is no worker."""
+    path = Path(folder) / f"{stem}-{HOST}-{owner_pid}"
+    try:
+        path.mkdir(mode=0o700)
+    except FileExistsError:  # left by a killed run of the same process id, or not ours
+        status = path.lstat()
+        if not stat.S_ISDIR(status.st_mode) or status.st_uid != os.getuid():
+            return None
+        path.chmod(0o700)
+        (path / SOCKET_NAME).unlink(missing_ok=True)
+    return path
+
+
+def socket_path(private: str | Path) -> str:
+    """The worker's socket in its ``private`` folder; a relative path where the absolute one
+    is too long for a Unix socket (108 bytes)."""
+    path = Path(private).absolute() / SOCKET_NAME
     return str(path) if len(str(path)) < 100 else os.path.relpath(path)
 
 
+def remove_private_folder(private: Path) -> None:
+    """A worker's folder and its socket, if still there."""
+    (private / SOCKET_NAME).unlink(missing_ok=True)
+    try:
+        private.rmdir()
+    except FileNotFoundError:
+        pass
+
+
 def remove_stale_sockets(folder: Path, stem: str) -> None:
-    """This host's sockets in ``folder`` whose workflow run is gone (killed before it could stop
-    its worker). Another host's sockets are never touched: their PIDs mean nothing here."""
+    """This host's worker folders in ``folder`` whose workflow run is gone (killed before it
+    could stop its worker). Another host's are never touched: their PIDs mean nothing here."""
     prefix = f"{stem}-{HOST}-"
-    for path in folder.glob(f"{prefix}*.sock"):
+    for path in folder.glob(f"{prefix}*"):
         try:
-            os.kill(int(path.name[len(prefix) : -len(".sock")]), 0)
+            os.kill(int(path.name[len(prefix) :]), 0)
         except ProcessLookupError:
-            path.unlink(missing_ok=True)
+            try:
+                remove_private_folder(path)
+            except OSError:
+                pass  # not a worker's folder, or another user's: not ours to remove
         except (ValueError, PermissionError):
             pass
 
@@ -66,12 +100,37 @@ _running: subprocess.Popen | None = None
 _socket: str | None = None
 
 
+def executes_here(workflow) -> bool:
+    """Whether Snakemake's ``workflow`` is set to run its jobs on this machine: not before it
+    knows (while it reads the Snakefile), not when it only reads (``--lint``) or prints the
+    plan (``--dag``, ``--summary``: no executor), nor for a dry run or ``--touch``."""
+    return workflow.executor_plugin is not None and workflow.local_exec and not (workflow.dryrun or workflow.touch)
+
+
+def spawn_when_planning(workflow, results: str | Path, figure_jobs: int = 0) -> None:
+    """Have Snakemake's ``workflow`` ``spawn`` the worker as it starts planning a run that
+    executes here (its imports overlap the planning): the first moment it knows whether the
+    run executes anything. A run that only reads or prints the workflow, or a dry run, starts
+    no process and writes nothing. Without that moment (another Snakemake), ``start`` spawns
+    the worker when the run starts."""
+    build_dag = getattr(workflow, "_build_dag", None)
+    if build_dag is None:
+        return
+
+    def spawn_then_build_dag():
+        if executes_here(workflow):
+            spawn(results, figure_jobs=figure_jobs)
+        return build_dag()
+
+    workflow._build_dag = spawn_then_build_dag
+
+
 def spawn(results: str | Path, idle_timeout_s: float = IDLE_TIMEOUT_S, figure_jobs: int = 0) -> subprocess.Popen | None:
     """Start this workflow run's worker importing, without pointing jobs at it yet: called
-    while Snakemake reads the Snakefile, its imports overlap Snakemake's planning. ``start``
-    then uses it; a run that executes nothing (a dry run, nothing to do) stops it at exit.
-    ``figure_jobs``: the study's stage-figure jobs, which decide the figure warm-up (see
-    ``WARM_UP_MIN_FIGURE_JOBS``). None when ``LIDARFIELD_WORKER=off``."""
+    when Snakemake starts planning (``spawn_when_planning``). ``start`` then uses it; a run
+    with nothing to do stops it at exit. ``figure_jobs``: the study's stage-figure jobs, which
+    decide the figure warm-up (see ``WARM_UP_MIN_FIGURE_JOBS``). None when
+    ``LIDARFIELD_WORKER=off``."""
     results = Path(results)
     return _spawn(results, LOCAL_RUN_STEM, results / "logs" / "worker.log", idle_timeout_s, figure_jobs)
 
@@ -81,12 +140,16 @@ def _spawn(folder: Path, stem: str, log: Path, idle_timeout_s: float, figure_job
     global _running, _socket
     if ENV in os.environ and worker_socket() is None:
         return None
+    if not hasattr(socket, "SO_PEERCRED"):
+        return None  # the worker could not tell who connects (not Linux): jobs run as processes
     if _running is None:
         folder.mkdir(parents=True, exist_ok=True)
         log.parent.mkdir(parents=True, exist_ok=True)
         remove_stale_sockets(folder, stem)
-        _socket = socket_path(folder, stem, os.getpid())
-        Path(_socket).unlink(missing_ok=True)
+        private = private_folder(folder, stem, os.getpid())
+        if private is None:
+            return None
+        _socket = socket_path(private)
         env = {**os.environ, **{name: "1" for name in THREAD_VARS}}
         env.pop(ENV, None)
         with open(log, "a") as log_file:
@@ -175,3 +238,5 @@ def stop() -> None:
         worker.wait(timeout=10)
     except subprocess.TimeoutExpired:
         worker.kill()
+        worker.wait()
+    remove_private_folder(Path(_socket).parent)

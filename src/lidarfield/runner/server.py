@@ -7,9 +7,12 @@ takes the job's stdin/stdout/stderr, working directory and environment and runs 
 job ...`` in-process, so a crash or a kill stays in its job. It reports the child's exit status
 (or the signal that killed it) to the client, and kills the child if the client goes away.
 
-The workflow starts one worker per run while Snakemake reads the Snakefile, points the jobs
-at it when the run starts executing locally, with its socket in the results folder named after
-the Snakemake process, and stops it when the run ends (:mod:`lidarfield.runner.launch`). The
+The workflow starts one worker per run as Snakemake plans it, points the jobs at it when the
+run starts executing locally, with its socket in a folder of the results folder named after the
+Snakemake process, and stops it when the run ends (:mod:`lidarfield.runner.launch`). Only the
+user who runs the workflow can reach the socket (0600, in a 0700 folder), and the worker
+serves only that user's processes (their user id, from the kernel): a job runs a hypothesis's
+plugin code, so another user's request would run their code as this user. The
 worker also exits when the process that started it is gone, or after ``idle_timeout_s``
 without a job. Its log, with each job's CPU time and peak memory (which
 Snakemake's benchmark files cannot see), is ``results/logs/worker.log``. What only later jobs
@@ -32,6 +35,7 @@ import os
 import selectors
 import signal
 import socket
+import struct
 import sys
 import time
 import traceback
@@ -140,6 +144,13 @@ class Worker:
 
     def accept(self) -> None:
         conn, _ = self.listener.accept()
+        peer_pid, peer_uid = peer_credentials(conn)
+        if peer_uid != os.getuid():
+            # A job can load a plugin: running another user's request would run their code as
+            # this user. Refused before reading anything of it.
+            log.warning("refused a connection from another user (uid %d, pid %d)", peer_uid, peer_pid)
+            conn.close()
+            return
         try:
             conn.settimeout(10.0)  # a client sends its request at once: never block the loop long
             _, fds, _, _ = socket.recv_fds(conn, 1, 3)
@@ -239,6 +250,14 @@ class Worker:
             conn.close()
 
 
+def peer_credentials(conn: socket.socket) -> tuple[int, int]:
+    """The process id and user id of the process at the other end of ``conn`` (a Unix socket),
+    as the kernel saw them when it connected (``SO_PEERCRED``)."""
+    credentials = struct.Struct("iII")  # struct ucred: pid_t pid, uid_t uid, gid_t gid
+    pid, uid, _ = credentials.unpack(conn.getsockopt(socket.SOL_SOCKET, socket.SO_PEERCRED, credentials.size))
+    return pid, uid
+
+
 def run_job(argv: list[str]) -> int:
     """``lidarfield ARGV`` in this process, with the exit status ``python -m lidarfield`` gives."""
     from ..cli import run_in_process
@@ -288,17 +307,21 @@ def serve(socket_path: str, parent_pid: int, idle_timeout_s: float = IDLE_TIMEOU
     """Listen on ``socket_path`` at once (clients queue while the imports run), then serve."""
 
     def stop_while_importing(signum, frame):
-        # A dry run ends while the worker imports. Exit at once: an exception raised here, in
-        # the middle of a compiled module's import (Open3D's), comes out as that import
-        # failing ("initialization failed"), and the imports would go on. Worker.serve
-        # installs its own handler afterwards.
+        # A run with nothing to do ends while the worker imports. Exit at once: an exception
+        # raised here, in the middle of a compiled module's import (Open3D's), comes out as
+        # that import failing ("initialization failed"), and the imports would go on.
+        # Worker.serve installs its own handler afterwards.
         Path(socket_path).unlink(missing_ok=True)
         log.info("worker %d stopped while importing", os.getpid())
         os._exit(0)
 
     signal.signal(signal.SIGTERM, stop_while_importing)
     listener = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
-    listener.bind(socket_path)
+    umask = os.umask(0o177)  # the socket made 0600, with no moment of another mode
+    try:
+        listener.bind(socket_path)
+    finally:
+        os.umask(umask)
     try:
         listener.listen(socket.SOMAXCONN)
         started = time.perf_counter()
@@ -320,8 +343,13 @@ def main(argv: list[str] | None = None) -> None:
     )
     parser.add_argument("--warm-up", action="store_true", help="draw a few figures between jobs first (runner.warm_up)")
     args = parser.parse_args(argv)
+    from ..cli import stderr_log_handler
+
     logging.basicConfig(
-        level=logging.INFO, format="%(asctime)s %(levelname)s %(name)s: %(message)s", datefmt="%H:%M:%S"
+        level=logging.INFO,
+        format="%(asctime)s %(levelname)s %(name)s: %(message)s",
+        datefmt="%H:%M:%S",
+        handlers=[stderr_log_handler()],  # its log is in the results folder, which can fill up
     )
     serve(args.socket, args.parent_pid, args.idle_timeout, args.warm_up)
 

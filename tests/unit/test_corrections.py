@@ -21,7 +21,7 @@ from lidarfield.registration import register_pair
 from lidarfield.sensors.models import PRESETS
 from lidarfield.simulation.raycast import simulate_scan
 from lidarfield.simulation.scene import load_scene
-from lidarfield.stage_points import CHANGES, read_stage_points
+from lidarfield.storage.stage_points import CHANGES, read_stage_points
 from lidarfield.study.jobs import stack_jobs
 from lidarfield.study.stack import apply_stack
 from lidarfield.study.summary import CORRECTION_COLUMNS, write_summary

@@ -14,7 +14,7 @@ from lidarfield.registration import register_pair
 from lidarfield.sensors.models import PRESETS
 from lidarfield.simulation.raycast import simulate_scan
 from lidarfield.simulation.scene import load_scene
-from lidarfield.stage_points import CHANGES, read_stage_points, stage_files
+from lidarfield.storage.stage_points import CHANGES, read_stage_points, stage_files
 from lidarfield.study.jobs import write_stage
 from lidarfield.study.stack import apply_stack
 

@@ -21,7 +21,7 @@ from lidarfield.poses import pose_from_xyzrpy
 from lidarfield.sensors.models import PRESETS
 from lidarfield.simulation.raycast import simulate_scan
 from lidarfield.simulation.scene import load_scene
-from lidarfield.stage_points import CHANGES, read_stage_points, stage_files
+from lidarfield.storage.stage_points import CHANGES, read_stage_points, stage_files
 from lidarfield.study.config import load_config
 from lidarfield.study.jobs import field_stage, mitigate_stage
 from lidarfield.study.run import run_pair

@@ -197,7 +197,7 @@ def reference_pose(meta: dict) -> tuple[np.ndarray, str]:
 
 def rematch_stage(points: tuple[RegisteredPair, dict], settings: dict, out: str | Path) -> dict[str, np.ndarray]:
     """Rematch a stage's survivors (its points and their metadata, as
-    :func:`~lidarfield.stage_points.read_stage_points` reads them) and write ``rematch.parquet``."""
+    :func:`~lidarfield.storage.stage_points.read_stage_points` reads them) and write ``rematch.parquet``."""
     pair, meta = points
     reference, kind = reference_pose(meta)
     # The survivors of scan 2 are in frame 1 by the study's T_1_2: back to sensor 2's frame.

@@ -243,7 +243,7 @@ def suggest_stage(
     defaults: bool = False,
 ) -> dict[str, np.ndarray]:
     """``suggestions.parquet`` of a stage from its points and their metadata (as
-    :func:`~lidarfield.stage_points.read_stage_points` reads them); returns the table."""
+    :func:`~lidarfield.storage.stage_points.read_stage_points` reads them); returns the table."""
     pair, meta = points
     table = suggestions(pair, field_settings_from_config(grid_section), candidates, base_dir, grid_section, defaults)
     write_suggestions(out, table, meta.get("stage"), candidates, grid_section)

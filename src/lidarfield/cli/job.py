@@ -206,7 +206,7 @@ def _field(args: argparse.Namespace) -> None:
 
 def _suggest(args: argparse.Namespace) -> None:
     from ..analysis.suggest import suggest_stage
-    from ..stage_points import read_stage_points
+    from ..storage.stage_points import read_stage_points
 
     suggest_stage(
         read_stage_points(args.registered, args.stage_changes, args.stage),
@@ -219,7 +219,7 @@ def _suggest(args: argparse.Namespace) -> None:
 
 def _rematch(args: argparse.Namespace) -> None:
     from ..analysis.rematch import rematch_stage
-    from ..stage_points import read_stage_points
+    from ..storage.stage_points import read_stage_points
 
     rematch_stage(read_stage_points(args.registered, args.stage_changes, args.stage), args.settings, args.out)
 

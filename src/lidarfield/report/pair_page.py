@@ -17,11 +17,11 @@ from pathlib import Path
 
 from .. import __version__
 from ..analysis.findings import findings_items, stage_findings
-from ..layout import level_of
 from ..plots import stage_figures
 from ..plots.pair_stats import pair_figure_png
 from ..plots.png import compact_png
 from ..plots.settings import PlotSettings, plot_settings
+from ..storage.layout import level_of
 from ..study.summary import LABEL_SCORES
 from .budget import Figure, Note, budget_mb, file_figure, write_within_budget
 from .page import esc, relative_href, table

@@ -24,7 +24,7 @@ from ..pair import write_pair
 from ..scan import Scan
 from ..sensors.fit import log_fit
 from ..sensors.models import sensor_model
-from ..stage_points import CHANGES, read_stage_points, write_changes
+from ..storage.stage_points import CHANGES, read_stage_points, write_changes
 from .stack import Stage, next_stage
 from .summary import summary_row
 

@@ -14,11 +14,11 @@ from ..io.atomic import write_text
 from ..pair import RegisteredPair, write_pair
 from ..scan import Scan
 from ..sensors.fit import log_fit
-from ..stage_points import CHANGES, read_stage_points
+from ..storage.stage_ids import stage_ids
+from ..storage.stage_points import CHANGES, read_stage_points
 from .jobs import field_stage, write_stage
 from .pairs import recorded_scan_spec
 from .stack import apply_stack
-from .stage_ids import stage_ids
 from .summary import read_stats, write_summary
 
 log = logging.getLogger(__name__)

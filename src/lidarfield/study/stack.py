@@ -10,7 +10,7 @@ corrected pose; its removed points are as they were. Every stage's survivors car
 (an attribute of both clouds): the point's row among its cloud's points in the registered
 pair. Stage 0 numbers them 0..N-1; every later stage keeps the rows of its survivors, whatever
 it moved. A stage is stored as what it changed (its ``changes``, by these rows): see
-:mod:`lidarfield.stage_points`.
+:mod:`lidarfield.storage.stage_points`.
 """
 
 from __future__ import annotations
@@ -26,7 +26,7 @@ from ..hypotheses.outcome import displacement, reasons_of_removed
 from ..hypotheses.outliers import carry_neighbours
 from ..hypotheses.steps import canonical_json, step_name
 from ..pair import RegisteredPair
-from ..stage_points import NO_MITIGATION, ROW, change_columns, with_rows
+from ..storage.stage_points import NO_MITIGATION, ROW, change_columns, with_rows
 
 
 @dataclass
@@ -45,7 +45,7 @@ class Stage:
     displacement1: tuple[float, float] = (0.0, 0.0)
     displacement2: tuple[float, float] = (0.0, 0.0)
     reasons: np.ndarray | None = None  # why each removed point went (cloud 1's, then 2's); None: not said
-    # the stage's changes.parquet rows: what it removed and moved (see lidarfield.stage_points)
+    # the stage's changes.parquet rows: what it removed and moved (see lidarfield.storage.stage_points)
     changes: dict[str, np.ndarray] = field(default_factory=dict)
 
     @property

@@ -13,9 +13,9 @@ from ..analysis.tags import TAGS
 from ..errors import InputError
 from ..hypotheses.steps import canonical_json
 from ..io.atomic import atomic_path, write_text
-from ..layout import level_of
 from ..pair import RegisteredPair
 from ..sensors.fit import fit_warning
+from ..storage.layout import level_of
 
 if TYPE_CHECKING:
     import pandas as pd

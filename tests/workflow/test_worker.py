@@ -16,8 +16,8 @@ from pathlib import Path
 import pyarrow.parquet as pq
 import pytest
 
-from lidarfield.hypotheses.steps import canonical_json
 from lidarfield.runner.launch import THREAD_VARS
+from lidarfield.storage.stage_ids import canonical_json
 from lidarfield.study.config import validate_config
 
 pytestmark = pytest.mark.slow

@@ -8,7 +8,7 @@ from snakemake.common import overwrite_function_params
 from snakemake.utils import min_version
 
 import lidarfield.study.config
-from lidarfield.hypotheses.steps import canonical_json
+from lidarfield.storage.stage_ids import canonical_json
 from lidarfield.storage.layout import RESULTS_FOLDERS
 from lidarfield.plots.settings import figure_settings
 

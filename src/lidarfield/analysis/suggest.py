@@ -44,9 +44,10 @@ from ..field.grid import FieldSettings, field_settings_from_config
 from ..field.kernel import field_from_voxel_ids
 from ..hypotheses import BUILTINS, CORRECTING, apply_step, validate_step
 from ..hypotheses.outcome import displacement
-from ..hypotheses.steps import canonical_json, step_name
+from ..hypotheses.steps import step_name
 from ..io.parquet_table import write_table
 from ..pair import RegisteredPair
+from ..storage.stage_ids import canonical_json
 from .tags import vector_tags, voxel_energy
 
 log = logging.getLogger(__name__)

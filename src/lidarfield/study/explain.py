@@ -33,8 +33,8 @@ from ..analysis.explain import (
 from ..analysis.field_stats import analyse_field
 from ..analysis.suggest import candidate_steps, suggestions
 from ..field.grid import FieldSettings
-from ..hypotheses.steps import canonical_json
 from ..pair import RegisteredPair
+from ..storage.stage_ids import canonical_json
 from .stack import Stage, initial_stage, next_stage
 from .summary import summary_row
 

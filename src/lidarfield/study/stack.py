@@ -24,8 +24,9 @@ import numpy as np
 from ..hypotheses import apply_step, validate_stack, validate_step
 from ..hypotheses.outcome import displacement, reasons_of_removed
 from ..hypotheses.outliers import carry_neighbours
-from ..hypotheses.steps import canonical_json, step_name
+from ..hypotheses.steps import step_name
 from ..pair import RegisteredPair
+from ..storage.stage_ids import canonical_json
 from ..storage.stage_points import NO_MITIGATION, ROW, change_columns, with_rows
 
 

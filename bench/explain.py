@@ -22,8 +22,8 @@ import sys
 import tempfile
 from pathlib import Path
 
-from lidarfield.analysis.explain import ExplainSettings
 from lidarfield.analysis.field_stats import analyse_field
+from lidarfield.analysis.stopping_rule import ExplainSettings
 from lidarfield.report.explain import write_explanation
 from lidarfield.study.config import validate_config
 from lidarfield.study.explain import explain_pair, format_step

@@ -72,7 +72,7 @@ _EXPORTS = {
     "stage_files": "storage.stage_points",
     "run_pair": "study.run",
     "explain_pair": "study.explain",
-    "ExplainSettings": "analysis.explain",
+    "ExplainSettings": "analysis.stopping_rule",
     "explain_scans": "report.explain",
     "stage_ids": "storage.stage_ids",
     "load_config": "study.config",

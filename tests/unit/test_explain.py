@@ -12,7 +12,8 @@ import pytest
 import yaml
 
 from helpers.ego_car import ego_car_pair, registered_off
-from lidarfield.analysis.explain import (
+from lidarfield.analysis.field_stats import analyse_field
+from lidarfield.analysis.stopping_rule import (
     STOP_MAX_STEPS,
     STOP_NO_CANDIDATES,
     STOP_NOTHING_HELPS,
@@ -21,7 +22,6 @@ from lidarfield.analysis.explain import (
     repeats,
     worth_it,
 )
-from lidarfield.analysis.field_stats import analyse_field
 from lidarfield.analysis.suggest import suggestions
 from lidarfield.cli import main
 from lidarfield.errors import ConfigError

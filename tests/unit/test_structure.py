@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 
 import lidarfield
-from lidarfield.analysis.explain import ExplainSettings
+from lidarfield.analysis.stopping_rule import ExplainSettings
 from lidarfield.defaults import default, section
 from lidarfield.field.grid import CartesianGrid, FieldSettings, SphericalGrid
 from lidarfield.plots.settings import STAGE_FIGURES, PlotSettings

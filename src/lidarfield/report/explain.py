@@ -22,8 +22,8 @@ from pathlib import Path
 import numpy as np
 
 from .. import __version__
-from ..analysis.explain import explain_settings
 from ..analysis.field_stats import summary_json_safe
+from ..analysis.stopping_rule import explain_settings
 from ..errors import InputError
 from ..field.file import field_meta
 from ..field.grid import FieldSettings, field_settings_from_config

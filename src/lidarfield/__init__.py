@@ -71,7 +71,7 @@ _EXPORTS = {
     "read_stage_points": "storage.stage_points",
     "stage_files": "storage.stage_points",
     "run_pair": "study.run",
-    "explain_pair": "study.explain",
+    "explain_pair": "study.explain_loop",
     "ExplainSettings": "analysis.stopping_rule",
     "explain_scans": "report.explain",
     "stage_ids": "storage.stage_ids",

@@ -31,7 +31,7 @@ from lidarfield.pair import RegisteredPair
 from lidarfield.registration import register_pair
 from lidarfield.report.explain import read_explanations, study_explain_parts
 from lidarfield.study.config import load_config, validate_config
-from lidarfield.study.explain import STEP_COLUMNS, explain_pair
+from lidarfield.study.explain_loop import STEP_COLUMNS, explain_pair
 from lidarfield.study.jobs import simulated_scan
 from lidarfield.study.stack import apply_stack
 

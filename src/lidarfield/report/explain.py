@@ -2,7 +2,7 @@
 report's section on it.
 
 An explanation's folder holds ``stack.yaml`` (the stack found, a ready config), ``steps.csv``
-(one row per step, ``study.explain.STEP_COLUMNS``), ``explain.json`` (the stack, the steps and
+(one row per step, ``study.explain_loop.STEP_COLUMNS``), ``explain.json`` (the stack, the steps and
 why the loop stopped: what the study report reads), ``figures/`` (per stage its field, or
 before / after the step and what it removed) and ``explain.html`` (the page showing them step
 by step). The study report's section lists per pair the stack found, and per hypothesis how
@@ -34,7 +34,7 @@ from ..plots.settings import figure_settings
 from ..plots.stage import draw_stage
 from ..plots.stage_data import StageData, vector_field
 from ..study.config import load_config, validate_config
-from ..study.explain import (
+from ..study.explain_loop import (
     STEP_COLUMNS,
     TABLE_COLUMNS,
     ExplainedStage,

@@ -70,7 +70,7 @@ _EXPORTS = {
     "Stage": "study.stack",
     "read_stage_points": "storage.stage_points",
     "stage_files": "storage.stage_points",
-    "run_pair": "study.run",
+    "run_pair": "commands.scans",
     "explain_pair": "study.explain_loop",
     "ExplainSettings": "analysis.stopping_rule",
     "explain_scans": "report.explain",

@@ -62,8 +62,8 @@ def stage_statistics(planned, pair_name: str) -> list[tuple[int, int, dict]]:
     """Each stage's (removed1, removed2, field statistics) of a planned study's pair,
     registered by truth, computed in this process."""
     from lidarfield.analysis.field_stats import analyse_field
+    from lidarfield.commands.jobs import recorded_scan
     from lidarfield.registration import register_pair
-    from lidarfield.study.jobs import recorded_scan
     from lidarfield.study.stack import apply_stack
 
     pair = planned.pairs[pair_name]

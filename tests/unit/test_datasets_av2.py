@@ -18,10 +18,10 @@ from helpers.av2_layout import (
     write_calibration,
 )
 from lidarfield import ConfigError, InputError, read_scan, write_scan
+from lidarfield.commands.jobs import recorded_scan
 from lidarfield.datasets import describe_dataset, read_dataset
 from lidarfield.poses import invert_pose
 from lidarfield.study.config import validate_config
-from lidarfield.study.jobs import recorded_scan
 
 
 @pytest.fixture(scope="module")

@@ -85,8 +85,8 @@ def test_ego_poses_taken_as_lidar_poses_would_turn_the_motion_sideways(nuscenes_
 
 
 def test_a_study_registers_the_scene_by_truth_within_1e_9(nuscenes_folder):
+    from lidarfield.commands.jobs import recorded_scan
     from lidarfield.registration import register_pair
-    from lidarfield.study.jobs import recorded_scan
 
     root, sweeps = nuscenes_folder
     study = _study(root)
@@ -102,7 +102,7 @@ def test_a_study_registers_the_scene_by_truth_within_1e_9(nuscenes_folder):
 
 
 def test_the_ingested_points_are_the_simulated_ones(nuscenes_folder):
-    from lidarfield.study.jobs import recorded_scan
+    from lidarfield.commands.jobs import recorded_scan
 
     root, sweeps = nuscenes_folder
     study = _study(root, "scene-0103", sweeps=False)

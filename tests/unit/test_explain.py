@@ -24,6 +24,7 @@ from lidarfield.analysis.stopping_rule import (
 )
 from lidarfield.analysis.suggest import suggestions
 from lidarfield.cli import main
+from lidarfield.commands.jobs import simulated_scan
 from lidarfield.errors import ConfigError
 from lidarfield.field.grid import field_settings_from_config
 from lidarfield.hypotheses import validate_step
@@ -32,7 +33,6 @@ from lidarfield.registration import register_pair
 from lidarfield.report.explain import read_explanations, study_explain_parts
 from lidarfield.study.config import load_config, validate_config
 from lidarfield.study.explain_loop import STEP_COLUMNS, explain_pair
-from lidarfield.study.jobs import simulated_scan
 from lidarfield.study.stack import apply_stack
 
 ROOT = Path(__file__).resolve().parents[2]

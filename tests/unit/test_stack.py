@@ -68,8 +68,8 @@ def test_a_step_is_parsed_once_in_the_job_and_once_by_the_stack(monkeypatch, tmp
     """Planning validated the entries: the mitigate job parses its entry once (not also in a
     validation and again in ``apply_step``), ``apply_stack`` each entry once."""
     import lidarfield.hypotheses as hypotheses
+    from lidarfield.commands.jobs import mitigate_stage
     from lidarfield.pair import write_pair
-    from lidarfield.study.jobs import mitigate_stage
 
     parsed = []
     parse_params = hypotheses.parse_params

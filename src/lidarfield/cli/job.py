@@ -170,19 +170,19 @@ def add_parser(subparsers) -> None:
 
 
 def _scan(args: argparse.Namespace) -> None:
-    from ..study.jobs import scan_job
+    from ..commands.jobs import scan_job
 
     scan_job(args.kind, args.spec, args.out)
 
 
 def _register(args: argparse.Namespace) -> None:
-    from ..study.jobs import register_job
+    from ..commands.jobs import register_job
 
     register_job(args.scan1, args.scan2, args.settings, args.out)
 
 
 def _mitigate(args: argparse.Namespace) -> None:
-    from ..study.jobs import mitigate_stage
+    from ..commands.jobs import mitigate_stage
 
     mitigate_stage(
         args.registered, args.stage_changes, args.step, args.stage, args.level, args.changes_out, args.removed_out
@@ -190,7 +190,7 @@ def _mitigate(args: argparse.Namespace) -> None:
 
 
 def _field(args: argparse.Namespace) -> None:
-    from ..study.jobs import field_stage
+    from ..commands.jobs import field_stage
 
     field_stage(
         args.registered,

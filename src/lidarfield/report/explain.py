@@ -24,6 +24,7 @@ import numpy as np
 from .. import __version__
 from ..analysis.field_stats import summary_json_safe
 from ..analysis.stopping_rule import explain_settings
+from ..commands.scans import check_out_dir, read_and_register, registration_settings
 from ..errors import InputError
 from ..field.file import field_meta
 from ..field.grid import FieldSettings, field_settings_from_config
@@ -43,7 +44,6 @@ from ..study.explain_loop import (
     format_step,
     stack_config,
 )
-from ..study.run import check_out_dir, read_and_register, registration_settings
 from .page import esc, image, image_file, link, page, relative_href, table
 from .pair_page import DPI, PAIR_FIGURES
 

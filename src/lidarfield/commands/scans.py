@@ -16,10 +16,10 @@ from ..scan import Scan
 from ..sensors.fit import log_fit
 from ..storage.stage_ids import stage_ids
 from ..storage.stage_points import CHANGES, read_stage_points
+from ..study.pairs import recorded_scan_spec
+from ..study.stack import apply_stack
+from ..study.summary import read_stats, write_summary
 from .jobs import field_stage, write_stage
-from .pairs import recorded_scan_spec
-from .stack import apply_stack
-from .summary import read_stats, write_summary
 
 log = logging.getLogger(__name__)
 
@@ -93,7 +93,7 @@ def run_pair(
     hypothesis) runs before the first file is written, so a failure leaves no stage output.
     Returns the summary rows of all stages (also in ``out_dir/summary.parquet`` and ``.csv``).
     """
-    from .config import load_config
+    from ..study.config import load_config
 
     out_dir = check_out_dir(out_dir)
     study = load_config(config_path, require_pairs=False)

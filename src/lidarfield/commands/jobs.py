@@ -25,8 +25,8 @@ from ..scan import Scan
 from ..sensors.fit import log_fit
 from ..sensors.models import sensor_model
 from ..storage.stage_points import CHANGES, read_stage_points, write_changes
-from .stack import Stage, next_stage
-from .summary import summary_row
+from ..study.stack import Stage, next_stage
+from ..study.summary import summary_row
 
 log = logging.getLogger(__name__)
 

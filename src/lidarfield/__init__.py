@@ -73,7 +73,7 @@ _EXPORTS = {
     "run_pair": "commands.scans",
     "explain_pair": "study.explain_loop",
     "ExplainSettings": "analysis.stopping_rule",
-    "explain_scans": "report.explain",
+    "explain_scans": "commands.scans",
     "stage_ids": "storage.stage_ids",
     "load_config": "study.config",
     # figures and reports

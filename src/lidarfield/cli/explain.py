@@ -32,7 +32,7 @@ def add_parser(subparsers) -> None:
 
 
 def _explain(args: argparse.Namespace) -> int:
-    from ..report.explain import explain_scans
+    from ..commands.scans import explain_scans
     from ..study.explain_loop import PRINTED_COLUMNS
 
     out = args.out or f"explain-{Path(args.scan1).stem}-{Path(args.scan2).stem}"

@@ -1,5 +1,6 @@
-"""One pair through the whole stack of a study config, without Snakemake (``lidarfield run``):
-the same jobs as the workflow's, in one process, into one folder."""
+"""The commands on two scan files, without Snakemake: ``lidarfield run`` (one pair through the
+whole stack of a study config: the same jobs as the workflow's, in one process, into one
+folder) and ``lidarfield explain`` (the explain loop on the pair, its folder written)."""
 
 from __future__ import annotations
 
@@ -7,6 +8,7 @@ import json
 import logging
 from pathlib import Path
 
+from ..analysis.stopping_rule import explain_settings
 from ..analysis.suggest import suggestions, write_suggestions
 from ..errors import ConfigError, InputError
 from ..io import read_scan, write_scan
@@ -15,16 +17,19 @@ from ..pair import RegisteredPair, write_pair
 from ..scan import Scan
 from ..sensors.fit import log_fit
 from ..storage.stage_ids import stage_ids
-from ..storage.stage_points import CHANGES, read_stage_points
+from ..storage.stage_points import CHANGES
+from ..study.explain_loop import Explanation, explain_pair
 from ..study.pairs import recorded_scan_spec
 from ..study.stack import apply_stack
 from ..study.summary import read_stats, write_summary
-from .jobs import field_stage, write_stage
+from .jobs import field_stage, rematch_stage, write_stage
 
 log = logging.getLogger(__name__)
 
-# Marks a folder written by ``lidarfield run``: only such a folder (or an empty one) is reused.
+# Mark a folder written by ``lidarfield run`` / ``explain``: only such a folder (or an empty
+# one) is reused.
 RUN_MARKER = ".lidarfield-run.json"
+EXPLAIN_MARKER = ".lidarfield-explain.json"
 
 
 def registration_settings(register: str | None = None, transform: str | Path | None = None) -> str | dict:
@@ -153,11 +158,50 @@ def run_pair(
         )
         write_suggestions(folder / "suggestions.parquet", table, stage_id, candidates[level], study.grid_section)
         if study.rematch:
-            from ..analysis.rematch import rematch_stage
-
-            points = read_stage_points(out_dir / "registered.parquet", changes[1 : level + 1], stage_id)
-            rematch_stage(points, study.rematch, folder / "rematch.parquet")
+            rematch_stage(
+                out_dir / "registered.parquet",
+                changes[1 : level + 1],
+                stage_id,
+                study.rematch,
+                folder / "rematch.parquet",
+            )
     stats = [folder / "stats.json" for folder in folders]
     rematched = [folder / "rematch.parquet" for folder in folders] if study.rematch else []
     write_summary(stats, out_dir / "summary.parquet", out_dir / "summary.csv", rematched)
     return read_stats(stats, rematched)
+
+
+def explain_scans(
+    scan1: str | Path,
+    scan2: str | Path,
+    config_path: str | Path | None,
+    out_dir: str | Path,
+    register: str | None = None,
+    transform: str | Path | None = None,
+    sensor: str | None = None,
+    poses: dict | None = None,
+) -> Explanation:
+    """``lidarfield explain``: two scans read and registered as ``lidarfield run`` does, the loop
+    on the grid, ``suggest`` and ``explain`` settings of the config (the schema's defaults
+    without one; its ``hypotheses`` are not used), and the explanation's folder written."""
+    from ..report.explain import write_explanation  # the figures: matplotlib, only here
+    from ..study.config import load_config, validate_config
+
+    out_dir = check_out_dir(out_dir, EXPLAIN_MARKER, "lidarfield explain")
+    study = validate_config({}, require_pairs=False) if config_path is None else load_config(config_path, None, False)
+    settings = registration_settings(register, transform)
+    _, pair = read_and_register(scan1, scan2, settings, sensor, poses)
+    explanation = explain_pair(
+        pair,
+        study.grid,
+        study.grid_section,
+        explain_settings(study.config["explain"]),
+        study.suggest,
+        study.base_dir,
+        out_dir.resolve().name,
+    )
+    out_dir.mkdir(parents=True, exist_ok=True)
+    run = {"scan1": str(scan1), "scan2": str(scan2), "config": config_path and str(config_path), "register": settings}
+    write_text(out_dir / EXPLAIN_MARKER, json.dumps({**run, "sensor": sensor, "poses": poses}, indent=1) + "\n")
+    write_explanation(explanation, study.grid, study.grid_section, out_dir, study.config["plots"])
+    return explanation

@@ -1,12 +1,16 @@
 """The commands on two scan files, without Snakemake: ``lidarfield run`` (one pair through the
 whole stack of a study config: the same jobs as the workflow's, in one process, into one
-folder) and ``lidarfield explain`` (the explain loop on the pair, its folder written)."""
+folder), ``lidarfield explain`` (the explain loop on the pair, its folder written),
+``lidarfield field`` (the pair's field and its summary) and ``lidarfield register`` (the
+registered pair, or the transform of an aligned copy)."""
 
 from __future__ import annotations
 
 import json
 import logging
 from pathlib import Path
+
+import numpy as np
 
 from ..analysis.stopping_rule import explain_settings
 from ..analysis.suggest import suggestions, write_suggestions
@@ -205,3 +209,94 @@ def explain_scans(
     write_text(out_dir / EXPLAIN_MARKER, json.dumps({**run, "sensor": sensor, "poses": poses}, indent=1) + "\n")
     write_explanation(explanation, study.grid, study.grid_section, out_dir, study.config["plots"])
     return explanation
+
+
+def field_of_scans(
+    scan1: str | Path,
+    scan2: str | Path,
+    grid_section: dict,
+    out: Path,
+    format: str | None = None,
+    transform: str | Path | None = None,
+    pose2: str | None = None,
+) -> dict:
+    """``lidarfield field``: the field of scan 1 and scan 2 moved by ``transform`` (a pose file)
+    or ``pose2`` (a pose string; identity without either), written with its summary into
+    ``out``; returns the summary."""
+    from ..analysis.field_stats import analyse_field, summary_json_safe
+    from ..field.file import field_meta, write_field
+    from ..field.grid import field_settings_from_config
+    from ..io.pose_files import read_pose
+    from ..poses import apply_pose, parse_pose_arg
+
+    # Everything that can fail on the user's input happens before the first file is written.
+    settings = field_settings_from_config(grid_section)
+    T_1_2 = np.eye(4)
+    if transform is not None:
+        T_1_2 = read_pose(transform)
+    elif pose2 is not None:
+        T_1_2 = parse_pose_arg(pose2)
+    scans = read_scan(scan1, format=format), read_scan(scan2, format=format)
+    for path, scan in zip((scan1, scan2), scans):
+        if len(scan.xyz) == 0:
+            raise InputError("holds no valid point", path)
+    if out.exists() and not out.is_dir():
+        raise InputError("--out exists and is not a folder", out)
+
+    xyz2 = apply_pose(T_1_2, scans[1].xyz)
+    # the sensors too: their scan patterns are part of each vector's sampling noise
+    pair = RegisteredPair(scans[0].xyz, xyz2, T_1_2, scans[0].sensor, scans[1].sensor)
+    columns, statistics = analyse_field(pair, settings)
+    summary = {
+        "scan1": str(scan1),
+        "scan2": str(scan2),
+        "n1": len(scans[0].xyz),
+        "n2": len(xyz2),
+        "out_of_grid1": len(scans[0].xyz) - int(columns["n1"].sum()),
+        "out_of_grid2": len(xyz2) - int(columns["n2"].sum()),
+        "T_1_2": T_1_2.tolist(),
+        **field_meta(settings, statistics),
+    }
+    write_field(out / "field.parquet", columns, summary_json_safe(summary))
+    write_text(out / "summary.json", json.dumps(summary_json_safe(summary), indent=2, allow_nan=False) + "\n")
+    return summary
+
+
+def register_scans(
+    scan1: str | Path,
+    scan2: str | Path,
+    settings: str | dict,
+    out: str | Path,
+    format: str | None = None,
+    sensor: str | None = None,
+    poses: list | None = None,
+) -> RegisteredPair:
+    """``lidarfield register``: scan 2 in scan 1's frame by ``settings`` (the poses, where given,
+    replacing the scans' own), written to ``out``; returns the pair."""
+    from ..registration import register_pair
+
+    scans = [read_scan(path, format=format, sensor=sensor) for path in (scan1, scan2)]
+    for scan, pose in zip(scans, poses or (None, None)):
+        if pose is not None:
+            scan.pose = pose
+    pair = register_pair(*scans, settings)
+    write_pair(out, pair)
+    return pair
+
+
+def transform_from_aligned(original: Path, aligned: Path, out: Path) -> tuple[np.ndarray, np.ndarray, float]:
+    """``lidarfield register --from-aligned``: the translation mapping ``original`` onto its
+    aligned copy row for row, written as a transform file; returns it, the rows' offsets and
+    their spread (m)."""
+    from ..registration import read_xyz_rows, translation_from_aligned_copy, translation_offsets, write_transform
+
+    rows_original, rows_aligned = read_xyz_rows(original), read_xyz_rows(aligned)
+    T = translation_from_aligned_copy(rows_original, rows_aligned)
+    offsets = translation_offsets(rows_original, rows_aligned)
+    spread = float(np.abs(offsets - T[:3, 3]).max())
+    comment = (
+        f"pose of the sensor of {original.name} in the frame of {aligned.name}: the translation mapping "
+        f"it onto {aligned.name} row for row\n{len(offsets)} rows, offsets spread {spread:.3g} m"
+    )
+    write_transform(out, T, comment)
+    return T, offsets, spread

@@ -8,12 +8,14 @@
 PYTHON ?= python3
 VENV ?= .venv
 CORES ?= 2
-# The extras the lock holds and the set-up installs (ouster is left out: it pins an old click).
+# The extras the lock holds (ouster is left out: it pins an old click). `make run` installs
+# none of them: `make test` adds test and slurm (the tests cover the SLURM executor), `make
+# docs` docs, `make setup-slurm` slurm, each from the same lock (scripts/lock_subset.py).
 LOCK_EXTRAS ?= test slurm docs
 UV_VERSION ?= 0.13.9
 
-# The lock is the whole environment (--no-deps: lock-excludes.txt leaves out packages that a
-# dependency declares but lidarfield never uses).
+# The lock pins every package (--no-deps: lock-excludes.txt leaves out packages that a
+# dependency declares but lidarfield never uses); each environment installs its subset.
 PIP_INSTALL := --quiet --disable-pip-version-check --no-deps
 
 BIN := $(abspath $(VENV))/bin
@@ -22,7 +24,7 @@ BIN := $(abspath $(VENV))/bin
 export PATH := $(BIN):$(PATH)
 export VIRTUAL_ENV := $(abspath $(VENV))
 
-.PHONY: run test setup setup-test bench lint lock docs
+.PHONY: run test setup setup-test setup-docs setup-slurm bench lint lock docs
 
 run: setup
 	snakemake --cores $(CORES)
@@ -30,20 +32,32 @@ run: setup
 test: setup-test
 	python -m pytest
 
-# pip is re-run only when the lock or pyproject.toml changes.
+# The core: pyproject.toml's dependencies and what they need, at the lock's versions. pip is
+# re-run only when the lock or pyproject.toml changes.
 setup: $(VENV)/.setup.stamp
-$(VENV)/.setup.stamp: requirements.lock pyproject.toml
+$(VENV)/.setup.stamp: requirements.lock pyproject.toml scripts/lock_subset.py
 	PYTHON="$(PYTHON)" scripts/system-deps.sh
 	PYTHON="$(PYTHON)" scripts/venv.sh "$(VENV)"
-	python -m pip install $(PIP_INSTALL) -r requirements.lock
+	python scripts/lock_subset.py > $(VENV)/requirements-core.txt
+	python -m pip install $(PIP_INSTALL) -r $(VENV)/requirements-core.txt
 	python -m pip install $(PIP_INSTALL) -e .
 	@# Bytecode up front, on all cores: where PYTHONDONTWRITEBYTECODE is set (as on CI machines)
 	@# Python never caches it, and every job would compile matplotlib & co. again (1.4 s a job).
 	python -m compileall -q -j 0 "$$(python -c 'import sysconfig; print(sysconfig.get_path("purelib"))')" src > /dev/null
 	@touch $@
 
-setup-test: setup
+# An extra on top of the core (the subset of the lock of the core and the extra).
+$(VENV)/.setup-%.stamp: $(VENV)/.setup.stamp
+	python scripts/lock_subset.py $(foreach extra,$(subst +, ,$*),--extra $(extra)) > $(VENV)/requirements-$*.txt
+	python -m pip install $(PIP_INSTALL) -r $(VENV)/requirements-$*.txt
+	@touch $@
+
+setup-test: $(VENV)/.setup-test+slurm.stamp
 	scripts/system-deps.sh --test
+
+setup-docs: $(VENV)/.setup-docs.stamp
+
+setup-slurm: $(VENV)/.setup-slurm.stamp
 
 bench: setup
 	python bench/field_kernel.py
@@ -51,11 +65,11 @@ bench: setup
 	python bench/raycast.py
 
 # The documentation site (docs/, mkdocs.yml) into site/; --strict fails on any warning.
-docs: setup
+docs: setup-docs
 	mkdocs build --strict --site-dir site
 
 # ruff (pyproject.toml) on the Python; Snakemake's linter and snakefmt on the workflow.
-lint: setup
+lint: setup-test
 	ruff format --check src tests bench hypotheses docs
 	ruff check src tests bench hypotheses docs
 	snakemake --lint

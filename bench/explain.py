@@ -22,11 +22,11 @@ import sys
 import tempfile
 from pathlib import Path
 
-from lidarfield.analysis.explain import ExplainSettings
 from lidarfield.analysis.field_stats import analyse_field
+from lidarfield.analysis.stopping_rule import ExplainSettings
 from lidarfield.report.explain import write_explanation
 from lidarfield.study.config import validate_config
-from lidarfield.study.explain import explain_pair, format_step
+from lidarfield.study.explain_loop import explain_pair, format_step
 from lidarfield.study.stack import apply_stack
 from timing import best_time, machine  # bench/timing.py
 

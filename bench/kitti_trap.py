@@ -29,11 +29,11 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from lidarfield import load_scene, pose_from_xyzrpy, sensor_model, simulate_scan, write_scan  # noqa: E402
+from lidarfield.commands.jobs import field_stage, mitigate_stage, register_job, scan_job  # noqa: E402
 from lidarfield.field.file import read_field  # noqa: E402
 from lidarfield.io.pose_files import write_kitti_poses  # noqa: E402
 from lidarfield.plots.png import compact_png  # noqa: E402
 from lidarfield.study.config import validate_config  # noqa: E402
-from lidarfield.study.jobs import field_stage, mitigate_stage, register_job, scan_job  # noqa: E402
 from timing import machine  # noqa: E402 (bench/timing.py)
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -56,3 +56,32 @@ def write_kitti_layout(root: Path, sequence: str = "07", Tr: np.ndarray = KITTI_
         (root / "poses").mkdir()
         write_kitti_poses(root / "poses" / f"{sequence}.txt", Tr @ lidar @ np.linalg.inv(Tr))
     return scans, lidar
+
+
+def stage_statistics(planned, pair_name: str) -> list[tuple[int, int, dict]]:
+    """Each stage's (removed1, removed2, field statistics) of a planned study's pair,
+    registered by truth, computed in this process."""
+    from lidarfield.analysis.field_stats import analyse_field
+    from lidarfield.commands.jobs import recorded_scan
+    from lidarfield.registration import register_pair
+    from lidarfield.study.stack import apply_stack
+
+    pair = planned.pairs[pair_name]
+    registered = register_pair(recorded_scan(pair.scan1.spec), recorded_scan(pair.scan2.spec), "truth")
+    stages = apply_stack(registered, planned.hypotheses, planned.base_dir, planned.grid_section)
+    return [(s.removed1, s.removed2, analyse_field(s.pair, planned.grid)[1]) for s in stages]
+
+
+def assert_same_stage_statistics(stages: list, other: list) -> None:
+    """The same points removed, stage by stage, and the same statistics within 1e-9 (the rigid
+    fit's information matrix, in points x m^2 (~1e4), relatively)."""
+    assert len(stages) == len(other)
+    for (*removed, stats), (*removed_other, stats_other) in zip(stages, other):
+        assert removed == removed_other
+        assert stats.keys() == stats_other.keys() and stats["voxels_valid"] > 0
+        for key, value in stats.items():
+            if isinstance(value, str):
+                assert value == stats_other[key], key
+            else:
+                rtol = 1e-9 if key == "rigid_information" else 0
+                assert np.allclose(value, stats_other[key], rtol=rtol, atol=1e-9, equal_nan=True), key

@@ -80,9 +80,13 @@ def ego_pose_at(t: float) -> np.ndarray:
     return pose_from_xyzrpy([-2.0 + 5.0 * t, 0.3 * t, 1.16, 0.01 * np.sin(9 * t), -0.008 * t, 0.2 * t])
 
 
-def write_nuscenes_layout(root: Path) -> list[Sweep]:
+def write_nuscenes_layout(root: Path, city_origin=(0.0, 0.0, 0.0)) -> list[Sweep]:
     """``root/v1.0-mini/*.json``, ``root/samples/LIDAR_TOP``, ``root/sweeps/LIDAR_TOP`` and a
-    ``root/samples/RADAR_FRONT`` file; returns the LIDAR_TOP sweeps written, in time order."""
+    ``root/samples/RADAR_FRONT`` file; returns the LIDAR_TOP sweeps written, in time order.
+    The tables' global frame is the scene's shifted by ``city_origin`` (metres): nuScenes' maps
+    put the vehicle hundreds to thousands of metres from the global origin."""
+    to_global = np.eye(4)
+    to_global[:3, 3] = city_origin
     scene_model, model = load_scene("paper-intersection"), sensor_model("hdl32")
     tables = {name: [] for name in ("scene", "sample", "sample_data", "ego_pose", "calibrated_sensor", "sensor")}
     lidar_sensor, radar_sensor = token("sensor", "LIDAR_TOP"), token("sensor", "RADAR_FRONT")
@@ -138,9 +142,9 @@ def write_nuscenes_layout(root: Path) -> list[Sweep]:
     sweeps = []
     rng = np.random.default_rng(7)
     for k, (scene, t, key) in enumerate(LIDAR_SWEEPS):
-        ego = ego_pose_at(t)
+        ego = to_global @ ego_pose_at(t)
         lidar = ego @ calibration[scene][1]
-        scan = simulate_scan(scene_model, model, lidar, seed=k, range_noise_m=0.02)
+        scan = simulate_scan(scene_model, model, np.linalg.solve(to_global, lidar), seed=k, range_noise_m=0.02)
         intensity = rng.integers(0, 256, len(scan)).astype(np.float32)
         folder = "samples" if key else "sweeps"
         filename = f"{folder}/LIDAR_TOP/{LOG}__LIDAR_TOP__{_us(t)}.pcd.bin"
@@ -180,7 +184,7 @@ def write_nuscenes_layout(root: Path) -> list[Sweep]:
             filename = f"samples/RADAR_FRONT/{LOG}__RADAR_FRONT__{_us(t + 0.005)}.pcd"
             (root / filename).parent.mkdir(parents=True, exist_ok=True)
             (root / filename).write_bytes(b"# .PCD v0.7 - radar\n")
-            ego = ego_pose_at(t + 0.005)
+            ego = to_global @ ego_pose_at(t + 0.005)
             tables["ego_pose"].append(
                 {
                     "token": token("ego", t + 0.005),

@@ -20,7 +20,7 @@ from lidarfield.field.grid import FieldSettings, SphericalGrid
 from lidarfield.io.atomic import write_text
 from lidarfield.io.parquet_table import write_table
 from lidarfield.pair import RegisteredPair, write_pair
-from lidarfield.stage_points import CHANGES, change_columns, with_rows, write_changes
+from lidarfield.storage.stage_points import CHANGES, change_columns, with_rows, write_changes
 from lidarfield.study.summary import write_summary_table
 
 SETTINGS = FieldSettings(SphericalGrid(36, 0.0, (-20.0, 20.0), 5), min_points=10)

@@ -9,6 +9,7 @@ import pandas as pd
 import pytest
 
 from lidarfield.analysis.field_stats import analyse_field
+from lidarfield.commands.jobs import stack_jobs
 from lidarfield.errors import HypothesisError
 from lidarfield.field.grid import field_settings_from_config
 from lidarfield.hypotheses import apply_step
@@ -21,8 +22,7 @@ from lidarfield.registration import register_pair
 from lidarfield.sensors.models import PRESETS
 from lidarfield.simulation.raycast import simulate_scan
 from lidarfield.simulation.scene import load_scene
-from lidarfield.stage_points import CHANGES, read_stage_points
-from lidarfield.study.jobs import stack_jobs
+from lidarfield.storage.stage_points import CHANGES, read_stage_points
 from lidarfield.study.stack import apply_stack
 from lidarfield.study.summary import CORRECTION_COLUMNS, write_summary
 

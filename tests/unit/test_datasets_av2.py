@@ -18,10 +18,10 @@ from helpers.av2_layout import (
     write_calibration,
 )
 from lidarfield import ConfigError, InputError, read_scan, write_scan
+from lidarfield.commands.jobs import recorded_scan
 from lidarfield.datasets import describe_dataset, read_dataset
 from lidarfield.poses import invert_pose
 from lidarfield.study.config import validate_config
-from lidarfield.study.jobs import recorded_scan
 
 
 @pytest.fixture(scope="module")
@@ -136,10 +136,8 @@ def test_a_study_of_the_log_is_the_study_of_the_same_scans_as_files_with_lidar_p
     simulated scans written as files with a poses file of the lidar's poses. The grid's edges lie
     between the simulated beams (0.2 deg azimuth steps from 0, a beam at -4 deg): on an edge, a
     point's 1e-15 of frame-change rounding would pick its voxel."""
-    from lidarfield.analysis.field_stats import analyse_field
+    from helpers.datasets import assert_same_stage_statistics, stage_statistics
     from lidarfield.io.pose_files import write_kitti_poses
-    from lidarfield.registration import register_pair
-    from lidarfield.study.stack import apply_stack
 
     for k, scan in enumerate(log.up):
         write_scan(scan, tmp_path / f"{k:03d}.parquet")
@@ -156,24 +154,9 @@ def test_a_study_of_the_log_is_the_study_of_the_same_scans_as_files_with_lidar_p
         assert a.scan1.spec["sensor"] == b.scan1.spec["sensor"] == "vlp32c"
         assert np.abs(np.array(a.scan2.spec["pose"]) - np.array(b.scan2.spec["pose"])).max() < 1e-9
     for name in ("a-000", "a-002"):
-        summaries = []
-        for planned in (as_log, as_files):
-            pair = planned.pairs[name]
-            registered = register_pair(recorded_scan(pair.scan1.spec), recorded_scan(pair.scan2.spec), "truth")
-            stages = apply_stack(registered, planned.hypotheses, planned.base_dir, planned.grid_section)
-            summaries.append([(s.removed1, s.removed2, analyse_field(s.pair, planned.grid)[1]) for s in stages])
-        assert len(summaries[0]) == 4 and sum(sum(s[:2]) for s in summaries[0]) > 1000
-        for (removed, stats), (removed_files, stats_files) in zip(
-            ((s[:2], s[2]) for s in summaries[0]), ((s[:2], s[2]) for s in summaries[1])
-        ):
-            assert removed == removed_files
-            assert stats.keys() == stats_files.keys() and stats["voxels_valid"] > 0
-            for key, value in stats.items():
-                if isinstance(value, str):
-                    assert value == stats_files[key], key
-                else:  # the rigid fit's information matrix is in points x m^2 (~1e4): relative
-                    rtol = 1e-9 if key == "rigid_information" else 0
-                    assert np.allclose(value, stats_files[key], rtol=rtol, atol=1e-9, equal_nan=True), key
+        stages = stage_statistics(as_log, name)
+        assert len(stages) == 4 and sum(s[0] + s[1] for s in stages) > 1000
+        assert_same_stage_statistics(stages, stage_statistics(as_files, name))
 
 
 def test_planning_reads_the_tables_never_a_sweep(log, tmp_path, monkeypatch):

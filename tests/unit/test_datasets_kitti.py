@@ -41,8 +41,8 @@ def test_a_study_registers_the_dataset_by_truth_within_1e_9(kitti_folder, tmp_pa
     root, lidar = kitti_folder
     study = validate_config({"sequences": {"k": {"dataset": {"format": "kitti", "path": str(root), "sequence": "07"}}}})
     assert sorted(study.pairs) == ["k-000", "k-001", "k-002"]
+    from lidarfield.commands.jobs import recorded_scan
     from lidarfield.registration import register_pair
-    from lidarfield.study.jobs import recorded_scan
 
     pair = study.pairs["k-001"]
     registered = register_pair(recorded_scan(pair.scan1.spec), recorded_scan(pair.scan2.spec), pair.register)

@@ -64,8 +64,8 @@ def test_the_example_as_a_module_on_the_path(drive, monkeypatch):
 
 
 def test_the_example_registers_by_truth(drive):
+    from lidarfield.commands.jobs import recorded_scan
     from lidarfield.registration import register_pair
-    from lidarfield.study.jobs import recorded_scan
 
     base, poses = drive
     pair = study(base, "readers/my_reader.py:read").pairs["mine-001"]

@@ -12,7 +12,8 @@ import pytest
 import yaml
 
 from helpers.ego_car import ego_car_pair, registered_off
-from lidarfield.analysis.explain import (
+from lidarfield.analysis.field_stats import analyse_field
+from lidarfield.analysis.stopping_rule import (
     STOP_MAX_STEPS,
     STOP_NO_CANDIDATES,
     STOP_NOTHING_HELPS,
@@ -21,9 +22,9 @@ from lidarfield.analysis.explain import (
     repeats,
     worth_it,
 )
-from lidarfield.analysis.field_stats import analyse_field
 from lidarfield.analysis.suggest import suggestions
 from lidarfield.cli import main
+from lidarfield.commands.jobs import simulated_scan
 from lidarfield.errors import ConfigError
 from lidarfield.field.grid import field_settings_from_config
 from lidarfield.hypotheses import validate_step
@@ -31,8 +32,7 @@ from lidarfield.pair import RegisteredPair
 from lidarfield.registration import register_pair
 from lidarfield.report.explain import read_explanations, study_explain_parts
 from lidarfield.study.config import load_config, validate_config
-from lidarfield.study.explain import STEP_COLUMNS, explain_pair
-from lidarfield.study.jobs import simulated_scan
+from lidarfield.study.explain_loop import STEP_COLUMNS, explain_pair
 from lidarfield.study.stack import apply_stack
 
 ROOT = Path(__file__).resolve().parents[2]

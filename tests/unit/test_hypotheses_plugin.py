@@ -10,7 +10,7 @@ from conftest import ROOT
 from lidarfield.errors import HypothesisError
 from lidarfield.hypotheses import apply_step, validate_step
 from lidarfield.pair import RegisteredPair
-from lidarfield.study.stage_ids import stage_ids
+from lidarfield.storage.stage_ids import stage_ids
 
 PLUGINS = {
     "good.py": "import numpy as np\ndef remove(pair, params):\n    return pair.xyz1[:, 0] < params['x_max'], "

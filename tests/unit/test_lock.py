@@ -4,6 +4,7 @@ in its declared range, for each supported Python and platform (the lock is insta
 
 from __future__ import annotations
 
+import importlib.util
 import re
 import tomllib
 
@@ -110,3 +111,62 @@ def test_open3d_cpu_on_linux_x86_64_open3d_elsewhere():
         versions = locked_versions(environment(platform, "3.13.0"))
         cpu = platform == "linux-x86_64"
         assert ("open3d-cpu" in versions) == cpu and ("open3d" in versions) == (not cpu), platform
+
+
+# --- the environments the set-up installs: subsets of the lock (scripts/lock_subset.py) ------
+def lock_subset():
+    spec = importlib.util.spec_from_file_location("lock_subset", ROOT / "scripts" / "lock_subset.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def subset_names(extras: list[str]) -> set[str]:
+    module = lock_subset()
+    pyproject = tomllib.loads((ROOT / "pyproject.toml").read_text())
+    lines = module.subset((ROOT / "requirements.lock").read_text(), module.roots(pyproject, extras) - {"lidarfield"})
+    return {canonicalize_name(Requirement(line).name) for line in lines}
+
+
+def excluded() -> set[str]:
+    lines = (ROOT / "lock-excludes.txt").read_text().splitlines()
+    return {canonicalize_name(line) for line in lines if line.strip() and not line.startswith("#")}
+
+
+def test_the_run_environment_leaves_out_the_tests_docs_and_slurm_tools():
+    core, everything = subset_names([]), subset_names(lock_extras())
+    assert {"numpy", "open3d-cpu", "snakemake", "pandas", "matplotlib"} <= core
+    for tool in ("pytest", "ruff", "snakefmt", "mkdocs", "mkdocs-material", "snakemake-executor-plugin-slurm"):
+        assert tool in everything and tool not in core, tool
+    assert subset_names(["test"]) - core >= {"pytest", "ruff", "snakefmt", "pluggy", "iniconfig"}
+    assert "mkdocs" not in subset_names(["test"]) and "pytest" not in subset_names(["docs"])
+    # every extra together is the whole lock
+    locked = {canonicalize_name(Requirement(line).name) for line in _lock_lines()}
+    assert everything == locked
+
+
+@pytest.mark.parametrize("extras", [[], ["test", "slurm"], ["docs"]])
+def test_each_environment_holds_what_its_packages_require(extras):
+    """Checked against the installed packages' own metadata (this environment has the whole
+    lock), not the lock's annotations the subset is made from."""
+    from importlib.metadata import PackageNotFoundError, requires
+
+    names = subset_names(extras)
+    env = default_environment()
+    checked = 0
+    for name in sorted(names):
+        try:
+            required = requires(name) or []
+        except PackageNotFoundError:  # another platform's (open3d, colorama, ...)
+            continue
+        for text in required:
+            requirement = Requirement(text)
+            if requirement.marker is None or requirement.marker.evaluate({**env, "extra": ""}):
+                needed = canonicalize_name(requirement.name)
+                assert needed in names or needed in excluded(), f"{name} requires {needed}, not in {extras or 'core'}"
+        checked += 1
+    assert checked > 0.8 * len(names)
+
+
+def _lock_lines() -> list[str]:
+    return [line for line in (ROOT / "requirements.lock").read_text().splitlines() if line and line[0] not in " #"]

@@ -9,6 +9,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from lidarfield.commands.jobs import stack_jobs
 from lidarfield.errors import HypothesisError, NotApplicableError
 from lidarfield.field import free_space as fs
 from lidarfield.hypotheses import apply_step, validate_step
@@ -26,7 +27,6 @@ from lidarfield.sensors.models import PRESETS
 from lidarfield.simulation.raycast import simulate_scan
 from lidarfield.simulation.scene import Scene, SceneObject, load_scene, scene_from_dict
 from lidarfield.study.config import load_config
-from lidarfield.study.jobs import stack_jobs
 from lidarfield.study.stack import next_stage
 from lidarfield.study.summary import write_summary
 

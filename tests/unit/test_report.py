@@ -14,7 +14,7 @@ from lidarfield.cli import main
 from lidarfield.errors import InputError
 from lidarfield.plots import plot_pair, plot_stage
 from lidarfield.report import compare_studies, discover, write_pair_page, write_report
-from lidarfield.report.pair_page import STAGE_FIGURES
+from lidarfield.report.pair_page import STAGE_FIGURE_CAPTIONS
 
 FAST = {"background_points": 2000, "dpi": 50}
 
@@ -66,7 +66,9 @@ N_STUDY_FIGURES = 3 + 2  # heat map, hypotheses, all pairs; a polar map per stag
 
 def stage_figure_files(pairs) -> set:
     """The stage figures drawn for the study (which ones is plot_stage's business)."""
-    files = {d / "figures" / f"{stem}.png" for dirs in pairs.values() for d in dirs for stem, _ in STAGE_FIGURES}
+    files = {
+        d / "figures" / f"{stem}.png" for dirs in pairs.values() for d in dirs for stem, _ in STAGE_FIGURE_CAPTIONS
+    }
     return {f for f in files if f.is_file()}
 
 
@@ -404,9 +406,9 @@ def test_cli_report_takes_its_budget_from_max_mb_or_else_the_config(plotted_stud
 
 
 def test_the_report_knows_every_figure_a_stage_can_have():
-    from lidarfield.plots import STAGE_FIGURES as DRAWN
+    from lidarfield.plots import STAGE_FIGURES
 
-    assert sorted(stem for stem, _ in STAGE_FIGURES) == sorted(DRAWN)
+    assert sorted(stem for stem, _ in STAGE_FIGURE_CAPTIONS) == sorted(STAGE_FIGURES)
 
 
 def test_an_embedded_copy_is_the_figure_scaled_to_the_page_in_256_colours(plotted_study):

@@ -11,6 +11,7 @@ import pandas as pd
 import pytest
 import yaml
 
+from lidarfield.commands.scans import run_pair
 from lidarfield.io import read_scan, write_scan
 from lidarfield.poses import pose_from_xyzrpy
 from lidarfield.scan import Scan
@@ -18,7 +19,6 @@ from lidarfield.sensors.fit import ELEVATION_TOLERANCE_DEG, fit_warning, sensor_
 from lidarfield.sensors.models import PRESETS, SensorModel
 from lidarfield.simulation.raycast import simulate_scan
 from lidarfield.simulation.scene import load_scene
-from lidarfield.study.run import run_pair
 
 VLP16 = PRESETS["vlp16"]  # -15..15 deg, 0.5..100 m
 

@@ -10,9 +10,9 @@ import pytest
 import yaml
 
 from conftest import ROOT
+from lidarfield.commands.jobs import simulated_scan
 from lidarfield.errors import ConfigError
 from lidarfield.study.config import load_config, validate_config
-from lidarfield.study.jobs import simulated_scan
 
 DEFAULT_CONFIG = ROOT / "config" / "config.yaml"
 # A simulated scan's spec before the faults existed: a config without faults keeps exactly these.

@@ -64,6 +64,29 @@ def test_the_whole_stack_is_validated_before_any_stage():
         apply_stack(pair, [{"crop": {}}, {"shadow": {"jump_m": -1}}])
 
 
+def test_a_step_is_parsed_once_in_the_job_and_once_by_the_stack(monkeypatch, tmp_path):
+    """Planning validated the entries: the mitigate job parses its entry once (not also in a
+    validation and again in ``apply_step``), ``apply_stack`` each entry once."""
+    import lidarfield.hypotheses as hypotheses
+    from lidarfield.commands.jobs import mitigate_stage
+    from lidarfield.pair import write_pair
+
+    parsed = []
+    parse_params = hypotheses.parse_params
+    monkeypatch.setattr(hypotheses, "parse_params", lambda *a: parsed.append(a[2]) or parse_params(*a))
+    rng = np.random.default_rng(1)
+    pair = RegisteredPair(rng.normal(scale=8, size=(500, 3)), rng.normal(scale=8, size=(400, 3)))
+    write_pair(tmp_path / "registered.parquet", pair)
+    step = {"crop": {"max_range_m": 12.0}}
+    out = tmp_path / "changes.parquet", tmp_path / "removed.parquet"
+    mitigate_stage(tmp_path / "registered.parquet", [], step, "01-crop-00000000", 1, *out)
+    assert parsed == ["hypothesis 1 (crop)"] and out[0].is_file()
+    parsed.clear()
+    stages = list(apply_stack(pair, [{"ego_vehicle": {"radius_m": 4}}, step]))
+    assert parsed == ["hypothesis 1 (ego_vehicle)", "hypothesis 2 (crop)"]
+    assert stages[2].spec == {"crop": {**stages[2].spec["crop"], "max_range_m": 12.0}} and stages[2].removed1 > 0
+
+
 # --- the paper's simulated pair ------------------------------------------------------------
 
 # 36 azimuth bins and 5 elevation bands of 7.5 deg (the 37.5 deg the paper states), the lowest

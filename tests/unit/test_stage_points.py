@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from lidarfield.commands.jobs import write_stage
 from lidarfield.errors import InputError
 from lidarfield.io.parquet_table import read_table
 from lidarfield.pair import read_pair, write_pair
@@ -14,8 +15,7 @@ from lidarfield.registration import register_pair
 from lidarfield.sensors.models import PRESETS
 from lidarfield.simulation.raycast import simulate_scan
 from lidarfield.simulation.scene import load_scene
-from lidarfield.stage_points import CHANGES, read_stage_points, stage_files
-from lidarfield.study.jobs import write_stage
+from lidarfield.storage.stage_points import CHANGES, read_stage_points, stage_files
 from lidarfield.study.stack import apply_stack
 
 GRID = {"kind": "spherical", "azimuth_bins": 36, "elevation_deg": [-22.5, 15.0], "elevation_bins": 5, "min_points": 30}

@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 
 import lidarfield
-from lidarfield.analysis.explain import ExplainSettings
+from lidarfield.analysis.stopping_rule import ExplainSettings
 from lidarfield.defaults import default, section
 from lidarfield.field.grid import CartesianGrid, FieldSettings, SphericalGrid
 from lidarfield.plots.settings import STAGE_FIGURES, PlotSettings
@@ -144,3 +144,9 @@ def test_a_cartesian_field_from_the_command_line_bins_on_the_schema_cell():
 
     assert CartesianGrid().cell_m == default("grid", "cell_m") == 2.0
     assert field_settings_from_config({"kind": "cartesian"}).grid == CartesianGrid()
+
+
+def test_the_loose_top_level_modules_are_the_base_layer():
+    """A new module goes into a part (docs/development.md lists them), not beside these."""
+    loose = {p.stem for p in PACKAGE.glob("*.py")} - {"__init__", "__main__"}
+    assert loose == {"errors", "checks", "defaults", "yaml_file", "poses", "scan", "pair"}

@@ -15,11 +15,11 @@ import pytest
 import yaml
 
 from lidarfield.cli import main
+from lidarfield.commands.jobs import scan_job
 from lidarfield.io import read_scan
 from lidarfield.io.pose_files import read_kitti_poses
 from lidarfield.io.rosbag.writer import CloudMessage, write_bag
 from lidarfield.study.config import load_config, validate_config
-from lidarfield.study.jobs import scan_job
 
 pytest.importorskip("rosbags")
 

@@ -13,6 +13,8 @@ import yaml
 
 from conftest import ROOT
 from lidarfield.cli import main
+from lidarfield.commands.jobs import field_stage, mitigate_stage
+from lidarfield.commands.scans import run_pair
 from lidarfield.errors import InputError
 from lidarfield.io import read_scan, write_scan
 from lidarfield.io.parquet_table import read_metadata, read_table
@@ -21,10 +23,8 @@ from lidarfield.poses import pose_from_xyzrpy
 from lidarfield.sensors.models import PRESETS
 from lidarfield.simulation.raycast import simulate_scan
 from lidarfield.simulation.scene import load_scene
-from lidarfield.stage_points import CHANGES, read_stage_points, stage_files
+from lidarfield.storage.stage_points import CHANGES, read_stage_points, stage_files
 from lidarfield.study.config import load_config
-from lidarfield.study.jobs import field_stage, mitigate_stage
-from lidarfield.study.run import run_pair
 from lidarfield.study.summary import write_summary
 
 GRID = {"kind": "spherical", "azimuth_bins": 36, "elevation_deg": [-22.5, 15.0], "elevation_bins": 5, "min_points": 30}

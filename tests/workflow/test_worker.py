@@ -21,8 +21,8 @@ import pyarrow.parquet as pq
 import pytest
 
 from lidarfield.cli.worker_client import recv_message, send_message
-from lidarfield.hypotheses.steps import canonical_json
 from lidarfield.runner.launch import THREAD_VARS
+from lidarfield.storage.stage_ids import canonical_json
 from lidarfield.study.config import validate_config
 
 pytestmark = pytest.mark.slow

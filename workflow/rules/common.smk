@@ -9,8 +9,8 @@ from snakemake.common import overwrite_function_params
 from snakemake.utils import min_version, update_config
 
 import lidarfield.study.config
-from lidarfield.hypotheses.steps import canonical_json
-from lidarfield.layout import RESULTS_FOLDERS
+from lidarfield.storage.stage_ids import canonical_json
+from lidarfield.storage.layout import RESULTS_FOLDERS
 from lidarfield.plots.settings import figure_settings
 
 min_version("9.0")
@@ -78,7 +78,7 @@ PLOT_PAIRS = STUDY.plot_pairs
 SUGGEST_PAIRS = set(STUDY.suggest_pairs)
 
 
-# A stage's id: {k:02d}-{hypothesis}-{hash8} (lidarfield.study.stage_ids).
+# A stage's id: {k:02d}-{hypothesis}-{hash8} (lidarfield.storage.stage_ids).
 STAGE_ID = r"\d\d-[A-Za-z0-9_]+-[0-9a-f]{8}"
 
 

@@ -17,9 +17,8 @@ import numpy as np
 
 from ..checks import is_number
 from ..errors import RegistrationError
-from ..io.parquet_table import read_table, write_table
-from ..pair import RegisteredPair
-from ..poses import apply_pose, invert_pose, pose_error
+from ..io.parquet_table import read_table
+from ..poses import pose_error
 
 log = logging.getLogger(__name__)
 
@@ -193,29 +192,6 @@ def reference_pose(meta: dict) -> tuple[np.ndarray, str]:
     if registration.get("reference_T_1_2") is not None:
         return np.asarray(registration["reference_T_1_2"], dtype=np.float64), "truth"
     return np.asarray(meta["T_1_2"], dtype=np.float64), "registration"
-
-
-def rematch_stage(points: tuple[RegisteredPair, dict], settings: dict, out: str | Path) -> dict[str, np.ndarray]:
-    """Rematch a stage's survivors (its points and their metadata, as
-    :func:`~lidarfield.stage_points.read_stage_points` reads them) and write ``rematch.parquet``."""
-    pair, meta = points
-    reference, kind = reference_pose(meta)
-    # The survivors of scan 2 are in frame 1 by the study's T_1_2: back to sensor 2's frame.
-    xyz2_sensor = apply_pose(invert_pose(pair.T_1_2), pair.xyz2)
-    log.info(
-        "rematch stage %s: %d + %d points, reference: %s", meta.get("stage"), len(pair.xyz1), len(xyz2_sensor), kind
-    )
-    table = rematch(pair.xyz1, xyz2_sensor, reference, settings)
-    out_meta = {
-        "stage": meta.get("stage"),
-        "level": meta.get("level"),
-        "hypothesis": meta.get("hypothesis"),
-        "reference": kind,
-        "reference_T_1_2": reference.tolist(),
-        "settings": settings,
-    }
-    write_table(out, table, out_meta)
-    return table
 
 
 def read_rematch(path: str | Path) -> tuple[dict[str, np.ndarray], dict]:

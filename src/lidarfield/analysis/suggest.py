@@ -40,13 +40,14 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import HypothesisError, NotApplicableError
-from ..field.grid import FieldSettings, field_settings_from_config
+from ..field.grid import FieldSettings
 from ..field.kernel import field_from_voxel_ids
 from ..hypotheses import BUILTINS, CORRECTING, apply_step, validate_step
 from ..hypotheses.outcome import displacement
-from ..hypotheses.steps import canonical_json, step_name
+from ..hypotheses.steps import step_name
 from ..io.parquet_table import write_table
 from ..pair import RegisteredPair
+from ..storage.stage_ids import canonical_json
 from .tags import vector_tags, voxel_energy
 
 log = logging.getLogger(__name__)
@@ -232,22 +233,6 @@ def _rank_key(row: dict) -> tuple:
     defined = math.isfinite(reduction)
     share = row["tag_share"] if math.isfinite(row["tag_share"]) else 0.0
     return (not defined, -reduction if defined else 0.0, row["removed1"] + row["removed2"], -share)
-
-
-def suggest_stage(
-    points: tuple[RegisteredPair, dict],
-    candidates: list[dict],
-    grid_section: dict,
-    out: str | Path,
-    base_dir: str | Path = ".",
-    defaults: bool = False,
-) -> dict[str, np.ndarray]:
-    """``suggestions.parquet`` of a stage from its points and their metadata (as
-    :func:`~lidarfield.stage_points.read_stage_points` reads them); returns the table."""
-    pair, meta = points
-    table = suggestions(pair, field_settings_from_config(grid_section), candidates, base_dir, grid_section, defaults)
-    write_suggestions(out, table, meta.get("stage"), candidates, grid_section)
-    return table
 
 
 def write_suggestions(

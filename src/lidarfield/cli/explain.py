@@ -32,8 +32,8 @@ def add_parser(subparsers) -> None:
 
 
 def _explain(args: argparse.Namespace) -> int:
-    from ..report.explain import explain_scans
-    from ..study.explain import PRINTED_COLUMNS
+    from ..commands.scans import explain_scans
+    from ..study.explain_loop import PRINTED_COLUMNS
 
     out = args.out or f"explain-{Path(args.scan1).stem}-{Path(args.scan2).stem}"
     explanation = explain_scans(args.scan1, args.scan2, args.config, out, **pair_inputs(args))

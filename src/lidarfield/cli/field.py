@@ -2,13 +2,10 @@
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
-import numpy as np
-
 from ..defaults import default
-from ..errors import ConfigError, InputError
+from ..errors import ConfigError
 from ..yaml_file import read_yaml
 
 # CLI flag -> grid config key (the same keys as the study config's ``grid`` section).
@@ -88,46 +85,11 @@ def add_parser(subparsers) -> None:
 
 
 def run(args) -> int:
-    from ..analysis.field_stats import analyse_field, summary_json_safe
-    from ..field.file import field_meta, write_field
-    from ..field.grid import field_settings_from_config
-    from ..io import read_scan
-    from ..io.atomic import write_text
-    from ..io.pose_files import read_pose
-    from ..pair import RegisteredPair
-    from ..poses import apply_pose, parse_pose_arg
+    from ..commands.scans import field_of_scans
 
-    # Everything that can fail on the user's input happens before the first file is written.
-    settings = field_settings_from_config(_grid_config(args))
-    T_1_2 = np.eye(4)
-    if args.transform is not None:
-        T_1_2 = read_pose(args.transform)
-    elif args.pose2 is not None:
-        T_1_2 = parse_pose_arg(args.pose2)
-    scan1 = read_scan(args.scan1, format=args.format)
-    scan2 = read_scan(args.scan2, format=args.format)
-    for path, scan in ((args.scan1, scan1), (args.scan2, scan2)):
-        if len(scan.xyz) == 0:
-            raise InputError("holds no valid point", path)
-    if args.out.exists() and not args.out.is_dir():
-        raise InputError("--out exists and is not a folder", args.out)
-
-    xyz2 = apply_pose(T_1_2, scan2.xyz)
-    # the sensors too: their scan patterns are part of each vector's sampling noise
-    pair = RegisteredPair(scan1.xyz, xyz2, T_1_2, scan1.sensor, scan2.sensor)
-    columns, statistics = analyse_field(pair, settings)
-    summary = {
-        "scan1": str(args.scan1),
-        "scan2": str(args.scan2),
-        "n1": len(scan1.xyz),
-        "n2": len(xyz2),
-        "out_of_grid1": len(scan1.xyz) - int(columns["n1"].sum()),
-        "out_of_grid2": len(xyz2) - int(columns["n2"].sum()),
-        "T_1_2": T_1_2.tolist(),
-        **field_meta(settings, statistics),
-    }
-    write_field(args.out / "field.parquet", columns, summary_json_safe(summary))
-    write_text(args.out / "summary.json", json.dumps(summary_json_safe(summary), indent=2, allow_nan=False) + "\n")
+    summary = field_of_scans(
+        args.scan1, args.scan2, _grid_config(args), args.out, args.format, args.transform, args.pose2
+    )
     print(_table(summary))
     print(f"-> {args.out / 'field.parquet'}, {args.out / 'summary.json'}")
     return 0

@@ -170,19 +170,19 @@ def add_parser(subparsers) -> None:
 
 
 def _scan(args: argparse.Namespace) -> None:
-    from ..study.jobs import scan_job
+    from ..commands.jobs import scan_job
 
     scan_job(args.kind, args.spec, args.out)
 
 
 def _register(args: argparse.Namespace) -> None:
-    from ..study.jobs import register_job
+    from ..commands.jobs import register_job
 
     register_job(args.scan1, args.scan2, args.settings, args.out)
 
 
 def _mitigate(args: argparse.Namespace) -> None:
-    from ..study.jobs import mitigate_stage
+    from ..commands.jobs import mitigate_stage
 
     mitigate_stage(
         args.registered, args.stage_changes, args.step, args.stage, args.level, args.changes_out, args.removed_out
@@ -190,7 +190,7 @@ def _mitigate(args: argparse.Namespace) -> None:
 
 
 def _field(args: argparse.Namespace) -> None:
-    from ..study.jobs import field_stage
+    from ..commands.jobs import field_stage
 
     field_stage(
         args.registered,
@@ -205,11 +205,12 @@ def _field(args: argparse.Namespace) -> None:
 
 
 def _suggest(args: argparse.Namespace) -> None:
-    from ..analysis.suggest import suggest_stage
-    from ..stage_points import read_stage_points
+    from ..commands.jobs import suggest_stage
 
     suggest_stage(
-        read_stage_points(args.registered, args.stage_changes, args.stage),
+        args.registered,
+        args.stage_changes,
+        args.stage,
         args.candidates,
         args.grid,
         args.out,
@@ -218,10 +219,9 @@ def _suggest(args: argparse.Namespace) -> None:
 
 
 def _rematch(args: argparse.Namespace) -> None:
-    from ..analysis.rematch import rematch_stage
-    from ..stage_points import read_stage_points
+    from ..commands.jobs import rematch_stage
 
-    rematch_stage(read_stage_points(args.registered, args.stage_changes, args.stage), args.settings, args.out)
+    rematch_stage(args.registered, args.stage_changes, args.stage, args.settings, args.out)
 
 
 def _plot_stage(args: argparse.Namespace) -> None:
@@ -238,14 +238,9 @@ def _plotly_js(args: argparse.Namespace) -> None:
 
 
 def _plot_pair(args: argparse.Namespace) -> None:
-    from ..plots import plot_pair
-    from ..study.summary import read_stats
+    from ..commands.jobs import plot_pair_job
 
-    plot_pair(read_stats(args.stats), args.out)
-    if args.rematch:
-        from ..plots.rematch import plot_pair_rematch
-
-        plot_pair_rematch(args.rematch, args.out)
+    plot_pair_job(args.stats, args.rematch, args.out)
 
 
 def _summary(args: argparse.Namespace) -> None:
@@ -267,48 +262,37 @@ def _study_tables(args: argparse.Namespace) -> None:
 
 
 def _study_figures(args: argparse.Namespace) -> None:
-    from ..plots.study import plot_study
-    from ..study.tables import read_study_tables
+    from ..commands.jobs import study_figures_job
 
-    t = read_study_tables(args.summary, args.study_dir)
-    plot_study(t.summary, t.voxels, t.hypotheses, t.pairs, t.grid, args.out)
+    study_figures_job(args.summary, args.study_dir, args.out)
 
 
 def _pair_report(args: argparse.Namespace) -> None:
-    from pathlib import Path
+    from ..commands.jobs import pair_report_job
 
-    from ..report import write_pair_page
-    from ..study.summary import read_stats
-
-    write_pair_page(
+    pair_report_job(
         args.pair,
         args.stage_dirs,
-        read_stats(args.stats, args.rematch),
-        args.out,
+        args.stats,
+        args.rematch,
+        args.suggestions,
         args.plots,
         args.figures,
-        overview_href="../report.html",
-        on_demand=args.on_demand,
-        max_mb=args.max_mb,
-        suggested={Path(p).parent.name for p in args.suggestions},
+        args.on_demand,
+        args.max_mb,
+        args.out,
     )
 
 
 def _report(args: argparse.Namespace) -> None:
-    from pathlib import Path
+    from ..commands.jobs import report_job
 
-    from ..report import write_overview
-    from ..report.explain import read_explanations
-    from ..study.tables import read_study_tables
-
-    tables = read_study_tables(args.summary, args.study_dir)
-    # .../{pair}/stages/{stage}/suggestions.parquet
-    last_stages = {Path(p).parents[2].name: Path(p).parent for p in args.suggestions}
-    explained = read_explanations(args.explain)
-    write_overview(args.config, tables, args.out, args.figures, set(args.plotted), last_stages, explained=explained)
+    report_job(
+        args.config, args.summary, args.study_dir, args.figures, args.plotted, args.suggestions, args.explain, args.out
+    )
 
 
 def _explain(args: argparse.Namespace) -> None:
-    from ..report.explain import explain_job
+    from ..commands.jobs import explain_job
 
     explain_job(args.points, args.pair, args.grid, args.suggest, args.settings, args.plots, args.out_dir)

@@ -28,7 +28,7 @@ def add_parser(subparsers) -> None:
 
 def run(args) -> int:
     from ..plots import plot_stage
-    from ..stage_points import stage_files
+    from ..storage.stage_points import stage_files
     from ..study.config import load_config
 
     settings = load_config(args.config, require_pairs=False).plots if args.config else {}

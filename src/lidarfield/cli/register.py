@@ -73,16 +73,10 @@ def run(args) -> int:
         return _from_aligned(*args.from_aligned, args.out)
     if len(args.scans) != 2:
         raise InputError(f"expected SCAN1 SCAN2, got {len(args.scans)} scan argument(s)")
-    from ..io import read_scan
-    from ..pair import write_pair
-    from ..registration import register_pair
+    from ..commands.scans import register_scans
 
-    scan1, scan2 = (read_scan(path, format=args.format, sensor=args.sensor) for path in args.scans)
-    for scan, spec in ((scan1, args.pose1), (scan2, args.pose2)):
-        if spec:
-            scan.pose = _pose_spec(spec)
-    pair = register_pair(scan1, scan2, _settings(args))
-    write_pair(args.out, pair)
+    poses = [_pose_spec(spec) if spec else None for spec in (args.pose1, args.pose2)]
+    pair = register_scans(*args.scans, _settings(args), args.out, args.format, args.sensor, poses)
     _print_registration(pair)
     print(f"wrote {args.out}")
     return 0
@@ -138,22 +132,9 @@ def _print_registration(pair) -> None:
 
 
 def _from_aligned(original: Path, aligned: Path, out: Path) -> int:
-    from ..registration import (
-        read_xyz_rows,
-        translation_from_aligned_copy,
-        translation_offsets,
-        write_transform,
-    )
+    from ..commands.scans import transform_from_aligned
 
-    rows_original, rows_aligned = read_xyz_rows(original), read_xyz_rows(aligned)
-    T = translation_from_aligned_copy(rows_original, rows_aligned)
-    offsets = translation_offsets(rows_original, rows_aligned)
-    spread = np.abs(offsets - T[:3, 3]).max()
-    comment = (
-        f"pose of the sensor of {original.name} in the frame of {aligned.name}: the translation mapping "
-        f"it onto {aligned.name} row for row\n{len(offsets)} rows, offsets spread {spread:.3g} m"
-    )
-    write_transform(out, T, comment)
+    T, offsets, spread = transform_from_aligned(original, aligned, out)
     print(f"translation {T[:3, 3].tolist()} m from {len(offsets)} rows; spread {spread:.3g} m")
     print(f"wrote {out}")
     return 0

@@ -63,7 +63,7 @@ def pair_inputs(args: argparse.Namespace) -> dict:
 
 def _run(args: argparse.Namespace) -> int:
     from ..analysis.rematch import METHOD_COLUMNS, method_rows
-    from ..study.run import run_pair
+    from ..commands.scans import run_pair
 
     rows = run_pair(args.scan1, args.scan2, args.config, args.out, **pair_inputs(args))
     print(format_table(rows))

@@ -8,8 +8,9 @@ the sweeps before a scene's first key frame and after its last are the scene's t
 frames only (``sweeps: false``). The points are in the LIDAR_TOP sensor frame. nuScenes gives
 the vehicle's pose (ego_pose: global-from-ego, at the sweep's timestamp) and the lidar's
 calibration (calibrated_sensor: ego-from-lidar); each scan's pose is their product,
-world-from-lidar. Quaternions are [w, x, y, z]; timestamps microseconds. The lidar is a
-Velodyne HDL-32E (the ``hdl32`` preset) spinning at 20 Hz.
+world-from-lidar. Quaternions are [w, x, y, z]; timestamps integer microseconds, divided
+(correctly rounded) into seconds. The lidar is a Velodyne HDL-32E (the ``hdl32`` preset)
+spinning at 20 Hz.
 
 Only the tables are read, never the point files (their existence is checked). A full
 v1.0-trainval ``sample_data.json`` and ``ego_pose.json`` hold millions of records: they are
@@ -66,7 +67,7 @@ def read_index(settings: dict, base_dir: Path) -> DatasetSequence:
             str(root / r.filename),
             "nuscenes",
             (_matrix(*index.ego[r.ego_pose], index.ego_table, r.ego_pose) @ index.calibration[r.calibration]).tolist(),
-            r.timestamp_us * 1e-6,
+            r.timestamp_us / 1e6,  # correctly rounded; * 1e-6 rounds twice (an ulp, 0.24 us, off)
         )
         for r in records
     ]

@@ -110,7 +110,11 @@ def validate_step(
 
     Idempotent: validating a normalised entry gives it back unchanged.
     """
-    name, params = parse_step(step, base_dir, study_grid, level)
+    return step_spec(*parse_step(step, base_dir, study_grid, level))
+
+
+def step_spec(name: str, params) -> dict:
+    """The normalised entry ``{name: {params}}`` of a parsed one (:func:`parse_step`'s)."""
     return {name: params_to_dict(params)}
 
 
@@ -120,11 +124,16 @@ def validate_stack(stack: list[dict] | None, base_dir: str | Path = ".", study_g
     Pass the study's ``grid`` section as ``study_grid`` so that ``shadow``'s default grid is
     written into its entry (and so into its stage id).
     """
+    return [step_spec(name, params) for name, params in parse_stack(stack, base_dir, study_grid)]
+
+
+def parse_stack(stack: list[dict] | None, base_dir: str | Path = ".", study_grid: dict | None = None) -> list[tuple]:
+    """(name, params) of every entry of the stack (:func:`parse_step`), in order."""
     if stack is None:
         return []
     if not isinstance(stack, list):
         raise HypothesisError(f"the hypothesis stack is a list of {{name: {{parameters}}}} entries, got {stack!r}")
-    return [validate_step(step, base_dir, study_grid, level) for level, step in enumerate(stack, start=1)]
+    return [parse_step(step, base_dir, study_grid, level) for level, step in enumerate(stack, start=1)]
 
 
 def apply_step(
@@ -136,7 +145,12 @@ def apply_step(
 ) -> Outcome:
     """Validate one stack entry and apply it: its checked :class:`Outcome` (which unpacks as the
     keep-masks of both clouds, ``keep1, keep2 = apply_step(...)``)."""
-    name, params = parse_step(step, base_dir, study_grid, level)
+    return run_step(pair, *parse_step(step, base_dir, study_grid, level), base_dir, level)
+
+
+def run_step(pair: RegisteredPair, name: str, params, base_dir: str | Path = ".", level: int | None = None) -> Outcome:
+    """Apply a parsed stack entry (:func:`parse_step`'s name and parameters): its checked
+    :class:`Outcome`."""
     if name == PLUGIN.name:
         return plugin.run_plugin(pair, params, base_dir, level)
     result = BUILTINS[name].function(pair, params)

@@ -1,4 +1,5 @@
-"""``shadow``: the first radial cluster (McDermott & Rife 2022).
+"""``shadow``: the first radial cluster (McDermott & Rife 2022, the shadow mitigation the source
+paper, Choate & Rife, uses; docs/references.md).
 
 For each origin o in ``origins``, each cloud's points are binned about o on an angular grid
 (azimuth x elevation; points are expressed in that sensor's frame). In each cell, that cloud's

@@ -1,14 +1,7 @@
-"""One entry of a hypothesis stack, ``{name: params}``: its name, and its canonical JSON (what
-stage ids and suggestions hash and compare)."""
+"""One entry of a hypothesis stack, ``{name: params}``: its name (its canonical JSON, what
+stage ids and suggestions hash and compare, is :func:`lidarfield.storage.stage_ids.canonical_json`)."""
 
 from __future__ import annotations
-
-import json
-
-
-def canonical_json(obj) -> str:
-    """Key-sorted, whitespace-free JSON: equal settings give equal strings."""
-    return json.dumps(obj, sort_keys=True, separators=(",", ":"), allow_nan=False)
 
 
 def step_name(step: dict) -> str:

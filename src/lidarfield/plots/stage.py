@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..stage_points import stage_files
+from ..storage.stage_points import stage_files
 from .before_after import plot_before_after
 from .field_views import magnified_tips, plot_field_perspective, plot_field_top
 from .interactive import plot_interactive
@@ -50,7 +50,7 @@ def plot_stage(
 
     ``points``: the files of the stage's points, the pair's ``registered.parquet`` and the
     ``changes.parquet`` of stages 1..k (the previous stage's: all but the last); found from
-    the results' layout when None (:func:`~lidarfield.stage_points.stage_files`).
+    the results' layout when None (:func:`~lidarfield.storage.stage_points.stage_files`).
     ``settings`` is the config's ``plots`` section. Axis limits come from the previous stage
     when given (its points are a superset of this stage's), so that both halves of
     ``before_after`` and the figures of consecutive stages share their axes. ``plotly_js``:

@@ -2,7 +2,7 @@
 
 A stage folder holds ``changes.parquet`` (what the stage removed and moved: with the registered
 pair and the changes of the stages before it, its survivors; see
-:mod:`lidarfield.stage_points`), ``removed.parquet`` (points this stage removed, with a
+:mod:`lidarfield.storage.stage_points`), ``removed.parquet`` (points this stage removed, with a
 ``hypothesis`` column) and ``field.parquet`` (one row per voxel); see the shared layout.
 """
 
@@ -17,9 +17,9 @@ import numpy as np
 from ..defaults import default
 from ..errors import InputError
 from ..io.parquet_table import read_table
-from ..layout import level_of
 from ..pair import RegisteredPair
-from ..stage_points import read_stage_points, stage_files
+from ..storage.layout import level_of
+from ..storage.stage_points import read_stage_points, stage_files
 
 FIELD_COLUMNS = ("voxel", "n1", "n2", "x1", "y1", "z1", "x2", "y2", "z2", "u", "v", "w", "magnitude", "valid")
 

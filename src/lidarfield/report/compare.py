@@ -12,10 +12,10 @@ from pathlib import Path
 import numpy as np
 
 from ..io.atomic import write_text
-from ..layout import level_of
 from ..plots.output import png_bytes
 from ..plots.pair_stats import column, sorted_rows, stage_ticks
 from ..plots.style import figure
+from ..storage.layout import level_of
 from .discover import discover
 from .page import esc, image, image_file, page, table
 

@@ -12,7 +12,7 @@ import json
 from pathlib import Path
 
 from ..errors import InputError
-from ..layout import level_of
+from ..storage.layout import level_of
 from ..study.summary import read_stats, read_summary_frame
 
 LIST_COLUMNS = ("rigid_translation_m", "rigid_information", "rigid_unconstrained")

@@ -2,7 +2,7 @@
 report's section on it.
 
 An explanation's folder holds ``stack.yaml`` (the stack found, a ready config), ``steps.csv``
-(one row per step, ``study.explain.STEP_COLUMNS``), ``explain.json`` (the stack, the steps and
+(one row per step, ``study.explain_loop.STEP_COLUMNS``), ``explain.json`` (the stack, the steps and
 why the loop stopped: what the study report reads), ``figures/`` (per stage its field, or
 before / after the step and what it removed) and ``explain.html`` (the page showing them step
 by step). The study report's section lists per pair the stack found, and per hypothesis how
@@ -22,28 +22,23 @@ from pathlib import Path
 import numpy as np
 
 from .. import __version__
-from ..analysis.explain import explain_settings
 from ..analysis.field_stats import summary_json_safe
 from ..errors import InputError
 from ..field.file import field_meta
-from ..field.grid import FieldSettings, field_settings_from_config
+from ..field.grid import FieldSettings
 from ..io.atomic import write_text
-from ..pair import read_pair
 from ..plots.pair_stats import pair_figure_png
 from ..plots.settings import figure_settings
 from ..plots.stage import draw_stage
 from ..plots.stage_data import StageData, vector_field
-from ..study.config import load_config, validate_config
-from ..study.explain import (
+from ..study.explain_loop import (
     STEP_COLUMNS,
     TABLE_COLUMNS,
     ExplainedStage,
     Explanation,
-    explain_pair,
     format_step,
     stack_config,
 )
-from ..study.run import check_out_dir, read_and_register, registration_settings
 from .page import esc, image, image_file, link, page, relative_href, table
 from .pair_page import DPI, PAIR_FIGURES
 
@@ -209,58 +204,3 @@ def study_explain_parts(records: list[dict], out_dir: Path) -> list[str]:
             text_columns=1,
         ),
     ]
-
-
-EXPLAIN_MARKER = ".lidarfield-explain.json"  # marks a folder written by ``lidarfield explain``
-
-
-def explain_scans(
-    scan1: str | Path,
-    scan2: str | Path,
-    config_path: str | Path | None,
-    out_dir: str | Path,
-    register: str | None = None,
-    transform: str | Path | None = None,
-    sensor: str | None = None,
-    poses: dict | None = None,
-) -> Explanation:
-    """``lidarfield explain``: two scans read and registered as ``lidarfield run`` does, the loop
-    on the grid, ``suggest`` and ``explain`` settings of the config (the schema's defaults
-    without one; its ``hypotheses`` are not used), and the explanation's folder written."""
-
-    out_dir = check_out_dir(out_dir, EXPLAIN_MARKER, "lidarfield explain")
-    study = validate_config({}, require_pairs=False) if config_path is None else load_config(config_path, None, False)
-    settings = registration_settings(register, transform)
-    _, pair = read_and_register(scan1, scan2, settings, sensor, poses)
-    explanation = explain_pair(
-        pair,
-        study.grid,
-        study.grid_section,
-        explain_settings(study.config["explain"]),
-        study.suggest,
-        study.base_dir,
-        out_dir.resolve().name,
-    )
-    out_dir.mkdir(parents=True, exist_ok=True)
-    run = {"scan1": str(scan1), "scan2": str(scan2), "config": config_path and str(config_path), "register": settings}
-    write_text(out_dir / EXPLAIN_MARKER, json.dumps({**run, "sensor": sensor, "poses": poses}, indent=1) + "\n")
-    write_explanation(explanation, study.grid, study.grid_section, out_dir, study.config["plots"])
-    return explanation
-
-
-def explain_job(
-    points: str | Path,
-    pair_name: str,
-    grid_section: dict,
-    suggest: list[dict] | None,
-    explain: dict,
-    plots: dict | None,
-    out_dir: str | Path,
-) -> Explanation:
-    """A study pair's explain target: the loop on its registered pair, its folder written."""
-
-    pair, _ = read_pair(points)
-    settings = field_settings_from_config(grid_section)
-    explanation = explain_pair(pair, settings, grid_section, explain_settings(explain), suggest, ".", pair_name)
-    write_explanation(explanation, settings, grid_section, out_dir, plots)
-    return explanation

@@ -17,18 +17,20 @@ from pathlib import Path
 
 from .. import __version__
 from ..analysis.findings import findings_items, stage_findings
-from ..layout import level_of
 from ..plots import stage_figures
 from ..plots.pair_stats import pair_figure_png
 from ..plots.png import compact_png
 from ..plots.settings import PlotSettings, plot_settings
+from ..storage.layout import level_of
 from ..study.summary import LABEL_SCORES
 from .budget import Figure, Note, budget_mb, file_figure, write_within_budget
 from .page import esc, relative_href, table
 from .rematch import pair_rematch_table
 from .suggestions import stage_suggestions
 
-SUMMARY_COLUMNS = (
+# The summary columns the page's table shows, in its order (study.summary.SUMMARY_COLUMNS is
+# the summary file's).
+PAGE_TABLE_COLUMNS = (
     "pair",
     "stage",
     "level",
@@ -54,7 +56,9 @@ SUMMARY_COLUMNS = (
     "registration_method",
     "registration_fitness",
 )
-STAGE_FIGURES = (
+# Each stage figure's file stem (plots.settings.STAGE_FIGURES) and caption, in the order the
+# page embeds them.
+STAGE_FIGURE_CAPTIONS = (
     ("field_top", "field from above"),
     ("before_after", "before / after (same axes, same colour scale)"),
     ("removed_top", "removed points from above"),
@@ -71,7 +75,7 @@ PAIR_FIGURES = (
 PAIR_TIER = "pair figures"
 # The order in which figures are embedded while the page fits its budget: the pair's summary
 # first, then the stage figures that say most about a stage.
-TIERS = (PAIR_TIER, *(caption for _, caption in STAGE_FIGURES))
+TIERS = (PAIR_TIER, *(caption for _, caption in STAGE_FIGURE_CAPTIONS))
 DPI = 110
 
 
@@ -126,7 +130,7 @@ def correction_text(value) -> str:
 def stages_table(rows: list[dict]) -> str:
     """One row per stage (rows in red: the registration did not converge or warned); with a
     correcting stage, also each stage's displacements and what it fitted."""
-    headers = [c for c in SUMMARY_COLUMNS if any(c in r for r in rows)]
+    headers = [c for c in PAGE_TABLE_COLUMNS if any(c in r for r in rows)]
     headers += [c for c in LABEL_SCORES if any(_is_number(r.get(c)) for r in rows)]  # where labelled
     corrects = any(isinstance(r.get("correction"), str) and r["correction"] for r in rows)
     extra = list(CORRECTION_COLUMNS) if corrects else []
@@ -192,7 +196,7 @@ def stage_parts(
         parts.append(f'<p><a href="{esc(relative_href(view, out_dir))}">interactive 3-D view of this stage</a></p>')
     level = level_of(stage_dir.name) or 0
     drawn = stage_figures(settings, level, has_previous=level > 0)
-    stems = [(s, c) for s, c in STAGE_FIGURES if s in drawn]
+    stems = [(s, c) for s, c in STAGE_FIGURE_CAPTIONS if s in drawn]
     figures = [file_figure(c, fig_dir / f"{s}.png", f"{stage_dir.name}: {c}", out_dir) for s, c in stems]
     return parts + ['<div class="figures">', *figures, "</div>"]
 

@@ -50,7 +50,7 @@ log = logging.getLogger("lidarfield.worker")
 # jobs (scans, registration, stages) use.
 PRELOAD = (
     "lidarfield.cli.job",
-    "lidarfield.study.jobs",
+    "lidarfield.commands.jobs",
     "lidarfield.study.summary",
     "lidarfield.registration.matching",  # Open3D
     "lidarfield.analysis.rematch",

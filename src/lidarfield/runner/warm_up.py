@@ -14,6 +14,7 @@ import tempfile
 from collections.abc import Iterator
 from pathlib import Path
 
+from ..commands.jobs import stack_jobs
 from ..pair import write_pair
 from ..plots import plot_stage
 from ..poses import pose_from_xyzrpy
@@ -21,7 +22,6 @@ from ..registration import register_pair
 from ..sensors.models import sensor_model
 from ..simulation.raycast import simulate_scan
 from ..simulation.scene import load_scene
-from ..study.jobs import stack_jobs
 
 WARM_UP_FIGURES = ("field_top", "field_perspective")
 # The default study's simulated pair, with the 16-beam VLP-16: about 20,000 points a scan.

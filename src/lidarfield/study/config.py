@@ -18,12 +18,12 @@ import numpy as np
 
 from ..errors import ConfigError, LidarfieldError
 from ..field.grid import FieldSettings, field_settings_from_config
-from ..layout import RESULTS_FOLDERS
 from ..plots.settings import PlotSettings, plot_settings
+from ..storage.layout import RESULTS_FOLDERS
+from ..storage.stage_ids import stage_ids
 from ..yaml_file import read_yaml
 from .pairs import PairSpec, ScanSpec, study_pairs
 from .schema import check_config
-from .stage_ids import stage_ids
 
 
 @dataclass

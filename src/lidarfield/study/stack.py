@@ -10,7 +10,7 @@ corrected pose; its removed points are as they were. Every stage's survivors car
 (an attribute of both clouds): the point's row among its cloud's points in the registered
 pair. Stage 0 numbers them 0..N-1; every later stage keeps the rows of its survivors, whatever
 it moved. A stage is stored as what it changed (its ``changes``, by these rows): see
-:mod:`lidarfield.stage_points`.
+:mod:`lidarfield.storage.stage_points`.
 """
 
 from __future__ import annotations
@@ -21,12 +21,13 @@ from pathlib import Path
 
 import numpy as np
 
-from ..hypotheses import apply_step, validate_stack, validate_step
+from ..hypotheses import parse_stack, parse_step, run_step, step_spec
 from ..hypotheses.outcome import displacement, reasons_of_removed
 from ..hypotheses.outliers import carry_neighbours
-from ..hypotheses.steps import canonical_json, step_name
+from ..hypotheses.steps import step_name
 from ..pair import RegisteredPair
-from ..stage_points import NO_MITIGATION, ROW, change_columns, with_rows
+from ..storage.stage_ids import canonical_json
+from ..storage.stage_points import NO_MITIGATION, ROW, change_columns, with_rows
 
 
 @dataclass
@@ -45,7 +46,7 @@ class Stage:
     displacement1: tuple[float, float] = (0.0, 0.0)
     displacement2: tuple[float, float] = (0.0, 0.0)
     reasons: np.ndarray | None = None  # why each removed point went (cloud 1's, then 2's); None: not said
-    # the stage's changes.parquet rows: what it removed and moved (see lidarfield.stage_points)
+    # the stage's changes.parquet rows: what it removed and moved (see lidarfield.storage.stage_points)
     changes: dict[str, np.ndarray] = field(default_factory=dict)
 
     @property
@@ -101,9 +102,15 @@ def initial_stage(pair: RegisteredPair) -> Stage:
 def next_stage(
     pair: RegisteredPair, step: dict, level: int, base_dir: str | Path = ".", study_grid: dict | None = None
 ) -> Stage:
-    """Stage ``level``: hypothesis ``step`` applied to ``pair`` (the previous stage's survivors)."""
-    spec = validate_step(step, base_dir, study_grid, level)
-    outcome = apply_step(pair, spec, base_dir, study_grid, level)
+    """Stage ``level``: hypothesis ``step`` applied to ``pair`` (the previous stage's survivors).
+    The entry is parsed here, once: planning validated it already."""
+    return parsed_stage(pair, *parse_step(step, base_dir, study_grid, level), level, base_dir)
+
+
+def parsed_stage(pair: RegisteredPair, name: str, params, level: int, base_dir: str | Path = ".") -> Stage:
+    """Stage ``level``: the parsed entry (``parse_step``'s name and parameters) applied to ``pair``."""
+    spec = step_spec(name, params)
+    outcome = run_step(pair, name, params, base_dir, level)
     keep1, keep2 = outcome
     survivors = pair.subset(keep1, keep2)
     stage = Stage(level, step_name(spec), spec, survivors, pair.subset(~keep1, ~keep2), keep1, keep2)
@@ -133,19 +140,18 @@ def apply_stack(
 ) -> Iterator[Stage]:
     """Stage 0 (no mitigation), then one stage per entry of ``stack``, lazily.
 
-    The whole stack is validated first (a HypothesisError before any stage is produced).
+    The whole stack is parsed first, once (a HypothesisError before any stage is produced).
     ``base_dir`` is where plugin files are found; ``study_grid`` is the study's ``grid``
     section (``shadow``'s default grid).
     """
-    steps = validate_stack(stack, base_dir, study_grid)
-    return _stages(pair, steps, base_dir, study_grid)
+    return _stages(pair, parse_stack(stack, base_dir, study_grid), base_dir)
 
 
-def _stages(pair: RegisteredPair, steps: list[dict], base_dir, study_grid) -> Iterator[Stage]:
+def _stages(pair: RegisteredPair, parsed: list[tuple], base_dir) -> Iterator[Stage]:
     stage = initial_stage(pair)
     yield stage
-    for level, step in enumerate(steps, start=1):
-        previous, stage = stage, next_stage(stage.pair, step, level, base_dir, study_grid)
+    for level, (name, params) in enumerate(parsed, start=1):
+        previous, stage = stage, parsed_stage(stage.pair, name, params, level, base_dir)
         # what the caller derived from the previous stage's points (its suggestions' outlier
         # scores), carried over exactly for less than a new search costs; a cloud the stage
         # moved is searched anew when needed (carrying assumes unmoved points)

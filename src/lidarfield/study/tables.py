@@ -23,7 +23,7 @@ import numpy as np
 from ..errors import InputError
 from ..io.atomic import atomic_path
 from ..io.parquet_table import read_table, write_table
-from ..layout import level_of
+from ..storage.layout import level_of
 from .summary import read_summary_frame
 
 log = logging.getLogger(__name__)

@@ -30,10 +30,10 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import InputError
-from .io.parquet_table import read_metadata, read_table, write_table
+from ..errors import InputError
+from ..io.parquet_table import read_metadata, read_table, write_table
+from ..pair import RegisteredPair, read_pair
 from .layout import level_of
-from .pair import RegisteredPair, read_pair
 
 CHANGES = "changes.parquet"  # the file of a stage folder that holds what the stage changed
 NO_MITIGATION = "none"  # the hypothesis name of stage 0, which changes nothing

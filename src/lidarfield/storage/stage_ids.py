@@ -10,10 +10,16 @@ stages j..N and leaves the earlier ones, and their files, untouched.
 from __future__ import annotations
 
 import hashlib
+import json
 from pathlib import Path
 
 from .. import __version__
-from ..hypotheses.steps import canonical_json, step_name
+from ..hypotheses.steps import step_name
+
+
+def canonical_json(obj) -> str:
+    """Key-sorted, whitespace-free JSON: equal settings give equal strings."""
+    return json.dumps(obj, sort_keys=True, separators=(",", ":"), allow_nan=False)
 
 
 def _sha256(text: str) -> str:

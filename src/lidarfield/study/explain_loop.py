@@ -5,7 +5,7 @@ Everything stays in memory: each step is a :class:`~.stack.Stage` (the same ``ne
 study's mitigate job) with its field and statistics (``analyse_field``, as the field job), and
 the candidates of each step are the suggestions of that stage (``analysis.suggest``: the
 config's ``suggest`` list, or every built-in the stack has not applied). The stopping rule is
-:mod:`lidarfield.analysis.explain`. What it found is a stack (normalised entries, as a config's
+:mod:`lidarfield.analysis.stopping_rule`. What it found is a stack (normalised entries, as a config's
 ``hypotheses:``), one row per step with the numbers behind the choice, and every stage's field.
 """
 
@@ -20,7 +20,8 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from ..analysis.explain import (
+from ..analysis.field_stats import analyse_field
+from ..analysis.stopping_rule import (
     STOP_MAX_STEPS,
     STOP_NO_CANDIDATES,
     STOP_NOTHING_HELPS,
@@ -30,11 +31,10 @@ from ..analysis.explain import (
     repeats,
     worth_it,
 )
-from ..analysis.field_stats import analyse_field
 from ..analysis.suggest import candidate_steps, suggestions
 from ..field.grid import FieldSettings
-from ..hypotheses.steps import canonical_json
 from ..pair import RegisteredPair
+from ..storage.stage_ids import canonical_json
 from .stack import Stage, initial_stage, next_stage
 from .summary import summary_row
 

@@ -1,7 +1,7 @@
 """The results folder's layout: what every stage reads and writes relies on these names.
 
 ``results/{pair}/stages/{stage id}/`` holds a stage's files; a stage id is
-``{k:02d}-{hypothesis}-{hash8}`` (:mod:`lidarfield.study.stage_ids`), so its folder name
+``{k:02d}-{hypothesis}-{hash8}`` (:mod:`lidarfield.storage.stage_ids`), so its folder name
 starts with its level. Beside the pairs' folders, the results folder has its own subfolders.
 """
 

@@ -1,5 +1,7 @@
-"""The workflow's jobs, file in, file out: a scan (simulated or recorded), the registered
-pair, a stage's changes (mitigate) and its field with its summary row.
+"""The workflow's jobs, file in, file out, one function per ``lidarfield job``: a scan
+(simulated or recorded), the registered pair, a stage's changes (mitigate), its field with its
+summary row, its suggestions and its rematch; the pair's and the study's figures and pages; a
+pair's explanation.
 
 Each job reads what the config resolved for it (a scan spec, the pair's ``register``
 setting, one stack entry, the grid) and writes its outputs whole and atomically, so a failed
@@ -20,13 +22,14 @@ from ..field.grid import field_settings_from_config
 from ..io import read_scan, write_scan
 from ..io.atomic import write_text
 from ..io.parquet_table import read_table, write_table
-from ..pair import write_pair
+from ..pair import read_pair, write_pair
+from ..poses import apply_pose, invert_pose
 from ..scan import Scan
 from ..sensors.fit import log_fit
 from ..sensors.models import sensor_model
-from ..stage_points import CHANGES, read_stage_points, write_changes
-from .stack import Stage, next_stage
-from .summary import summary_row
+from ..storage.stage_points import CHANGES, read_stage_points, write_changes
+from ..study.stack import Stage, next_stage
+from ..study.summary import summary_row
 
 log = logging.getLogger(__name__)
 
@@ -184,3 +187,146 @@ def stack_jobs(
             folder.name,
         )
     return changes
+
+
+def suggest_stage(
+    registered: str | Path,
+    changes: list[str | Path],
+    stage_id: str,
+    candidates: list[dict],
+    grid_section: dict,
+    out: str | Path,
+    base_dir: str | Path = ".",
+    defaults: bool = False,
+) -> dict[str, np.ndarray]:
+    """``suggestions.parquet`` of a stage (the registered pair with ``changes``, those of stages
+    1..k; stage 0 takes its keys from ``stage_id``); returns the table."""
+    from ..analysis.suggest import suggestions, write_suggestions
+
+    pair, meta = read_stage_points(registered, changes, stage_id)
+    table = suggestions(pair, field_settings_from_config(grid_section), candidates, base_dir, grid_section, defaults)
+    write_suggestions(out, table, meta.get("stage"), candidates, grid_section)
+    return table
+
+
+def rematch_stage(
+    registered: str | Path, changes: list[str | Path], stage_id: str, settings: dict, out: str | Path
+) -> dict[str, np.ndarray]:
+    """Rematch a stage's survivors (the registered pair with ``changes``) and write
+    ``rematch.parquet``; returns the table."""
+    from ..analysis.rematch import reference_pose, rematch
+
+    pair, meta = read_stage_points(registered, changes, stage_id)
+    reference, kind = reference_pose(meta)
+    # The survivors of scan 2 are in frame 1 by the study's T_1_2: back to sensor 2's frame.
+    xyz2_sensor = apply_pose(invert_pose(pair.T_1_2), pair.xyz2)
+    log.info(
+        "rematch stage %s: %d + %d points, reference: %s", meta.get("stage"), len(pair.xyz1), len(xyz2_sensor), kind
+    )
+    table = rematch(pair.xyz1, xyz2_sensor, reference, settings)
+    out_meta = {
+        "stage": meta.get("stage"),
+        "level": meta.get("level"),
+        "hypothesis": meta.get("hypothesis"),
+        "reference": kind,
+        "reference_T_1_2": reference.tolist(),
+        "settings": settings,
+    }
+    write_table(out, table, out_meta)
+    return table
+
+
+def plot_pair_job(stats: list[str | Path], rematched: list[str | Path], out: str | Path) -> None:
+    """The pair's figures across its stages (and its rematch figure in a rematch study)."""
+    from ..plots import plot_pair
+    from ..study.summary import read_stats
+
+    plot_pair(read_stats(stats), out)
+    if rematched:
+        from ..plots.rematch import plot_pair_rematch
+
+        plot_pair_rematch(rematched, out)
+
+
+def study_figures_job(summary: str | Path, study_dir: str | Path, out: str | Path) -> None:
+    """The study level's figures, from the summary and the study tables."""
+    from ..plots.study import plot_study
+    from ..study.tables import read_study_tables
+
+    t = read_study_tables(summary, study_dir)
+    plot_study(t.summary, t.voxels, t.hypotheses, t.pairs, t.grid, out)
+
+
+def pair_report_job(
+    pair_name: str,
+    stage_dirs: list[str | Path],
+    stats: list[str | Path],
+    rematched: list[str | Path],
+    suggestion_files: list[str | Path],
+    plots: dict,
+    figures: bool,
+    on_demand: str | None,
+    max_mb: float,
+    out: str | Path,
+) -> None:
+    """A pair's page, beside the study overview; suggestions shown for the stages whose
+    ``suggestions.parquet`` is given."""
+    from ..report import write_pair_page
+    from ..study.summary import read_stats
+
+    write_pair_page(
+        pair_name,
+        stage_dirs,
+        read_stats(stats, rematched),
+        out,
+        plots,
+        figures,
+        overview_href="../report.html",
+        on_demand=on_demand,
+        max_mb=max_mb,
+        suggested={Path(p).parent.name for p in suggestion_files},
+    )
+
+
+def report_job(
+    config: dict,
+    summary: str | Path,
+    study_dir: str | Path,
+    figures: str | Path,
+    plotted: list[str],
+    suggestion_files: list[str | Path],
+    explanations: list[str | Path],
+    out: str | Path,
+) -> None:
+    """The study overview: its tables, figures, the pairs' last-stage suggestions
+    (``.../{pair}/stages/{stage}/suggestions.parquet``) and what explain found."""
+    from ..report import write_overview
+    from ..report.explain import read_explanations
+    from ..study.tables import read_study_tables
+
+    tables = read_study_tables(summary, study_dir)
+    last_stages = {Path(p).parents[2].name: Path(p).parent for p in suggestion_files}
+    explained = read_explanations(explanations)
+    write_overview(config, tables, out, figures, set(plotted), last_stages, explained=explained)
+
+
+def explain_job(
+    points: str | Path,
+    pair_name: str,
+    grid_section: dict,
+    suggest: list[dict] | None,
+    explain: dict,
+    plots: dict | None,
+    out_dir: str | Path,
+):
+    """A study pair's explain target: the loop on its registered pair, its folder written;
+    returns the explanation."""
+    from ..analysis.stopping_rule import explain_settings
+    from ..report.explain import write_explanation
+    from ..study.explain_loop import explain_pair
+
+    pair, _ = read_pair(points)
+    settings = field_settings_from_config(grid_section)
+    explanation = explain_pair(pair, settings, grid_section, explain_settings(explain), suggest, ".", pair_name)
+    write_explanation(explanation, settings, grid_section, out_dir, plots)
+    return explanation

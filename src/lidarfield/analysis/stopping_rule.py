@@ -5,7 +5,7 @@ A candidate is *worth it* when its energy reduction (``suggest``: over the voxel
 and after) is more than 0 and at least ``min_energy_reduction``, it removes at most
 ``max_removed_share`` of the points left, and its reduction is at least
 ``min_reduction_per_removed`` times that share (a correction removes nothing: only the first
-test applies). The loop (``study.explain``) applies the best-ranked candidate that is worth it,
+test applies). The loop (``study.explain_loop``) applies the best-ranked candidate that is worth it,
 and stops when the field's verdict is no longer ``patterned`` (``random``, or ``undetermined``
 with too few valid voxels to judge), when no candidate is worth it, or after ``max_steps``.
 The defaults are the config's ``explain`` section (the schema).

@@ -40,6 +40,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..lidars import LidarView
 from ..pair import RegisteredPair
 from ..poses import apply_pose, invert_pose
 from ..sensors.models import SensorModel
@@ -288,21 +289,38 @@ def sensor_image(xyz: np.ndarray, model: SensorModel, ring: np.ndarray | None = 
     return range_image(xyz, math.radians(model.azimuth_resolution_deg), sensor_channels(model), model.min_range_m, ring)
 
 
+def lidar_images(pair: RegisteredPair, cloud: int, image_of=None) -> list[tuple[LidarView, RangeImage]]:
+    """Each lidar of cloud 1 or 2 (:meth:`RegisteredPair.lidars`) with the range image of its
+    own points in its own frame: ``image_of(xyz, view, ring)``, by default on its model's
+    channels (:func:`sensor_image`)."""
+    xyz = pair.xyz1 if cloud == 1 else pair.xyz2
+    ring = (pair.attributes1 if cloud == 1 else pair.attributes2).get("ring")
+    image_of = image_of or (lambda own, view, own_ring: sensor_image(own, view.sensor, own_ring))
+    return [
+        (view, image_of(in_lidar_frame(view, xyz[view.points]), view, None if ring is None else ring[view.points]))
+        for view in pair.lidars(cloud)
+    ]
+
+
+def in_lidar_frame(view: LidarView, xyz: np.ndarray) -> np.ndarray:
+    """Points given in frame 1 in the frame of one lidar."""
+    return apply_pose(invert_pose(view.pose), xyz)
+
+
 def shared_points(pair: RegisteredPair) -> tuple[np.ndarray, np.ndarray] | None:
-    """Per cloud, the mask of its points the other sensor could have seen (:func:`co_visible`,
-    with the default margin), from both sensors' models and range images; None when a sensor
-    model is missing."""
-    if pair.sensor1 is None or pair.sensor2 is None:
+    """Per cloud, the mask of its points the other scan's lidars could have seen (:func:`co_visible`
+    from any of them, with the default margin), from their models and range images; None when
+    a lidar's model is missing."""
+    if any(view.sensor is None for cloud in (1, 2) for view in pair.lidars(cloud)):
         return None
-    models = (pair.sensor1, pair.sensor2)
-    own = (pair.xyz1, apply_pose(invert_pose(pair.T_1_2), pair.xyz2))
-    rings = (pair.attributes1.get("ring"), pair.attributes2.get("ring"))
-    images = [sensor_image(xyz, model, ring) for xyz, model, ring in zip(own, models, rings)]
-    other = (apply_pose(invert_pose(pair.T_1_2), pair.xyz1), pair.xyz2)  # each cloud in the other's frame
-    return (
-        co_visible(other[0], images[1], MARGIN_M, BEAM_WIDTH_DEG, models[1].max_range_m),
-        co_visible(other[1], images[0], MARGIN_M, BEAM_WIDTH_DEG, models[0].max_range_m),
-    )
+    images = lidar_images(pair, 1), lidar_images(pair, 2)
+    shared = []
+    for xyz, other in ((pair.xyz1, images[1]), (pair.xyz2, images[0])):
+        mask = np.zeros(len(xyz), dtype=bool)
+        for view, image in other:
+            mask |= co_visible(in_lidar_frame(view, xyz), image, MARGIN_M, BEAM_WIDTH_DEG, view.sensor.max_range_m)
+        shared.append(mask)
+    return shared[0], shared[1]
 
 
 class _Reference:

@@ -38,13 +38,15 @@ from ..field.free_space import (
     MARGIN_M,
     RangeImage,
     free_space_evidence,
+    in_lidar_frame,
+    lidar_images,
     range_image,
     sensor_image,
     uniform_channels,
 )
+from ..lidars import LidarView
 from ..pair import RegisteredPair
 from ..sensors.models import SensorModel
-from .geometry import in_sensor_frame
 from .outcome import Outcome
 from .params import doc
 from .voxel_objects import connected_voxels, off_ground, overlapping_objects, packed, voxel_grid
@@ -127,14 +129,15 @@ def evidenced_objects(evidence: np.ndarray, objects: np.ndarray, params: Params)
 
 
 def sensor_range_image(
-    xyz: np.ndarray, model: SensorModel | None, params: Params, sensor: int, ring: np.ndarray | None = None
+    xyz: np.ndarray, model: SensorModel | None, params: Params, lidar: str, ring: np.ndarray | None = None
 ) -> RangeImage:
-    """The range image of sensor 1's or 2's cloud (in its frame): one row per channel of its
-    model (its returns' ``ring`` where given), or uniform rows of ``angular_resolution_deg``."""
+    """The range image of a lidar's points (in its frame; ``lidar`` names it: "sensor 1", a
+    rig's lidar): one row per channel of its model (its returns' ``ring`` where given), or
+    uniform rows of ``angular_resolution_deg``."""
     if params.angular_resolution_deg is None:
         if model is None:
             raise NotApplicableError(
-                f"moving_objects: sensor {sensor} has no sensor model, so its channels are unknown: give the sensor "
+                f"moving_objects: {lidar} has no sensor model, so its channels are unknown: give the sensor "
                 "(--sensor, or 'sensor' in the pair's config) or moving_objects' angular_resolution_deg"
             )
         return sensor_image(xyz, model, ring)
@@ -159,19 +162,20 @@ def check_origins(pair: RegisteredPair) -> None:
 
 
 def pair_evidence(pair: RegisteredPair, params: Params) -> tuple[np.ndarray, np.ndarray]:
-    """Free-space evidence of every point of cloud 1 against sensor 2's returns, and of cloud 2
-    against sensor 1's."""
-    own = (pair.xyz1, in_sensor_frame(pair.xyz2, pair.T_1_2))
-    models = (pair.sensor1, pair.sensor2)
-    rings = (pair.attributes1.get("ring"), pair.attributes2.get("ring"))
-    images = [
-        sensor_range_image(xyz, model, params, sensor, ring)
-        for sensor, (xyz, model, ring) in enumerate(zip(own, models, rings), 1)
-    ]
-    return (
-        free_space_evidence(in_sensor_frame(pair.xyz1, pair.T_1_2), images[1], params.margin_m, params.beam_width_deg),
-        free_space_evidence(pair.xyz2, images[0], params.margin_m, params.beam_width_deg),
-    )
+    """Free-space evidence of every point of cloud 1 against the returns of scan 2's lidars
+    (in any one's free space), and of cloud 2 against scan 1's."""
+
+    def image_of(own: np.ndarray, view: LidarView, ring: np.ndarray | None) -> RangeImage:
+        return sensor_range_image(own, view.sensor, params, view.name, ring)
+
+    images = lidar_images(pair, 1, image_of), lidar_images(pair, 2, image_of)
+    evidence = []
+    for xyz, other in ((pair.xyz1, images[1]), (pair.xyz2, images[0])):
+        mask = np.zeros(len(xyz), dtype=bool)
+        for view, image in other:
+            mask |= free_space_evidence(in_lidar_frame(view, xyz), image, params.margin_m, params.beam_width_deg)
+        evidence.append(mask)
+    return evidence[0], evidence[1]
 
 
 def moving_objects(pair: RegisteredPair, params: Params) -> Outcome:

@@ -1,0 +1,135 @@
+"""Multi-lidar rigs: an Argoverse 2 style log of two VLP-32C stacked 0.3 m apart (the down one
+upside down), read through ``dataset: {format: av2}`` as rigs, each point with its own lidar;
+moving objects found from both lidars at the rates of one, and the rig carried through files."""
+
+from __future__ import annotations
+
+import numpy as np
+import pyarrow.feather as feather
+import pytest
+
+from helpers.av2_layout import DOWN_IN_VEHICLE, UP_IN_VEHICLE, simulate_log, write_av2_log
+from lidarfield import read_scan, write_scan
+from lidarfield.field.free_space import shared_points
+from lidarfield.hypotheses import apply_step
+from lidarfield.hypotheses import moving_objects as mo
+from lidarfield.io.formats.av2 import LIDARS
+from lidarfield.lidars import LIDAR
+from lidarfield.pair import RegisteredPair, read_pair, write_pair
+from lidarfield.poses import invert_pose, pose_from_xyzrpy
+from lidarfield.registration.core import register_pair
+from lidarfield.study.config import validate_config
+from lidarfield.study.jobs import recorded_scan
+
+# The vehicle waiting in the south arm of the traffic scene, 0.1 s and 0.7 m apart: its up lidar
+# at (2, -9, 1.95) and (2.5, -8.5, 1.95) m, as tests/unit/test_free_space_layouts.py's sensors.
+VEHICLE = [pose_from_xyzrpy([2.0, -10.35, 0.0, 0, 0, 1.5708]), pose_from_xyzrpy([2.5, -9.85, 0.0, 0, 0, 1.62])]
+
+
+@pytest.fixture(scope="module")
+def log(tmp_path_factory):
+    up_poses = np.stack([vehicle @ UP_IN_VEHICLE for vehicle in VEHICLE])
+    return write_av2_log(
+        tmp_path_factory.mktemp("av2") / "traffic", simulated=simulate_log("paper-intersection-traffic", up_poses)
+    )
+
+
+def registered(log, **settings) -> RegisteredPair:
+    planned = validate_config(
+        {"sequences": {"log": {"dataset": {"format": "av2", "path": str(log.folder), **settings}, "register": "truth"}}}
+    )
+    pair = planned.pairs["log-000"]
+    return register_pair(recorded_scan(pair.scan1.spec), recorded_scan(pair.scan2.spec), "truth")
+
+
+def labels(log, lidars) -> tuple[np.ndarray, np.ndarray]:
+    """The simulator's labels of the points each sweep's scan keeps (the reader keeps the rows of
+    its lidars in file order)."""
+    out = []
+    for sweep in log.sweeps:
+        table = feather.read_table(sweep)
+        laser = table.column("laser_number").to_numpy()
+        keep = np.zeros(len(laser), dtype=bool)
+        for name in lidars:
+            keep |= (laser >= LIDARS[name][0]) & (laser < LIDARS[name][1])
+        out.append(table.column("object").to_numpy()[keep])
+    return out[0], out[1]
+
+
+def rates(pair: RegisteredPair, label: tuple[np.ndarray, np.ndarray]) -> tuple[float, float]:
+    """(share of the moving cars' points removed, share of the static points kept)."""
+    outcome = apply_step(pair, {"moving_objects": {}})
+    label = np.concatenate(label)
+    removed = ~np.concatenate([outcome.keep1, outcome.keep2])
+    return removed[label > 0].mean(), 1 - removed[label == 0].mean()
+
+
+@pytest.fixture(scope="module")
+def both(log):
+    return registered(log)
+
+
+def test_the_log_is_read_as_two_lidars_each_where_the_calibration_mounts_it(log, both):
+    assert [lidar.name for lidar in both.lidars1] == ["up_lidar", "down_lidar"]
+    assert all(lidar.sensor.name == "vlp32c" for lidar in both.lidars1 + both.lidars2)
+    # in the up lidar's frame: the up lidar at its origin, the down one 0.3 m below, upside down
+    assert np.abs(both.lidars1[0].pose - np.eye(4)).max() < 1e-12
+    assert np.abs(both.lidars1[1].pose - invert_pose(UP_IN_VEHICLE) @ DOWN_IN_VEHICLE).max() < 1e-12
+    assert both.lidars1[1].pose[2, 2] < -0.99 and -0.32 < both.lidars1[1].pose[2, 3] < -0.28
+    # each point named by its lidar: the down lidar's points are its simulated scan's
+    views = both.lidars(2)
+    assert views[1].points.sum() == len(log.down[1]) and views[0].points.sum() == len(log.up[1])
+    own = (both.xyz2[views[1].points] - views[1].pose[:3, 3]) @ views[1].pose[:3, :3]
+    assert np.abs(own - log.down[1].xyz).max() < 1e-6
+
+
+def test_moving_objects_from_both_lidars_at_the_rates_of_one(log, both):
+    """Measured: the up lidar alone 95.6% of the cars' points removed, 99.84% of the static ones
+    kept; both lidars 100% and 99.79%."""
+    one = registered(log, lidars=["up_lidar"])
+    moved_one, static_one = rates(one, labels(log, ["up_lidar"]))
+    moved_both, static_both = rates(both, labels(log, ["up_lidar", "down_lidar"]))
+    assert moved_one >= 0.7 and static_one >= 0.99
+    assert moved_both >= moved_one - 0.02 and static_both >= static_one - 0.002
+    # Both lidars taken as one VLP-32C at the up lidar's origin (no rig): the down lidar's
+    # returns, read as the up one's rays, hide much of the free space the rig shows.
+    as_one = RegisteredPair(
+        both.xyz1, both.xyz2, both.T_1_2, one.sensor1, one.sensor2, both.attributes1, both.attributes2
+    )
+    moving = np.concatenate(labels(log, ["up_lidar", "down_lidar"])) > 0
+    evidence_rig, evidence_as_one = (
+        np.concatenate(mo.pair_evidence(p, mo.Params()))[moving].sum() for p in (both, as_one)
+    )
+    assert evidence_rig > 1.5 * evidence_as_one  # measured 1,654 against 926
+
+
+def test_co_visibility_takes_each_points_lidar(both):
+    """The down lidar, upside down, sees up to 25 deg above the horizon, the up one to 15 deg:
+    of what scan 1 has above 17 deg, scan 2's up lidar alone could see nothing, its rig 28.4%
+    (measured; the rest lies in the down lidar's 9.4 deg gap, its channels at +15.6 and +25 deg
+    upside down, as seen from where scan 2 was)."""
+    shared1, _ = shared_points(both)
+    up_only = RegisteredPair(
+        both.xyz1, both.xyz2[both.lidars(2)[0].points], both.T_1_2, both.lidars1[0].sensor, both.lidars2[0].sensor
+    )
+    shared1_up, _ = shared_points(up_only)
+    from_2 = both.xyz1 - both.T_1_2[:3, 3]
+    high = np.degrees(np.arctan2(from_2[:, 2], np.hypot(from_2[:, 0], from_2[:, 1]))) > 17
+    assert high.sum() > 100
+    assert shared1[high].mean() > 0.2 and not shared1_up[high].any()
+
+
+def test_the_rig_travels_through_the_scan_and_pair_files(log, both, tmp_path):
+    scan = recorded_scan(
+        validate_config({"sequences": {"log": {"dataset": {"format": "av2", "path": str(log.folder)}}}})
+        .pairs["log-000"]
+        .scan1.spec
+    )
+    write_scan(scan, tmp_path / "scan.parquet")
+    again = read_scan(tmp_path / "scan.parquet")
+    assert again.lidars == scan.lidars and np.array_equal(again.attributes[LIDAR], scan.attributes[LIDAR])
+    write_pair(tmp_path / "pair.parquet", both)
+    pair, _ = read_pair(tmp_path / "pair.parquet")
+    assert pair.lidars1 == both.lidars1 and pair.lidars2 == both.lidars2
+    kept = pair.subset(np.arange(len(pair.xyz1)) % 2 == 0, np.ones(len(pair.xyz2), dtype=bool))
+    assert kept.lidars1 == both.lidars1 and len(kept.lidars(1)[1].points) == len(kept.xyz1)

@@ -42,7 +42,7 @@ import numpy as np
 
 from ..lidars import LidarView
 from ..pair import RegisteredPair
-from ..poses import apply_pose, invert_pose
+from ..poses import in_sensor_frame
 from ..sensors.models import SensorModel
 
 # The margin across the ray is rounded up to a step of this ratio, so that few windows are filtered.
@@ -297,14 +297,12 @@ def lidar_images(pair: RegisteredPair, cloud: int, image_of=None) -> list[tuple[
     ring = (pair.attributes1 if cloud == 1 else pair.attributes2).get("ring")
     image_of = image_of or (lambda own, view, own_ring: sensor_image(own, view.sensor, own_ring))
     return [
-        (view, image_of(in_lidar_frame(view, xyz[view.points]), view, None if ring is None else ring[view.points]))
+        (
+            view,
+            image_of(in_sensor_frame(xyz[view.points], view.pose), view, None if ring is None else ring[view.points]),
+        )
         for view in pair.lidars(cloud)
     ]
-
-
-def in_lidar_frame(view: LidarView, xyz: np.ndarray) -> np.ndarray:
-    """Points given in frame 1 in the frame of one lidar."""
-    return apply_pose(invert_pose(view.pose), xyz)
 
 
 def shared_points(pair: RegisteredPair) -> tuple[np.ndarray, np.ndarray] | None:
@@ -318,7 +316,9 @@ def shared_points(pair: RegisteredPair) -> tuple[np.ndarray, np.ndarray] | None:
     for xyz, other in ((pair.xyz1, images[1]), (pair.xyz2, images[0])):
         mask = np.zeros(len(xyz), dtype=bool)
         for view, image in other:
-            mask |= co_visible(in_lidar_frame(view, xyz), image, MARGIN_M, BEAM_WIDTH_DEG, view.sensor.max_range_m)
+            mask |= co_visible(
+                in_sensor_frame(xyz, view.pose), image, MARGIN_M, BEAM_WIDTH_DEG, view.sensor.max_range_m
+            )
         shared.append(mask)
     return shared[0], shared[1]
 

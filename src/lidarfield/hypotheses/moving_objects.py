@@ -38,7 +38,6 @@ from ..field.free_space import (
     MARGIN_M,
     RangeImage,
     free_space_evidence,
-    in_lidar_frame,
     lidar_images,
     range_image,
     sensor_image,
@@ -46,6 +45,7 @@ from ..field.free_space import (
 )
 from ..lidars import LidarView
 from ..pair import RegisteredPair
+from ..poses import in_sensor_frame
 from ..sensors.models import SensorModel
 from .outcome import Outcome
 from .params import doc
@@ -173,7 +173,7 @@ def pair_evidence(pair: RegisteredPair, params: Params) -> tuple[np.ndarray, np.
     for xyz, other in ((pair.xyz1, images[1]), (pair.xyz2, images[0])):
         mask = np.zeros(len(xyz), dtype=bool)
         for view, image in other:
-            mask |= free_space_evidence(in_lidar_frame(view, xyz), image, params.margin_m, params.beam_width_deg)
+            mask |= free_space_evidence(in_sensor_frame(xyz, view.pose), image, params.margin_m, params.beam_width_deg)
         evidence.append(mask)
     return evidence[0], evidence[1]
 

@@ -64,6 +64,17 @@ class RegisteredPair:
             return cloud_lidars(np.eye(4), self.sensor1, self.lidars1, self.attributes1, len(self.xyz1), 1)
         return cloud_lidars(self.T_1_2, self.sensor2, self.lidars2, self.attributes2, len(self.xyz2), 2)
 
+    def point_origins(self, cloud: int) -> np.ndarray:
+        """Where the lidar of each point of cloud 1 or 2 was, in frame 1: (3,) when one lidar
+        measured the whole cloud, else (N, 3); either broadcasts against the points."""
+        views = self.lidars(cloud)
+        if len(views) == 1:
+            return views[0].origin
+        origins = np.zeros((len(self.xyz1 if cloud == 1 else self.xyz2), 3))
+        for view in views:
+            origins[view.points] = view.origin
+        return origins
+
     def subset(self, keep1: np.ndarray, keep2: np.ndarray) -> "RegisteredPair":
         return RegisteredPair(
             self.xyz1[keep1],

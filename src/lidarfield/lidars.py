@@ -18,6 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .errors import InputError
 from .sensors.models import SensorModel
 
 LIDAR = "lidar"  # the points' attribute: the index of the lidar that measured each point
@@ -104,3 +105,37 @@ def cloud_lidars(
         return [LidarView(f"sensor {cloud}", np.asarray(scan_pose, dtype=np.float64), sensor, np.ones(n, dtype=bool))]
     ids = np.asarray(attributes[LIDAR])
     return [LidarView(lidar.name, scan_pose @ lidar.pose, lidar.sensor, ids == k) for k, lidar in enumerate(lidars)]
+
+
+def rig_of_spec(
+    items: list[dict], attributes: dict[str, np.ndarray], n: int, path
+) -> tuple[tuple[Lidar, ...], np.ndarray]:
+    """The rig a study's config names for a scan of ``n`` points (``lidars`` of its spec: name,
+    sensor mapping, 4x4 pose, optional rings [first, end)) and each point's lidar: the scan's own
+    ``lidar`` attribute where it has one, else the lidar whose rings hold its ``ring``; one
+    lidar without rings takes every point. An InputError naming the scan's file otherwise."""
+    lidars = tuple(Lidar(item["name"], item["pose"], SensorModel.from_dict(item["sensor"])) for item in items)
+    if LIDAR in attributes:
+        ids = np.asarray(attributes[LIDAR])
+    elif any("rings" in item for item in items):
+        if "ring" not in attributes:
+            raise InputError("the config gives the lidars' rings, and the scan has no 'ring' attribute", path)
+        ring = np.asarray(attributes["ring"], dtype=np.float64)
+        ids = np.full(n, -1, dtype=np.int64)
+        for k, item in enumerate(items):
+            if "rings" in item:
+                ids[(ring >= item["rings"][0]) & (ring < item["rings"][1])] = k
+        if (ids < 0).any():
+            raise InputError(f"{int((ids < 0).sum())} point(s) have a ring in no lidar's rings", path)
+        ids = ids.astype(np.uint8)
+    elif len(lidars) == 1:
+        ids = np.zeros(n, dtype=np.uint8)
+    else:
+        raise InputError(
+            f"the config names {len(lidars)} lidars: the scan needs a 'lidar' attribute, or each lidar its rings", path
+        )
+    try:
+        check_lidar_ids(lidars, {LIDAR: ids})
+    except ValueError as e:
+        raise InputError(str(e), path) from None
+    return lidars, ids

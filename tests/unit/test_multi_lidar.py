@@ -9,11 +9,12 @@ import pyarrow.feather as feather
 import pytest
 
 from helpers.av2_layout import DOWN_IN_VEHICLE, UP_IN_VEHICLE, simulate_log, write_av2_log
-from lidarfield import read_scan, write_scan
+from lidarfield import ConfigError, InputError, Scan, read_scan, write_scan
 from lidarfield.field.free_space import shared_points
 from lidarfield.hypotheses import apply_step
 from lidarfield.hypotheses import moving_objects as mo
 from lidarfield.io.formats.av2 import LIDARS
+from lidarfield.io.pose_files import write_kitti_poses
 from lidarfield.lidars import LIDAR
 from lidarfield.pair import RegisteredPair, read_pair, write_pair
 from lidarfield.poses import invert_pose, pose_from_xyzrpy
@@ -194,3 +195,77 @@ def test_range_calibration_about_each_points_lidar(both):
             np.linalg.norm(before, axis=1) * np.linalg.norm(after, axis=1)
         )
         assert (sine[down].max() < 1e-9) == along_own_rays
+
+
+def test_a_files_sequence_names_its_lidars_in_the_config(log, both, tmp_path):
+    """The log's two sweeps as plain scan files (both lidars in the up lidar's frame, rings
+    0-63, no rig in them) with their poses, the rig named in the config (the down lidar's pose
+    as a matrix file, each lidar's rings): the same rig, and moving_objects removes the same
+    points as from the log."""
+    (tmp_path / "down.txt").write_text("\n".join(" ".join(f"{v:.17g}" for v in row) for row in both.lidars1[1].pose))
+    sequence = validate_config({"sequences": {"log": {"dataset": {"format": "av2", "path": str(log.folder)}}}})
+    for k, scan_spec in enumerate((sequence.pairs["log-000"].scan1, sequence.pairs["log-000"].scan2)):
+        scan = recorded_scan(scan_spec.spec)
+        plain = Scan(scan.xyz, {"ring": scan.attributes["ring"], "time": scan.attributes["time"]})
+        write_scan(plain, tmp_path / f"{k}.parquet")
+        assert read_scan(tmp_path / f"{k}.parquet").lidars == ()
+    write_kitti_poses(tmp_path / "poses.txt", log.up_poses)
+    rig = [
+        {"name": "up", "sensor": "vlp32c", "pose": [0, 0, 0, 0, 0, 0], "rings": [0, 32]},
+        {"name": "down", "sensor": "vlp32c", "pose": "down.txt", "rings": [32, 64]},
+    ]
+    scans = [str(tmp_path / f"{k}.parquet") for k in range(2)]  # the ingest jobs run in the study's folder
+    entry = {"scans": scans, "poses": "poses.txt", "lidars": rig, "register": "truth"}
+    planned = validate_config({"sequences": {"files": entry}}, base_dir=tmp_path)
+    pair = planned.pairs["files-000"]
+    files = register_pair(recorded_scan(pair.scan1.spec), recorded_scan(pair.scan2.spec), "truth")
+    assert [lidar.name for lidar in files.lidars2] == ["up", "down"]
+    assert np.abs(files.lidars2[1].pose - both.lidars2[1].pose).max() < 1e-12
+    assert np.array_equal(files.attributes2[LIDAR], both.attributes2[LIDAR])
+    from_files, from_log = (apply_step(p, {"moving_objects": {}}) for p in (files, both))
+    assert np.array_equal(from_files.keep1, from_log.keep1) and np.array_equal(from_files.keep2, from_log.keep2)
+    assert not from_log.keep2.all()
+
+
+@pytest.mark.parametrize(
+    ("lidars", "message"),
+    [
+        ([{"name": "a", "sensor": "vlp32c", "pose": [0] * 6, "rings": [5, 5]}], r"lidars\[0\]\.rings: \[first, end\)"),
+        ([{"name": "a", "sensor": "vlp32c", "pose": [0] * 6}] * 2, "names must differ"),
+        ([{"name": "a", "sensor": "vlp33", "pose": [0] * 6}], r"lidars\[0\]\.sensor: unknown sensor 'vlp33'"),
+        ([{"name": "a", "sensor": "vlp32c", "pose": "nowhere.txt"}], r"lidars\[0\]\.pose"),
+    ],
+)
+def test_a_bad_rig_in_the_config_names_the_key(tmp_path, lidars, message):
+    for k in range(2):
+        write_scan(Scan(np.ones((3, 3)) * (k + 1)), tmp_path / f"{k}.parquet")
+    entry = {"scans": ["0.parquet", "1.parquet"], "lidars": lidars, "register": "identity"}
+    with pytest.raises(ConfigError, match=message):
+        validate_config({"sequences": {"files": entry}}, base_dir=tmp_path)
+
+
+def test_a_scan_whose_points_name_no_lidar_of_the_rig_names_its_file(tmp_path):
+    write_scan(Scan(np.ones((4, 3)), {"ring": np.array([0, 1, 40, 70])}), tmp_path / "a.parquet")
+    rig = [
+        {"name": "up", "sensor": {"name": "x", "elevation_deg": [0.0]}, "pose": np.eye(4).tolist(), "rings": [0, 32]},
+        {
+            "name": "down",
+            "sensor": {"name": "x", "elevation_deg": [0.0]},
+            "pose": np.eye(4).tolist(),
+            "rings": [32, 64],
+        },
+    ]
+    spec = {"path": str(tmp_path / "a.parquet"), "format": None, "sensor": None, "pose": None, "lidars": rig}
+    with pytest.raises(InputError, match=r"a\.parquet.*1 point\(s\) have a ring in no lidar's rings"):
+        recorded_scan(spec)
+    write_scan(Scan(np.ones((4, 3))), tmp_path / "b.parquet")
+    with pytest.raises(
+        InputError, match=r"b\.parquet.*2 lidars: the scan needs a 'lidar' attribute, or each lidar its rings"
+    ):
+        recorded_scan(
+            {
+                **spec,
+                "path": str(tmp_path / "b.parquet"),
+                "lidars": [{k: v for k, v in item.items() if k != "rings"} for item in rig],
+            }
+        )

@@ -94,6 +94,7 @@ def run(args) -> int:
     from ..io import read_scan
     from ..io.atomic import write_text
     from ..io.pose_files import read_pose
+    from ..lidars import LIDAR
     from ..pair import RegisteredPair
     from ..poses import apply_pose, parse_pose_arg
 
@@ -113,8 +114,19 @@ def run(args) -> int:
         raise InputError("--out exists and is not a folder", args.out)
 
     xyz2 = apply_pose(T_1_2, scan2.xyz)
-    # the sensors too: their scan patterns are part of each vector's sampling noise
-    pair = RegisteredPair(scan1.xyz, xyz2, T_1_2, scan1.sensor, scan2.sensor)
+    # the sensors too: their scan patterns are part of each vector's sampling noise; a rig's
+    # lidars (each point's own) are what could see what
+    pair = RegisteredPair(
+        scan1.xyz,
+        xyz2,
+        T_1_2,
+        scan1.sensor,
+        scan2.sensor,
+        {LIDAR: scan1.attributes[LIDAR]} if scan1.lidars else {},
+        {LIDAR: scan2.attributes[LIDAR]} if scan2.lidars else {},
+        lidars1=scan1.lidars,
+        lidars2=scan2.lidars,
+    )
     columns, statistics = analyse_field(pair, settings)
     summary = {
         "scan1": str(args.scan1),

@@ -37,6 +37,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 
@@ -72,14 +73,14 @@ class RangeImage:
     channels: np.ndarray  # (rows,) rad, ascending: each row's beam elevation
     nearest: np.ndarray  # (rows, columns)
     min_range_m: float = 0.0
-    # per (columns on each side, farthest): a sparse table of the rows' extremes, made when first asked for
+    # per (columns on each side, farthest): the levels of a sparse table of the rows' extremes, made as asked for
     _tables: dict = field(default_factory=dict, compare=False, repr=False)
 
     @property
     def elevation_limits(self) -> tuple[float, float]:
         return float(self.channels[0]), float(self.channels[-1])
 
-    @property
+    @cached_property
     def channel_spacing(self) -> float:
         """The layout's usual gap between neighbouring channels (the median; one channel: the azimuth step)."""
         return float(np.median(np.diff(self.channels))) if len(self.channels) > 1 else self.azimuth_step
@@ -123,15 +124,21 @@ class RangeImage:
         """The nearest range over rows ``first..last`` and ``columns`` on each side of ``column``
         (azimuth wraps around; inf: no return there), or with ``farthest`` the farthest of the
         cells' nearest returns (-inf: no return)."""
-        table = self._table(columns, farthest)
         level = np.floor(np.log2(last - first + 1)).astype(np.int64)
         pick = np.maximum if farthest else np.minimum
-        return pick(table[level, first, column], table[level, last - (1 << level) + 1, column])
+        out = np.empty(len(first))
+        for k in range(int(level.min(initial=0)), int(level.max(initial=-1)) + 1):
+            at = level == k
+            at = slice(None) if at.all() else at  # one level for all (the usual case): no copies
+            table = self._level(columns, farthest, k)
+            out[at] = pick(table[first[at], column[at]], table[last[at] - (1 << k) + 1, column[at]])
+        return out
 
-    def _table(self, columns: int, farthest: bool) -> np.ndarray:
-        """(levels, rows, columns): level k holds the extreme over rows i..i + 2^k - 1 of the
-        extremes over ``columns`` on each side (past the last row: the last row's)."""
-        if (columns, farthest) not in self._tables:
+    def _level(self, columns: int, farthest: bool, level: int) -> np.ndarray:
+        """Level ``level`` of the sparse table of the extremes over ``columns`` on each side:
+        the extreme over rows i..i + 2^level - 1 (past the last row: the last row's)."""
+        levels = self._tables.get((columns, farthest))
+        if levels is None:
             from scipy.ndimage import maximum_filter1d, minimum_filter1d
 
             size = min(2 * columns + 1, self.nearest.shape[1])
@@ -140,15 +147,14 @@ class RangeImage:
                 levels = [maximum_filter1d(image, size=size, axis=1, mode="wrap")]
             else:
                 levels = [minimum_filter1d(self.nearest, size=size, axis=1, mode="wrap")]
-            pick = np.maximum if farthest else np.minimum
-            span = 1
-            while 2 * span <= len(self.channels):
-                below = levels[-1]
-                shifted = np.concatenate([below[span:], below[-1:].repeat(span, axis=0)])
-                levels.append(pick(below, shifted))
-                span *= 2
-            self._tables[columns, farthest] = np.stack(levels)
-        return self._tables[columns, farthest]
+            self._tables[columns, farthest] = levels
+        pick = np.maximum if farthest else np.minimum
+        while len(levels) <= level:
+            below, span = levels[-1], 1 << (len(levels) - 1)
+            above = below.copy()  # the last rows keep their own extreme: the rows past them are none
+            pick(below[:-span], below[span:], out=above[:-span])
+            levels.append(above)
+        return levels[level]
 
 
 def directions(xyz: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -178,13 +184,15 @@ def channel_rows(elevation: np.ndarray, channels: np.ndarray, ring: np.ndarray |
     known = np.isfinite(ring) & (ring >= 0)
     if not known.any():
         return rows
-    names, which = np.unique(ring[known], return_inverse=True)
-    mean = np.bincount(which, weights=elevation[known]) / np.bincount(which)
+    which = ring[known].astype(np.int64)  # rings are small whole numbers: counted, not sorted
+    count = np.bincount(which)
+    names = np.flatnonzero(count)
+    mean = np.bincount(which, weights=elevation[known])[names] / count[names]
+    row_of_ring = np.zeros(len(count), dtype=np.int64)
     if len(names) == len(channels):
-        row_of_ring = np.empty(len(names), dtype=np.int64)
-        row_of_ring[np.argsort(mean, kind="stable")] = np.arange(len(names))
+        row_of_ring[names[np.argsort(mean, kind="stable")]] = np.arange(len(names))
     else:
-        row_of_ring = nearest_channel(mean, channels)
+        row_of_ring[names] = nearest_channel(mean, channels)
     rows[known] = row_of_ring[which]
     return rows
 

@@ -319,16 +319,21 @@ def shared_points(pair: RegisteredPair) -> tuple[np.ndarray, np.ndarray] | None:
     a lidar's model is missing."""
     if any(view.sensor is None for cloud in (1, 2) for view in pair.lidars(cloud)):
         return None
+
+    def seen(own: np.ndarray, view: LidarView, image: RangeImage) -> np.ndarray:
+        return co_visible(own, image, MARGIN_M, BEAM_WIDTH_DEG, view.sensor.max_range_m)
+
     images = lidar_images(pair, 1), lidar_images(pair, 2)
-    shared = []
-    for xyz, other in ((pair.xyz1, images[1]), (pair.xyz2, images[0])):
-        mask = np.zeros(len(xyz), dtype=bool)
-        for view, image in other:
-            mask |= co_visible(
-                in_sensor_frame(xyz, view.pose), image, MARGIN_M, BEAM_WIDTH_DEG, view.sensor.max_range_m
-            )
-        shared.append(mask)
-    return shared[0], shared[1]
+    return any_lidar(pair.xyz1, images[1], seen), any_lidar(pair.xyz2, images[0], seen)
+
+
+def any_lidar(xyz: np.ndarray, images: list[tuple[LidarView, RangeImage]], test) -> np.ndarray:
+    """Mask of the points (frame 1) for which ``test(the points in a lidar's frame, the lidar,
+    its range image)`` holds with any of the lidars of ``images``."""
+    mask = np.zeros(len(xyz), dtype=bool)
+    for view, image in images:
+        mask |= test(in_sensor_frame(xyz, view.pose), view, image)
+    return mask
 
 
 class _Reference:

@@ -9,7 +9,9 @@ within m across the ray, and at least the beams on either side. So an edge that 
 passes and the next one hits is not free space, nor is a surface that the registration's error
 moved by less than m. Directions the other sensor did not see give no evidence either way: no
 return in the point's cell, a point outside its elevation limits or nearer than its minimum
-range, a point behind what it measured (occluded), and a point in a wide gap between channels that no ray passed near.
+range, a point behind what it measured (occluded), and a point in a wide gap between channels
+that no ray passed near. A scan of several lidars (:mod:`lidarfield.lidars`) has a range image
+per lidar, in its own frame: a point is evidence in the free space of any of them.
 
 A moving object gives such evidence only on its leading and trailing parts, so evidence grows
 to objects: each cloud's points higher than ``ground_height_m`` above a plane fitted to its
@@ -37,6 +39,7 @@ from ..field.free_space import (
     BEAM_WIDTH_DEG,
     MARGIN_M,
     RangeImage,
+    any_lidar,
     free_space_evidence,
     lidar_images,
     range_image,
@@ -45,7 +48,6 @@ from ..field.free_space import (
 )
 from ..lidars import LidarView
 from ..pair import RegisteredPair
-from ..poses import in_sensor_frame
 from ..sensors.models import SensorModel
 from .outcome import Outcome
 from .params import doc
@@ -168,14 +170,11 @@ def pair_evidence(pair: RegisteredPair, params: Params) -> tuple[np.ndarray, np.
     def image_of(own: np.ndarray, view: LidarView, ring: np.ndarray | None) -> RangeImage:
         return sensor_range_image(own, view.sensor, params, view.name, ring)
 
+    def evidence(own: np.ndarray, view: LidarView, image: RangeImage) -> np.ndarray:
+        return free_space_evidence(own, image, params.margin_m, params.beam_width_deg)
+
     images = lidar_images(pair, 1, image_of), lidar_images(pair, 2, image_of)
-    evidence = []
-    for xyz, other in ((pair.xyz1, images[1]), (pair.xyz2, images[0])):
-        mask = np.zeros(len(xyz), dtype=bool)
-        for view, image in other:
-            mask |= free_space_evidence(in_sensor_frame(xyz, view.pose), image, params.margin_m, params.beam_width_deg)
-        evidence.append(mask)
-    return evidence[0], evidence[1]
+    return any_lidar(pair.xyz1, images[1], evidence), any_lidar(pair.xyz2, images[0], evidence)
 
 
 def moving_objects(pair: RegisteredPair, params: Params) -> Outcome:

@@ -126,7 +126,7 @@ def bench_moving_objects(pair: RegisteredPair) -> None:
     params = mo.Params()
     t_fast = best_time(lambda: apply_step(pair, {"moving_objects": {}}))[0]
     images = [
-        free_space.range_image(xyz, mo.resolution_rad(model, params, k), *free_space.sensor_view(model))
+        mo.sensor_range_image(xyz, model, params, f"sensor {k}")
         for k, (xyz, model) in enumerate(
             ((pair.xyz1, pair.sensor1), (in_sensor_frame(pair.xyz2, pair.T_1_2), pair.sensor2)), 1
         )

@@ -13,6 +13,7 @@ import numpy as np
 
 from .errors import InputError
 from .io.parquet_table import read_table, write_table
+from .lidars import Lidar, LidarView, check_lidar_ids, cloud_lidars, lidars_from_meta, lidars_to_meta
 from .sensors.models import SensorModel
 
 
@@ -32,6 +33,10 @@ class RegisteredPair:
     # When each scan was taken and how its sensor moved during the sweep, as the scans recorded
     # them ({"1": {"stamp_s": ..., "sweep_motion": ...}, "2": ...}; see Scan; missing: unknown).
     sweeps: dict = field(default_factory=dict)
+    # Each scan's rig when several lidars measured it (``lidars``; the points' ``lidar``
+    # attribute names each point's); empty: one lidar at the scan frame's origin, ``sensorK``.
+    lidars1: tuple[Lidar, ...] = ()
+    lidars2: tuple[Lidar, ...] = ()
     # What hypotheses derived from the clouds and may reuse, e.g. ``outliers``' neighbour
     # distances by (cloud, k). Not written to files, not compared, not carried by subset().
     neighbours: dict = field(default_factory=dict, compare=False, repr=False)
@@ -40,6 +45,9 @@ class RegisteredPair:
         self.xyz1 = np.ascontiguousarray(self.xyz1, dtype=np.float64).reshape(-1, 3)
         self.xyz2 = np.ascontiguousarray(self.xyz2, dtype=np.float64).reshape(-1, 3)
         self.T_1_2 = np.asarray(self.T_1_2, dtype=np.float64).reshape(4, 4)
+        self.lidars1, self.lidars2 = tuple(self.lidars1), tuple(self.lidars2)
+        check_lidar_ids(self.lidars1, self.attributes1)
+        check_lidar_ids(self.lidars2, self.attributes2)
 
     @property
     def origin1(self) -> np.ndarray:
@@ -49,6 +57,23 @@ class RegisteredPair:
     def origin2(self) -> np.ndarray:
         """Sensor 2's origin in frame 1."""
         return self.T_1_2[:3, 3].copy()
+
+    def lidars(self, cloud: int) -> list[LidarView]:
+        """The lidars that measured cloud 1 or 2, each placed in frame 1 with its points."""
+        if cloud == 1:
+            return cloud_lidars(np.eye(4), self.sensor1, self.lidars1, self.attributes1, len(self.xyz1), 1)
+        return cloud_lidars(self.T_1_2, self.sensor2, self.lidars2, self.attributes2, len(self.xyz2), 2)
+
+    def point_origins(self, cloud: int) -> np.ndarray:
+        """Where the lidar of each point of cloud 1 or 2 was, in frame 1: (3,) when one lidar
+        measured the whole cloud, else (N, 3); either broadcasts against the points."""
+        views = self.lidars(cloud)
+        if len(views) == 1:
+            return views[0].origin
+        origins = np.zeros((len(self.xyz1 if cloud == 1 else self.xyz2), 3))
+        for view in views:
+            origins[view.points] = view.origin
+        return origins
 
     def subset(self, keep1: np.ndarray, keep2: np.ndarray) -> "RegisteredPair":
         return RegisteredPair(
@@ -62,6 +87,8 @@ class RegisteredPair:
             self.registration,
             self.sensor_fit,
             self.sweeps,
+            self.lidars1,
+            self.lidars2,
         )
 
     def stamp(self, cloud: int) -> float | None:
@@ -98,6 +125,8 @@ class RegisteredPair:
             "registration": self.registration,
             "sensor_fit": self.sensor_fit,
             "sweeps": self.sweeps,
+            "lidars1": lidars_to_meta(self.lidars1),
+            "lidars2": lidars_to_meta(self.lidars2),
         }
 
     @classmethod
@@ -123,6 +152,8 @@ class RegisteredPair:
             meta.get("registration", {}),
             meta.get("sensor_fit", {}),
             meta.get("sweeps", {}),
+            lidars_from_meta(meta.get("lidars1")),
+            lidars_from_meta(meta.get("lidars2")),
         )
 
 

@@ -101,6 +101,14 @@ def apply_pose(T: np.ndarray, xyz: np.ndarray) -> np.ndarray:
     return out
 
 
+def in_sensor_frame(xyz: np.ndarray, pose: np.ndarray) -> np.ndarray:
+    """Points given in a frame expressed in the frame of a sensor at ``pose`` in it (rotation
+    included); at the identity, the points themselves (no rounding, no copy)."""
+    if np.array_equal(pose, np.eye(4)):
+        return xyz
+    return apply_pose(invert_pose(pose), xyz)
+
+
 def invert_pose(T: np.ndarray) -> np.ndarray:
     """The inverse of a rigid pose (exact: transpose of the rotation)."""
     T = np.asarray(T, dtype=np.float64)

@@ -6,11 +6,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .lidars import Lidar, check_lidar_ids
 from .sensors.models import SensorModel
 
 # Attributes the contracts know; readers may add others (kept as they are). ``object`` is a
 # simulated point's label: the moving object it hit, 0 for the static scene.
-KNOWN_ATTRIBUTES = ("intensity", "ring", "time", "object")
+KNOWN_ATTRIBUTES = ("intensity", "ring", "time", "object", "lidar")
 
 
 def still_sweep() -> dict:
@@ -31,6 +32,9 @@ class Scan:
     # {"velocity_mps": [3], "angular_velocity_rps": [3]}, both in its sensor frame at the sweep
     # start (zero for a scan taken still or already de-skewed); None when unknown.
     sweep_motion: dict | None = None
+    # The rig when several lidars measured the scan (see lidarfield.lidars; the points'
+    # ``lidar`` attribute names each point's); empty: one lidar at the frame's origin.
+    lidars: tuple[Lidar, ...] = ()
 
     def __post_init__(self):
         self.xyz = np.ascontiguousarray(self.xyz, dtype=np.float64).reshape(-1, 3)
@@ -39,6 +43,8 @@ class Scan:
                 raise ValueError(f"attribute {name!r} has {len(values)} values for {len(self.xyz)} points")
         if self.pose is not None:
             self.pose = np.asarray(self.pose, dtype=np.float64).reshape(4, 4)
+        self.lidars = tuple(self.lidars)
+        check_lidar_ids(self.lidars, self.attributes)
 
     def __len__(self) -> int:
         return len(self.xyz)
@@ -53,4 +59,5 @@ class Scan:
             self.dropped_invalid,
             self.stamp_s,
             self.sweep_motion,
+            self.lidars,
         )

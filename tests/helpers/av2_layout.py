@@ -47,31 +47,44 @@ class Av2Log:
     sweeps: list[Path]
 
 
-def simulate_log() -> tuple[list[Scan], list[Scan], np.ndarray, np.ndarray, np.ndarray]:
-    scene, model = load_scene("paper-intersection"), sensor_model("vlp32c")
-    up_poses = np.stack([pose_from_xyzrpy(p) for p in DRIVE_XYZRPY])
+def simulate_log(
+    scene: str = "paper-intersection", up_poses: np.ndarray | None = None
+) -> tuple[list[Scan], list[Scan], np.ndarray, np.ndarray, np.ndarray]:
+    """Both lidars' scans of ``scene`` with the up lidar at ``up_poses`` (default: the drive's),
+    sweep k taken at scene time k x 0.1 s."""
+    scene, model = load_scene(scene), sensor_model("vlp32c")
+    up_poses = np.stack([pose_from_xyzrpy(p) for p in DRIVE_XYZRPY]) if up_poses is None else up_poses
     vehicle_poses = up_poses @ invert_pose(UP_IN_VEHICLE)
     down_poses = vehicle_poses @ DOWN_IN_VEHICLE
-    up = [simulate_scan(scene, model, pose, seed=k, range_noise_m=0.02) for k, pose in enumerate(up_poses)]
-    down = [simulate_scan(scene, model, pose, seed=50 + k, range_noise_m=0.02) for k, pose in enumerate(down_poses)]
+    time_s = [k * SWEEP_NS * 1e-9 for k in range(len(up_poses))]
+    up = [
+        simulate_scan(scene, model, pose, time_s=t, seed=k, range_noise_m=0.02)
+        for k, (pose, t) in enumerate(zip(up_poses, time_s))
+    ]
+    down = [
+        simulate_scan(scene, model, pose, time_s=t, seed=50 + k, range_noise_m=0.02)
+        for k, (pose, t) in enumerate(zip(down_poses, time_s))
+    ]
     return up, down, up_poses, down_poses, vehicle_poses
 
 
 _SIMULATED = None
 
 
-def write_av2_log(folder: Path, xyz_dtype=np.float64) -> Av2Log:
-    """The log folder of the simulated drive (the simulation is run once per test session)."""
+def write_av2_log(folder: Path, xyz_dtype=np.float64, simulated=None) -> Av2Log:
+    """The log folder of the simulated drive (the simulation is run once per test session), or
+    of ``simulated`` (what :func:`simulate_log` returns; each sweep then has an ``object``
+    column too, the simulator's labels, which the reader does not read)."""
     global _SIMULATED
-    if _SIMULATED is None:
+    if simulated is None and _SIMULATED is None:
         _SIMULATED = simulate_log()
-    up, down, up_poses, down_poses, vehicle_poses = _SIMULATED
+    up, down, up_poses, down_poses, vehicle_poses = simulated or _SIMULATED
     stamps = [FIRST_NS + k * SWEEP_NS + 1_000 * k for k in range(len(up))]
     (folder / "sensors" / "lidar").mkdir(parents=True)
     sweeps = []
     for k, stamp in enumerate(stamps):
         sweeps.append(folder / "sensors" / "lidar" / f"{stamp}.feather")
-        write_sweep(sweeps[-1], up[k], down[k], xyz_dtype)
+        write_sweep(sweeps[-1], up[k], down[k], xyz_dtype, labels=simulated is not None)
     write_ego_poses(folder / "city_SE3_egovehicle.feather", stamps, vehicle_poses)
     write_calibration(folder / "calibration" / "egovehicle_SE3_sensor.feather")
     (folder / "map").mkdir()  # other parts of a log: not the reader's business
@@ -84,8 +97,9 @@ def intensity_of(scan: Scan, salt: int) -> np.ndarray:
     return ((np.arange(len(scan)) * 7 + salt) % 256).astype(np.uint8)
 
 
-def write_sweep(path: Path, up: Scan, down: Scan, xyz_dtype=np.float64) -> None:
-    """Both lidars' points in the vehicle frame, in firing-time order (up first at equal times)."""
+def write_sweep(path: Path, up: Scan, down: Scan, xyz_dtype=np.float64, labels: bool = False) -> None:
+    """Both lidars' points in the vehicle frame, in firing-time order (up first at equal times);
+    with ``labels`` their ``object`` labels too."""
     xyz = np.vstack([_to_vehicle(UP_IN_VEHICLE, up.xyz), _to_vehicle(DOWN_IN_VEHICLE, down.xyz)])
     laser = np.concatenate([up.attributes["ring"], down.attributes["ring"] + 32]).astype(np.uint8)
     offset = np.round(np.concatenate([up.attributes["time"], down.attributes["time"]]) * 1e9).astype(np.int64)
@@ -101,6 +115,10 @@ def write_sweep(path: Path, up: Scan, down: Scan, xyz_dtype=np.float64) -> None:
             "offset_ns": offset[order],
         }
     )
+    if labels:
+        table = table.append_column(
+            "object", pa.array(np.concatenate([up.attributes["object"], down.attributes["object"]])[order])
+        )
     feather.write_feather(table, path)
 
 

@@ -3,6 +3,7 @@ simulated traffic counted from the simulator's object labels."""
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import numpy as np
@@ -161,7 +162,7 @@ def test_free_space_evidence_and_co_visible_agree_with_the_per_point_references(
     nor the points out of its view, and nearly all the static ones are."""
     rng = np.random.default_rng(0)
     own1 = traffic_pair.xyz1  # scan 2's cars moved into where sensor 1 saw through
-    image = fs.range_image(own1, mo.resolution_rad(traffic_pair.sensor1, mo.Params(), 1), 1.0, (-0.384, 0.168))
+    image = fs.range_image(own1, math.radians(0.2), fs.uniform_channels(-0.384, 0.168, math.radians(0.4)), 1.0)
     points = traffic_pair.xyz2
     cars = np.flatnonzero(traffic_pair.attributes2["object"] > 0)
     chosen = np.concatenate([rng.choice(len(points), 300, replace=False), rng.choice(cars, 300, replace=False)])

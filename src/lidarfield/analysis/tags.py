@@ -125,17 +125,13 @@ def _share(row: np.ndarray, flag: np.ndarray, count: np.ndarray) -> np.ndarray:
 
 
 def _near_fov_edge(pair: RegisteredPair) -> list[np.ndarray]:
-    from ..hypotheses.field_of_view import Params, sensor_limits, visible
-    from ..hypotheses.geometry import in_sensor_frame
+    from ..hypotheses.field_of_view import Params, seen_by
 
+    narrowed = Params(margin_deg=-FOV_EDGE_DEG)
     try:
-        limits1, limits2 = (sensor_limits(model, Params(), k) for k, model in ((1, pair.sensor1), (2, pair.sensor2)))
+        return [~seen_by(pair.xyz1, pair.lidars(2), narrowed), ~seen_by(pair.xyz2, pair.lidars(1), narrowed)]
     except HypothesisError:  # a sensor model is missing: its limits are unknown
         return [np.zeros(len(pair.xyz1), bool), np.zeros(len(pair.xyz2), bool)]
-    return [
-        ~visible(in_sensor_frame(pair.xyz1, pair.T_1_2), limits2, -FOV_EDGE_DEG),
-        ~visible(pair.xyz2, limits1, -FOV_EDGE_DEG),
-    ]
 
 
 def _near_a_sensor(xyz: np.ndarray, pair: RegisteredPair) -> np.ndarray:

@@ -22,6 +22,7 @@ from ..field.grid import field_settings_from_config
 from ..io import read_scan, write_scan
 from ..io.atomic import write_text
 from ..io.parquet_table import read_table, write_table
+from ..lidars import LIDAR, rig_of_spec
 from ..pair import read_pair, write_pair
 from ..poses import apply_pose, invert_pose
 from ..scan import Scan
@@ -69,6 +70,8 @@ def recorded_scan(spec: dict) -> Scan:
         scan.stamp_s = spec["stamp_s"]
     if spec.get("sweep_motion") is not None:
         scan.sweep_motion = spec["sweep_motion"]
+    if spec.get("lidars"):
+        scan.lidars, scan.attributes[LIDAR] = rig_of_spec(spec["lidars"], scan.attributes, len(scan), spec["path"])
     return scan
 
 

@@ -227,6 +227,7 @@ def field_of_scans(
     from ..field.file import field_meta, write_field
     from ..field.grid import field_settings_from_config
     from ..io.pose_files import read_pose
+    from ..lidars import LIDAR
     from ..poses import apply_pose, parse_pose_arg
 
     # Everything that can fail on the user's input happens before the first file is written.
@@ -244,8 +245,19 @@ def field_of_scans(
         raise InputError("--out exists and is not a folder", out)
 
     xyz2 = apply_pose(T_1_2, scans[1].xyz)
-    # the sensors too: their scan patterns are part of each vector's sampling noise
-    pair = RegisteredPair(scans[0].xyz, xyz2, T_1_2, scans[0].sensor, scans[1].sensor)
+    # the sensors too: their scan patterns are part of each vector's sampling noise; a rig's
+    # lidars (each point's own) are what could see what
+    pair = RegisteredPair(
+        scans[0].xyz,
+        xyz2,
+        T_1_2,
+        scans[0].sensor,
+        scans[1].sensor,
+        {LIDAR: scans[0].attributes[LIDAR]} if scans[0].lidars else {},
+        {LIDAR: scans[1].attributes[LIDAR]} if scans[1].lidars else {},
+        lidars1=scans[0].lidars,
+        lidars2=scans[1].lidars,
+    )
     columns, statistics = analyse_field(pair, settings)
     summary = {
         "scan1": str(scan1),

@@ -12,13 +12,15 @@ t; between listed poses the vehicle's pose is interpolated (translation linear, 
 slerp), and a sweep without a listed pose within 50 ms, or outside the poses' time span, is an
 error. ``lidars`` (default both) chooses whose points the scans keep.
 
-Sensor model: ``vlp32c`` when the scans are one lidar's points in that lidar's own frame
-(``lidars: [up_lidar]`` with ``frame: up_lidar``, or the down lidar's likewise). Otherwise
-none by default: the two lidars sit at different places and angles (the down one is mounted
-upside down), so one VLP-32C model about the frame's origin misdescribes the other lidar's
-points (a ``field_of_view`` stage would cut them at the wrong elevations), and about the
-vehicle frame's origin it describes neither. Give ``sensor:`` (or ``field_of_view``'s own
-limits) where a stage needs one.
+Lidars: each scan is a rig (:mod:`lidarfield.lidars`) of the lidars it keeps, each placed
+where the calibration mounts it in the scan's frame (``T_frame_vehicle @
+egovehicle_SE3_<lidar>``), each a ``vlp32c`` (or the sequence's ``sensor:``), and each point
+names its lidar (``lidar`` attribute, from ``laser_number``): the hypotheses that reason about
+rays take each point's own lidar, the down one upside down 0.3 m below the up one. The scan's
+own sensor model, for what reads one model (the field's scan patterns, the sensor fit at
+ingest): ``vlp32c`` when the scans are one lidar's points in that lidar's own frame, else
+none unless ``sensor:`` gives one (one model about the frame's origin describes neither
+lidar's points).
 
 Reading the index reads these two tables and lists the sweeps, never a sweep: the ingest jobs
 read the points, with the options (frame, lidars, ``T_frame_vehicle``) each scan carries.
@@ -57,9 +59,12 @@ def read_index(settings: dict, base_dir: Path) -> DatasetSequence:
     sweeps = _sweeps(folder)
     if not sweeps:
         raise ConfigError("dataset: no Argoverse 2 sweep (<timestamp_ns>.feather) in the log", folder / SWEEPS)
-    vehicle_frame = np.eye(4) if frame == "egovehicle" else sensor_pose(folder / CALIBRATION, frame)
+    mounted = sensor_poses(folder / CALIBRATION, [n for n in dict.fromkeys([frame, *lidars]) if n != "egovehicle"])
+    vehicle_frame = np.eye(4) if frame == "egovehicle" else mounted[frame]
     stamps_ns, city = read_ego_poses(folder / POSES)
-    options = {"frame": frame, "lidars": lidars, "T_frame_vehicle": invert_pose(vehicle_frame).tolist()}
+    frame_vehicle = invert_pose(vehicle_frame)
+    lidar_poses = {name: (frame_vehicle @ mounted[name]).tolist() for name in lidars}
+    options = {"frame": frame, "lidars": lidars, "T_frame_vehicle": frame_vehicle.tolist(), "lidar_poses": lidar_poses}
     scans = [
         DatasetScan(
             str(root / SWEEPS / path.name),
@@ -104,15 +109,24 @@ def quaternion_poses(columns: dict[str, np.ndarray], path: Path, what: str) -> n
 
 def sensor_pose(path: Path, sensor: str) -> np.ndarray:
     """``egovehicle_SE3_<sensor>`` (4x4) from the log's calibration table."""
+    return sensor_poses(path, [sensor])[sensor]
+
+
+def sensor_poses(path: Path, sensors: list[str]) -> dict[str, np.ndarray]:
+    """``egovehicle_SE3_<sensor>`` (4x4) of each of ``sensors``, the calibration table read once."""
     what = "the calibration (egovehicle_SE3_sensor)"
     columns = feather_columns(
         path, ("sensor_name",) + POSE_COLUMNS, f"dataset: {what}", ConfigError, text=("sensor_name",)
     )
     names = [str(name) for name in columns["sensor_name"].tolist()]
-    if sensor not in names:
-        raise ConfigError(f"dataset: {what} has no sensor {sensor!r}; its sensors: {', '.join(names)}", path)
-    row = names.index(sensor)
-    return quaternion_poses({c: columns[c][row : row + 1] for c in POSE_COLUMNS}, path, f"{what}, {sensor}")[0]
+    poses = {}
+    for sensor in sensors:
+        if sensor not in names:
+            raise ConfigError(f"dataset: {what} has no sensor {sensor!r}; its sensors: {', '.join(names)}", path)
+        row = names.index(sensor)
+        columns_of_row = {c: columns[c][row : row + 1] for c in POSE_COLUMNS}
+        poses[sensor] = quaternion_poses(columns_of_row, path, f"{what}, {sensor}")[0]
+    return poses
 
 
 def read_ego_poses(path: Path) -> tuple[np.ndarray, np.ndarray]:

@@ -11,7 +11,10 @@ fired ``s`` seconds after the reference time is, in the reference frame, ``Rot(w
 ``reference`` is the time the scan's pose (and so the pair's frame) refers to: ``start`` for the
 simulator and for a Velodyne/Ouster driver's scan stamped at its first packet, ``mid`` or ``end``
 for data stamped otherwise. Cloud 2 is de-skewed in sensor 2's frame (through ``T_1_2``) and
-put back in frame 1; sensor 2's pose is not changed.
+put back in frame 1; sensor 2's pose is not changed. A scan of several lidars
+(:mod:`lidarfield.lidars`) moves as one body (its velocities are its frame's); what is each
+lidar's own is the time of a point without a time attribute: from its azimuth about its own
+lidar, at that lidar's rotation rate.
 
 Each point's time: the ``time_attribute`` (seconds or nanoseconds, ``time_unit``; counted from
 the sweep start, to the sweep end (negative), or absolute, ``time_zero``); without one, from the
@@ -56,7 +59,7 @@ import numpy as np
 
 from ..errors import HypothesisError
 from ..pair import RegisteredPair
-from ..poses import constant_twist
+from ..poses import constant_twist, in_sensor_frame
 from ..sensors.models import SensorModel
 from .outcome import Outcome
 from .params import doc
@@ -133,12 +136,10 @@ def deskew(pair: RegisteredPair, params: Params) -> Outcome:
     fitted: dict = {"reference": params.reference, "method": "constant_velocity"}
     for cloud in clouds:
         v, w, motion_source = sweep_motion(pair, cloud, params)
-        xyz, attributes, sensor = (
-            (pair.xyz1, pair.attributes1, pair.sensor1) if cloud == 1 else (pair.xyz2, pair.attributes2, pair.sensor2)
-        )
+        xyz = pair.xyz1 if cloud == 1 else pair.xyz2
         pose = np.eye(4) if cloud == 1 else pair.T_1_2
         local = (xyz - pose[:3, 3]) @ pose[:3, :3]  # the points in their own sensor frame
-        s, time_source = _times_from_reference(local, attributes, sensor, params, cloud)
+        s, time_source = _point_times(local, pair, cloud, params)
         moved = _moved(local, s, v, w)
         displacement = np.linalg.norm(moved - local, axis=1)
         if np.any(v) or np.any(w):  # a still scan stays exactly where it is (no round trip of frames)
@@ -202,6 +203,23 @@ def _moved(local: np.ndarray, s: np.ndarray, v: np.ndarray, w: np.ndarray) -> np
 
         moved = Rotation.from_rotvec(s[:, None] * w).apply(local) + s[:, None] * v
     return moved
+
+
+def _point_times(local: np.ndarray, pair: RegisteredPair, cloud: int, params: Params) -> tuple[np.ndarray, str]:
+    """Each point of cloud ``cloud`` (``local``: in its scan's frame) timed from the reference
+    (:func:`_times_from_reference`): by the time attribute, with the sweep's length of its first
+    lidar's model; without one, by its azimuth about its own lidar, at that lidar's rotation rate."""
+    xyz, attributes = (pair.xyz1, pair.attributes1) if cloud == 1 else (pair.xyz2, pair.attributes2)
+    lidars = pair.lidars(cloud)
+    scan_pose = np.eye(4) if cloud == 1 else pair.T_1_2
+    if params.time_attribute in attributes or len(lidars) == 1 and np.array_equal(lidars[0].pose, scan_pose):
+        return _times_from_reference(local, attributes, lidars[0].sensor, params, cloud)
+    s, sources = np.zeros(len(local)), []
+    for lidar in lidars:
+        own = in_sensor_frame(xyz[lidar.points], lidar.pose)
+        s[lidar.points], source = _times_from_reference(own, {}, lidar.sensor, params, cloud)
+        sources.append(f"{lidar.name}: {source}")
+    return s, "; ".join(sources)
 
 
 def _times_from_reference(

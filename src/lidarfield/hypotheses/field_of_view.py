@@ -5,7 +5,9 @@ sensor 2's limits; cloud 2 against sensor 1's limits in frame 1. A point is drop
 elevation ``atan2(z, hypot(x, y))`` is strictly below or above the sensor's elevation limits
 (the lowest and highest channel of its model, or ``elevation_deg``), widened by ``margin_deg``.
 Where the model has them (or the parameters give them), points outside the range limits
-``[min_range_m, max_range_m]`` and the azimuth sector are dropped by the same rule.
+``[min_range_m, max_range_m]`` and the azimuth sector are dropped by the same rule. A scan of
+several lidars (:mod:`lidarfield.lidars`) sees what any of its lidars sees: a point is kept
+when it is inside the limits of one of them, about that lidar's own origin and axes.
 """
 
 from __future__ import annotations
@@ -16,9 +18,10 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import NotApplicableError
+from ..lidars import LidarView
 from ..pair import RegisteredPair
 from ..sensors.models import SensorModel
-from .geometry import in_sensor_frame, sensor_pose
+from .geometry import in_sensor_frame
 from .params import doc
 
 
@@ -61,11 +64,11 @@ class Limits:
     azimuth_deg: tuple[float, float] | None = None
 
 
-def sensor_limits(model: SensorModel | None, params: Params, sensor: int) -> Limits:
-    """The limits of sensor 1 or 2: the parameters where given, else its model."""
+def sensor_limits(model: SensorModel | None, params: Params, lidar: str) -> Limits:
+    """The limits of a lidar ("sensor 1", a rig's lidar): the parameters where given, else its model."""
     if params.elevation_deg is None and model is None:
         raise NotApplicableError(
-            f"field_of_view: sensor {sensor} has no sensor model, so its elevation limits are unknown: "
+            f"field_of_view: {lidar} has no sensor model, so its elevation limits are unknown: "
             "give the sensor (--sensor, or 'sensor' in the pair's config) or field_of_view's elevation_deg"
         )
     elevation = params.elevation_deg or model.elevation_limits_deg
@@ -112,9 +115,15 @@ def visible(xyz: np.ndarray, limits: Limits, margin_deg: float = 0.0) -> np.ndar
 
 
 def field_of_view(pair: RegisteredPair, params: Params) -> tuple[np.ndarray, np.ndarray]:
-    """Keep-masks: cloud 1 against sensor 2's limits, cloud 2 against sensor 1's."""
-    limits1 = sensor_limits(pair.sensor1, params, 1)
-    limits2 = sensor_limits(pair.sensor2, params, 2)
-    keep1 = visible(in_sensor_frame(pair.xyz1, sensor_pose(pair, 2)), limits2, params.margin_deg)
-    keep2 = visible(pair.xyz2, limits1, params.margin_deg)
-    return keep1, keep2
+    """Keep-masks: cloud 1 against the limits of scan 2's lidars, cloud 2 against scan 1's."""
+    keep2 = seen_by(pair.xyz2, pair.lidars(1), params)  # sensor 1's missing model is the first error
+    return seen_by(pair.xyz1, pair.lidars(2), params), keep2
+
+
+def seen_by(xyz: np.ndarray, lidars: list[LidarView], params: Params) -> np.ndarray:
+    """Mask of the points (frame 1) inside the limits of any of ``lidars``."""
+    keep = np.zeros(len(xyz), dtype=bool)
+    for lidar in lidars:
+        limits = sensor_limits(lidar.sensor, params, lidar.name)
+        keep |= visible(in_sensor_frame(xyz, lidar.pose), limits, params.margin_deg)
+    return keep

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..pair import RegisteredPair
-from ..poses import apply_pose, invert_pose
+from ..poses import in_sensor_frame
 
 
 def sensor_pose(pair: RegisteredPair, sensor: int) -> np.ndarray:
@@ -13,11 +13,6 @@ def sensor_pose(pair: RegisteredPair, sensor: int) -> np.ndarray:
     if sensor not in (1, 2):
         raise ValueError(f"sensor must be 1 or 2, got {sensor!r}")
     return np.eye(4) if sensor == 1 else pair.T_1_2
-
-
-def in_sensor_frame(xyz: np.ndarray, pose: np.ndarray) -> np.ndarray:
-    """Points given in frame 1 expressed in the frame of a sensor at ``pose`` (rotation included)."""
-    return apply_pose(invert_pose(pose), xyz)
 
 
 def own_frame_points(pair: RegisteredPair) -> tuple[np.ndarray, np.ndarray]:

@@ -4,12 +4,14 @@ With both sensor origins known (``T_1_2``), a point of one cloud is *evidence* o
 lies where the other sensor's rays passed through, with a ball of free space around it: in the
 other sensor's frame, it is nearer than every return of that sensor around its direction by
 more than the margin m = ``margin_m + range x tan(beam_width_deg)``, "around" being the cells
-of that sensor's range image (its angular resolution) within m across the ray, and at least
-the beams on either side. So an edge that one beam passes and the next one hits is not free
-space, nor is a surface that the registration's error moved by less than m. Directions the
-other sensor did not see give no evidence either way: no return in the point's cell, a point
-outside its elevation limits or nearer than its minimum range, and a point behind what it
-measured (occluded).
+of that sensor's range image (one row per channel, one column per azimuth step of its model)
+within m across the ray, and at least the beams on either side. So an edge that one beam
+passes and the next one hits is not free space, nor is a surface that the registration's error
+moved by less than m. Directions the other sensor did not see give no evidence either way: no
+return in the point's cell, a point outside its elevation limits or nearer than its minimum
+range, a point behind what it measured (occluded), and a point in a wide gap between channels
+that no ray passed near. A scan of several lidars (:mod:`lidarfield.lidars`) has a range image
+per lidar, in its own frame: a point is evidence in the free space of any of them.
 
 A moving object gives such evidence only on its leading and trailing parts, so evidence grows
 to objects: each cloud's points higher than ``ground_height_m`` above a plane fitted to its
@@ -36,14 +38,17 @@ from ..errors import NotApplicableError
 from ..field.free_space import (
     BEAM_WIDTH_DEG,
     MARGIN_M,
+    RangeImage,
+    any_lidar,
     free_space_evidence,
+    lidar_images,
     range_image,
-    sensor_resolution_rad,
-    sensor_view,
+    sensor_image,
+    uniform_channels,
 )
+from ..lidars import LidarView
 from ..pair import RegisteredPair
 from ..sensors.models import SensorModel
-from .geometry import in_sensor_frame
 from .outcome import Outcome
 from .params import doc
 from .voxel_objects import connected_voxels, off_ground, overlapping_objects, packed, voxel_grid
@@ -56,8 +61,8 @@ class Params:
     angular_resolution_deg: tuple[float, float] | None = field(
         default=None,
         metadata=doc(
-            "[azimuth, elevation] size of the cells of each sensor's range image (null: its model's azimuth step "
-            "and widest gap between channels)"
+            "[azimuth, elevation] size of the cells of each sensor's range image, rows this far apart over its "
+            "model's elevation limits (or its cloud's) (null: its model's azimuth step and one row per channel)"
         ),
     )
     margin_m: float = field(
@@ -125,17 +130,27 @@ def evidenced_objects(evidence: np.ndarray, objects: np.ndarray, params: Params)
     return removed
 
 
-def resolution_rad(model: SensorModel | None, params: Params, sensor: int) -> tuple[float, float]:
-    """The (azimuth, elevation) cell size of sensor 1's or 2's range image: the parameter, or
-    its model's azimuth step and widest gap between neighbouring channels."""
-    if params.angular_resolution_deg is not None:
-        return tuple(math.radians(v) for v in params.angular_resolution_deg)
-    if model is None:
-        raise NotApplicableError(
-            f"moving_objects: sensor {sensor} has no sensor model, so its angular resolution is unknown: give the "
-            "sensor (--sensor, or 'sensor' in the pair's config) or moving_objects' angular_resolution_deg"
-        )
-    return sensor_resolution_rad(model)
+def sensor_range_image(
+    xyz: np.ndarray, model: SensorModel | None, params: Params, lidar: str, ring: np.ndarray | None = None
+) -> RangeImage:
+    """The range image of a lidar's points (in its frame; ``lidar`` names it: "sensor 1", a
+    rig's lidar): one row per channel of its model (its returns' ``ring`` where given), or
+    uniform rows of ``angular_resolution_deg``."""
+    if params.angular_resolution_deg is None:
+        if model is None:
+            raise NotApplicableError(
+                f"moving_objects: {lidar} has no sensor model, so its channels are unknown: give the sensor "
+                "(--sensor, or 'sensor' in the pair's config) or moving_objects' angular_resolution_deg"
+            )
+        return sensor_image(xyz, model, ring)
+    azimuth_step, elevation_step = (math.radians(v) for v in params.angular_resolution_deg)
+    if model is not None:
+        lo, hi = (math.radians(v) for v in model.elevation_limits_deg)
+    else:
+        elevation = np.arctan2(xyz[:, 2], np.hypot(xyz[:, 0], xyz[:, 1]))
+        lo, hi = (float(elevation.min()), float(elevation.max())) if len(xyz) else (0.0, 0.0)
+    channels = uniform_channels(lo, hi, elevation_step)
+    return range_image(xyz, azimuth_step, channels, 0.0 if model is None else model.min_range_m)
 
 
 def check_origins(pair: RegisteredPair) -> None:
@@ -149,18 +164,17 @@ def check_origins(pair: RegisteredPair) -> None:
 
 
 def pair_evidence(pair: RegisteredPair, params: Params) -> tuple[np.ndarray, np.ndarray]:
-    """Free-space evidence of every point of cloud 1 against sensor 2's returns, and of cloud 2
-    against sensor 1's."""
-    own = (pair.xyz1, in_sensor_frame(pair.xyz2, pair.T_1_2))
-    models = (pair.sensor1, pair.sensor2)
-    images = [
-        range_image(xyz, resolution_rad(model, params, sensor), *sensor_view(model))
-        for sensor, (xyz, model) in enumerate(zip(own, models), 1)
-    ]
-    return (
-        free_space_evidence(in_sensor_frame(pair.xyz1, pair.T_1_2), images[1], params.margin_m, params.beam_width_deg),
-        free_space_evidence(pair.xyz2, images[0], params.margin_m, params.beam_width_deg),
-    )
+    """Free-space evidence of every point of cloud 1 against the returns of scan 2's lidars
+    (in any one's free space), and of cloud 2 against scan 1's."""
+
+    def image_of(own: np.ndarray, view: LidarView, ring: np.ndarray | None) -> RangeImage:
+        return sensor_range_image(own, view.sensor, params, view.name, ring)
+
+    def evidence(own: np.ndarray, view: LidarView, image: RangeImage) -> np.ndarray:
+        return free_space_evidence(own, image, params.margin_m, params.beam_width_deg)
+
+    images = lidar_images(pair, 1, image_of), lidar_images(pair, 2, image_of)
+    return any_lidar(pair.xyz1, images[1], evidence), any_lidar(pair.xyz2, images[0], evidence)
 
 
 def moving_objects(pair: RegisteredPair, params: Params) -> Outcome:

@@ -108,4 +108,6 @@ def _read_only(pair: RegisteredPair) -> RegisteredPair:
         dict(pair.registration),
         dict(pair.sensor_fit),
         dict(pair.sweeps),
+        pair.lidars1,
+        pair.lidars2,
     )

@@ -3,8 +3,8 @@
 A correcting hypothesis: it removes nothing, and moves the points of the chosen cloud (``cloud``,
 1 or 2) along their own lines of sight. The model is the simulator's range fault: a sensor that
 measures ``r = scale * r_true + offset``; a point at measured range ``r`` in unit direction ``u``
-about its sensor origin ``o`` is corrected to ``o + (r - offset) / scale * u``. Sensor 2's pose
-is not changed (the correction is not rigid).
+about its sensor origin ``o`` (its own lidar's, in a multi-lidar scan) is corrected to
+``o + (r - offset) / scale * u``. Sensor 2's pose is not changed (the correction is not rigid).
 
 The fit: a sample of at most ``max_points`` points of the chosen cloud (evenly spaced rows), each
 paired with the nearest point ``q`` of the other cloud (SciPy's k-d tree) and that point's
@@ -88,9 +88,10 @@ def range_calibration(pair: RegisteredPair, params: Params) -> Outcome:
 
     name = "range_calibration"
     if params.cloud == 2:
-        xyz, other, origin, attributes = pair.xyz2, pair.xyz1, pair.origin2, pair.attributes2
+        xyz, other, attributes = pair.xyz2, pair.xyz1, pair.attributes2
     else:
-        xyz, other, origin, attributes = pair.xyz1, pair.xyz2, pair.origin1, pair.attributes1
+        xyz, other, attributes = pair.xyz1, pair.xyz2, pair.attributes1
+    origin = pair.point_origins(params.cloud)  # each point's own lidar
     for cloud, points, need in (
         (params.cloud, xyz, MIN_POINTS),
         (3 - params.cloud, other, max(MIN_POINTS, params.normal_k)),
@@ -118,13 +119,13 @@ def range_calibration(pair: RegisteredPair, params: Params) -> Outcome:
 
     tree = cKDTree(other, balanced_tree=False, compact_nodes=False)  # faster to build, as fast to query
     normals = np.full((len(other), 3), np.nan)  # the other cloud's normals, computed where needed
-    rs, us = r[candidates], u[candidates]
+    rs, us, origins = r[candidates], u[candidates], np.broadcast_to(origin, xyz.shape)[candidates]
     r_max = float(rs.max())
     theta = np.concatenate([[1.0], np.zeros(len(groups))])  # alpha, then beta per group
     iterations, converged = 0, False
     while iterations < params.max_iterations and not converged:
         iterations += 1
-        corrected = origin + (theta[0] * rs - theta[1:][group_of])[:, None] * us
+        corrected = origins + (theta[0] * rs - theta[1:][group_of])[:, None] * us
         distance, nearest = tree.query(corrected, distance_upper_bound=params.max_correspondence_m)
         paired = np.isfinite(distance)
         index = nearest[paired]
@@ -142,7 +143,7 @@ def range_calibration(pair: RegisteredPair, params: Params) -> Outcome:
         nu = np.einsum("ij,ij->i", n, us[use])
         # the Jacobian's rows: r (n . u) for alpha, -(n . u) for the point's group's beta
         a, b, g = rs[use] * nu, -nu, group_of[use]
-        y = np.einsum("ij,ij->i", n, q - origin)
+        y = np.einsum("ij,ij->i", n, q - origins[use])
         residual = a * theta[0] + b * theta[1:][g] - y
         weight = _huber(residual)
         information, gradient = _normal_equations(a, b, g, y, weight, len(theta))

@@ -8,7 +8,8 @@ than ``jump_m``; the first segment holding more than ``min_points`` points is th
 sensor sees first, and the cell's points nearer or farther than that segment are removed. A
 cell with no such segment, and a point outside the grid, is left alone. Removals over all
 origins are united: a point that one sensor sees past an object's edge, where the other is
-blocked, is dropped.
+blocked, is dropped. A scan of several lidars (:mod:`lidarfield.lidars`) gives one origin per
+lidar: its points are binned about each lidar's own origin and axes.
 
 :func:`first_cluster_keep` is the vectorised kernel (one sort, then cumulative tricks);
 :func:`first_cluster_keep_loop` is the plain per-cell reference it is tested against.
@@ -162,8 +163,8 @@ def shadow(pair: RegisteredPair, params: Params) -> tuple[np.ndarray, np.ndarray
     grid = params.angular_grid()
     keep1 = np.ones(len(pair.xyz1), dtype=bool)
     keep2 = np.ones(len(pair.xyz2), dtype=bool)
-    for origin in params.origins:
+    for lidar in (view for origin in params.origins for view in pair.lidars(origin)):
         for xyz, keep in ((pair.xyz1, keep1), (pair.xyz2, keep2)):
-            local = xyz if origin == 1 else in_sensor_frame(xyz, pair.T_1_2)
+            local = in_sensor_frame(xyz, lidar.pose)
             keep &= first_cluster_keep(grid.assign(local), ranges(local), params.jump_m, params.min_points)
     return keep1, keep2

@@ -66,6 +66,8 @@ def register_pair(
         record,
         {"1": sensor_fit(scan1.xyz, scan1.sensor), "2": sensor_fit(scan2.xyz, scan2.sensor)},
         {str(k): sweep_record(scan) for k, scan in ((1, scan1), (2, scan2)) if sweep_record(scan)},
+        scan1.lidars,
+        scan2.lidars,
     )
 
 

@@ -77,6 +77,16 @@ _VLP32C_ELEVATION = tuple(
     -4.667 1.667 1 -3.667 -3.333 3.333 2.333 -2.667 -3 7 4.667 -2.333 -2 15 10.333 -1.333
     """.split()
 )
+# Hesai Pandar40P: the default angle-correction table of Hesai's drivers (line 1..40), -25..+15
+# deg, 1/3 deg apart from -6 to +2 deg and gaps of 3 to 6 deg at both edges (14 -> 19 -> 25
+# below, 5 -> 8 -> 11 -> 15 above): a "gradient" layout.
+_PANDAR40P_ELEVATION = tuple(
+    float(a)
+    for a in """
+    15 11 8 5 3 2 1.67 1.33 1 0.67 0.33 0 -0.33 -0.67 -1 -1.33 -1.66 -2 -2.33 -2.67
+    -3 -3.33 -3.67 -4 -4.33 -4.67 -5 -5.33 -5.67 -6 -7 -8 -9 -10 -11 -12 -13 -14 -19 -25
+    """.split()
+)
 PRESETS: dict[str, SensorModel] = {
     # The source paper's simulated sensor: 80 channels 0.4 deg apart from -22 deg upward,
     # whole scan at one instant.
@@ -100,6 +110,8 @@ PRESETS: dict[str, SensorModel] = {
     # laser ID), 200 m, 0.2 deg at 10 Hz; the datasheet gives no minimum range, so none is set.
     # Argoverse 2's two roof lidars are VLP-32Cs.
     "vlp32c": SensorModel("vlp32c", _VLP32C_ELEVATION, 0.2, 0.0, 200.0, 10.0),
+    # Hesai Pandar40P: 40 channels, -25..+15 deg (the table above), 0.3..200 m, 0.2 deg at 10 Hz.
+    "pandar40p": SensorModel("pandar40p", _PANDAR40P_ELEVATION, 0.2, 0.3, 200.0, 10.0),
     # Ouster OS1-128 (rev 7): 128 channels uniform over -22.5..+22.5 deg, 1024 columns at 10 Hz.
     "os1-128": SensorModel("os1-128", _uniform(-22.5, 45.0 / 127.0, 128), 360.0 / 1024, 0.3, 200.0, 10.0),
 }

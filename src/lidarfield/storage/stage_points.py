@@ -57,6 +57,8 @@ def with_rows(pair: RegisteredPair) -> RegisteredPair:
         pair.registration,
         pair.sensor_fit,
         pair.sweeps,
+        pair.lidars1,
+        pair.lidars2,
         neighbours=pair.neighbours,
     )
 

@@ -136,13 +136,15 @@ def recorded_scan_spec(
     options: dict | None = None,
     stamp_s: float | None = None,
     sweep_motion: dict | None = None,
+    lidars: list[dict] | None = None,
 ) -> dict:
     """The spec of a recorded scan, as the ingest job reads it and stage ids hash it: the one
     place it is built, for a study's pairs and for ``lidarfield run`` (equal inputs, equal ids).
     ``poses`` ({topic, frame}) takes the scan's pose from a topic of its bag when it is read;
     ``options`` are the format reader's (a dataset's sweep: its frame and lidars); ``stamp_s``
     the scan's time where its dataset gives it, ``sweep_motion`` the motion its points carry
-    where the dataset says (none: de-skewed). Keys that are not given stay out of the spec."""
+    where the dataset says (none: de-skewed), ``lidars`` the rig the config names (resolved by
+    :func:`_lidars`). Keys that are not given stay out of the spec."""
     spec = {"path": path, "format": format, "sensor": sensor, "pose": pose}
     if isinstance(poses, dict):
         spec["poses"] = poses
@@ -152,12 +154,40 @@ def recorded_scan_spec(
         spec["stamp_s"] = float(stamp_s)
     if sweep_motion is not None:
         spec["sweep_motion"] = sweep_motion
+    if lidars:
+        spec["lidars"] = lidars
     return spec
 
 
-def _recorded_scan(scan_id: str, entry: dict, path: str, pose=None) -> ScanSpec:
-    spec = recorded_scan_spec(path, entry.get("format"), entry.get("sensor"), pose, entry.get("poses"))
+def _recorded_scan(scan_id: str, entry: dict, path: str, pose=None, lidars: list[dict] | None = None) -> ScanSpec:
+    spec = recorded_scan_spec(path, entry.get("format"), entry.get("sensor"), pose, entry.get("poses"), lidars=lidars)
     return ScanSpec(scan_id, "recorded", spec)
+
+
+def _lidars(entry: dict, key: str, base_dir: Path) -> list[dict] | None:
+    """The rig an entry names (``lidars``), checked and resolved now: each lidar's name, its
+    model (as a mapping), its pose in the scan's frame (4x4) and its rings where given."""
+    if entry.get("lidars") is None:
+        return None
+    rig = []
+    for k, lidar in enumerate(entry["lidars"]):
+        where = f"{key}.lidars[{k}]"
+        model = _sensor(lidar["sensor"], where, base_dir)
+        item = {
+            "name": lidar["name"],
+            "sensor": model.to_dict(),
+            "pose": _extrinsic(lidar["pose"], f"{where}.pose", base_dir).tolist(),
+        }
+        if "rings" in lidar:
+            first, end = lidar["rings"]
+            if not first < end:
+                raise ConfigError(f"{where}.rings: [first, end) with first < end, got {lidar['rings']}")
+            item["rings"] = [first, end]
+        rig.append(item)
+    names = [item["name"] for item in rig]
+    if len(set(names)) < len(names):
+        raise ConfigError(f"{key}.lidars: names must differ, got {names}")
+    return rig
 
 
 def _pair(name: str, entry: dict, base_dir: Path) -> PairSpec:
@@ -179,8 +209,11 @@ def _pair(name: str, entry: dict, base_dir: Path) -> PairSpec:
         ]
     else:
         _sensor(entry.get("sensor"), key, base_dir)
+        rig = _lidars(entry, key, base_dir)
         scans = [
-            _recorded_scan(f"{name}-{i}", entry, _existing_file(entry[f"scan{i}"], f"{key}.scan{i}", base_dir))
+            _recorded_scan(
+                f"{name}-{i}", entry, _existing_file(entry[f"scan{i}"], f"{key}.scan{i}", base_dir), lidars=rig
+            )
             for i in (1, 2)
         ]
     return PairSpec(name, scans[0], scans[1], _register(entry["register"], key, base_dir))
@@ -261,8 +294,9 @@ def _recorded_sequence(name: str, entry: dict, base_dir: Path) -> list[ScanSpec]
         if entry.get("extrinsic") is not None:
             extrinsic = _extrinsic(entry["extrinsic"], f"sequences.{name}.extrinsic", base_dir)
             poses = poses_of_attached_frame(poses, extrinsic)
+    rig = _lidars(entry, f"sequences.{name}", base_dir)
     return [
-        _recorded_scan(f"{name}-s{k:03d}", entry, files[k], None if poses is None else poses[k].tolist())
+        _recorded_scan(f"{name}-s{k:03d}", entry, files[k], None if poses is None else poses[k].tolist(), rig)
         for k in range(first, last + 1)
     ]
 
@@ -278,6 +312,9 @@ def _dataset_sequence(name: str, entry: dict, base_dir: Path) -> list[ScanSpec]:
         raise type(e)(f"{key}.{e}" if not e.path else str(e)) from None
     sensor = entry.get("sensor") if entry.get("sensor") is not None else dataset.sensor
     _sensor(sensor, key, base_dir)
+    rig = _lidars(entry, key, base_dir)
+    if rig and any("lidar_poses" in scan.options for scan in dataset.scans):
+        raise ConfigError(f"{key}.lidars: {dataset.what} names its lidars itself (its calibration); give none")
     first, last = _first_last(name, entry, len(dataset.scans))
     scans = dataset.scans[first : last + 1]
     motions = _sweep_motions(dataset)[first : last + 1]
@@ -299,6 +336,7 @@ def _dataset_sequence(name: str, entry: dict, base_dir: Path) -> list[ScanSpec]:
                 scan.options,
                 scan.stamp_s,
                 motion,
+                rig,
             ),
         )
         for (k, scan), motion in zip(enumerate(scans, start=first), motions)

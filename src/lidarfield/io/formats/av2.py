@@ -12,7 +12,10 @@ the vehicle frame, which the log's calibration table gives). The dataset reader
 sweep file and nothing else; read on its own (``lidarfield info sweep.feather``), a sweep is
 both lidars in the vehicle frame. Attributes: ``intensity``, ``ring`` (``laser_number`` as
 stored: the down lidar's rings are 32-63) and ``time`` (``offset_ns`` in seconds after the
-sweep's timestamp).
+sweep's timestamp). With ``lidar_poses`` (each kept lidar's pose in ``frame``, which the
+dataset reader gives from the calibration), the scan is a rig (:mod:`lidarfield.lidars`): its
+``lidars`` in the order of ``lidars``, each with the given sensor model (default ``vlp32c``),
+and each point's ``lidar`` attribute its lidar's index there.
 """
 
 from __future__ import annotations
@@ -22,15 +25,17 @@ from pathlib import Path
 import numpy as np
 
 from ...errors import InputError
+from ...lidars import LIDAR, Lidar
 from ...poses import apply_pose, rigid_pose
 from ...scan import Scan
-from ...sensors.models import SensorModel
+from ...sensors.models import PRESETS, SensorModel
 from ..rows import scan_from_rows
 
 # lidar -> its laser_number range [first, last + 1) in a sweep
 LIDARS = {"up_lidar": (0, 32), "down_lidar": (32, 64)}
 FRAMES = ("up_lidar", "down_lidar", "egovehicle")
 COLUMNS = ("x", "y", "z", "intensity", "laser_number", "offset_ns")
+MODEL = "vlp32c"  # both lidars' model
 
 
 def read_av2(
@@ -41,22 +46,29 @@ def read_av2(
     frame: str = "egovehicle",
     lidars: list[str] | tuple[str, ...] = ("up_lidar", "down_lidar"),
     T_frame_vehicle: list | None = None,
+    lidar_poses: dict[str, list] | None = None,
 ) -> Scan:
     """The points of ``lidars`` in ``frame`` (``T_frame_vehicle``: 4x4, vehicle to that frame;
-    needed for a lidar frame, identity for ``egovehicle``)."""
+    needed for a lidar frame, identity for ``egovehicle``); with ``lidar_poses`` (lidar name ->
+    its 4x4 pose in ``frame``) a rig of those lidars."""
     transform = _frame_transform(frame, T_frame_vehicle, path)
     unknown = [name for name in lidars if name not in LIDARS]
     if unknown or not lidars:
         raise InputError(f"lidars {list(lidars)!r}: choose one or both of {list(LIDARS)}", path)
+    if lidar_poses is not None and set(lidar_poses) != set(lidars):
+        raise InputError(f"lidar_poses names {sorted(lidar_poses)}, not the lidars read {sorted(lidars)}", path)
     columns = feather_columns(path, COLUMNS, "an Argoverse 2 lidar sweep")
     laser = columns["laser_number"]
     if not (np.isfinite(laser).all() and (laser >= 0).all() and (laser < 64).all()):
         raise InputError("laser_number holds values outside 0..63 (0-31 up lidar, 32-63 down lidar)", path)
     laser = laser.astype(np.int64)
     keep = np.zeros(len(laser), dtype=bool)
-    for name in lidars:
+    which = np.zeros(len(laser), dtype=np.uint8)
+    for k, name in enumerate(lidars):
         first, end = LIDARS[name]
-        keep |= (laser >= first) & (laser < end)
+        mine = (laser >= first) & (laser < end)
+        keep |= mine
+        which[mine] = k
     if len(laser) and not keep.any():
         raise InputError(f"no point of {' or '.join(lidars)} in the sweep (laser_number ranges {LIDARS})", path)
     xyz = np.column_stack([np.asarray(columns[c], dtype=np.float64)[keep] for c in ("x", "y", "z")])
@@ -67,7 +79,13 @@ def read_av2(
         "ring": laser[keep].astype(np.uint16),
         "time": np.asarray(columns["offset_ns"], dtype=np.float64)[keep] * 1e-9,
     }
-    return scan_from_rows(xyz, attributes, path, sensor=sensor)
+    if lidar_poses is None:
+        return scan_from_rows(xyz, attributes, path, sensor=sensor)
+    attributes[LIDAR] = which[keep]
+    scan = scan_from_rows(xyz, attributes, path, sensor=sensor)
+    model = sensor or PRESETS[MODEL]
+    scan.lidars = tuple(Lidar(name, _rigid(lidar_poses[name], f"lidar_poses.{name}", path), model) for name in lidars)
+    return scan
 
 
 def _frame_transform(frame: str, T_frame_vehicle, path: Path) -> np.ndarray | None:
@@ -81,13 +99,18 @@ def _frame_transform(frame: str, T_frame_vehicle, path: Path) -> np.ndarray | No
                 path,
             )
         return None
-    T = np.asarray(T_frame_vehicle, dtype=np.float64)
+    return _rigid(T_frame_vehicle, "T_frame_vehicle", path)
+
+
+def _rigid(values, what: str, path: Path) -> np.ndarray:
+    """A 4x4 rigid transform from ``values``; an InputError naming ``what`` otherwise."""
+    T = np.asarray(values, dtype=np.float64)
     if T.shape != (4, 4):
-        raise InputError(f"T_frame_vehicle is {T.shape}, not 4x4", path)
+        raise InputError(f"{what} is {T.shape}, not 4x4", path)
     try:
         return rigid_pose(T, path)
     except InputError as e:
-        raise InputError(f"T_frame_vehicle: {str(e).removeprefix(f'{path}: ')}", path) from None
+        raise InputError(f"{what}: {str(e).removeprefix(f'{path}: ')}", path) from None
 
 
 def feather_columns(

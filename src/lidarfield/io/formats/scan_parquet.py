@@ -1,5 +1,6 @@
 """The scan Parquet contract: columns x, y, z (float64) plus attributes; metadata key
-``lidarfield`` = {"sensor", "pose", "source", "dropped_invalid", "stamp_s", "sweep_motion"}."""
+``lidarfield`` = {"sensor", "pose", "source", "dropped_invalid", "stamp_s", "sweep_motion",
+"lidars"} (``lidars``: a multi-lidar rig, see :mod:`lidarfield.lidars`; absent: one lidar)."""
 
 from __future__ import annotations
 
@@ -8,6 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from ...errors import InputError, LidarfieldError
+from ...lidars import check_lidar_ids, lidars_from_meta, lidars_to_meta
 from ...scan import Scan
 from ...sensors.models import SensorModel
 from ..parquet_table import read_table, write_table
@@ -28,6 +30,7 @@ def scan_metadata(scan: Scan) -> dict:
         "dropped_invalid": int(scan.dropped_invalid),
         "stamp_s": scan.stamp_s,
         "sweep_motion": scan.sweep_motion,
+        **({"lidars": lidars_to_meta(scan.lidars)} if scan.lidars else {}),
     }
 
 
@@ -51,4 +54,9 @@ def read_parquet(path: Path, index: int = 0, sensor: SensorModel | None = None) 
         scan.source = meta["source"]
     scan.stamp_s = meta.get("stamp_s")
     scan.sweep_motion = meta.get("sweep_motion")
+    try:
+        scan.lidars = lidars_from_meta(meta.get("lidars"))
+        check_lidar_ids(scan.lidars, scan.attributes)
+    except (LidarfieldError, ValueError, TypeError, KeyError) as e:
+        raise InputError(f"bad lidarfield metadata: lidars ({e})", path) from None
     return scan

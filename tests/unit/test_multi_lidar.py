@@ -20,7 +20,7 @@ from lidarfield.pair import RegisteredPair, read_pair, write_pair
 from lidarfield.poses import in_sensor_frame, invert_pose, pose_from_xyzrpy
 from lidarfield.registration.core import register_pair
 from lidarfield.study.config import validate_config
-from lidarfield.study.jobs import recorded_scan
+from lidarfield.commands.jobs import recorded_scan
 
 # The vehicle waiting in the south arm of the traffic scene, 0.1 s and 0.7 m apart: its up lidar
 # at (2, -9, 1.95) and (2.5, -8.5, 1.95) m, as tests/unit/test_free_space_layouts.py's sensors.

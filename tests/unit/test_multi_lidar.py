@@ -10,6 +10,7 @@ import pytest
 
 from helpers.av2_layout import DOWN_IN_VEHICLE, UP_IN_VEHICLE, simulate_log, write_av2_log
 from lidarfield import ConfigError, InputError, Scan, read_scan, write_scan
+from lidarfield.commands.jobs import recorded_scan
 from lidarfield.field.free_space import shared_points
 from lidarfield.hypotheses import apply_step
 from lidarfield.hypotheses import moving_objects as mo
@@ -20,7 +21,6 @@ from lidarfield.pair import RegisteredPair, read_pair, write_pair
 from lidarfield.poses import in_sensor_frame, invert_pose, pose_from_xyzrpy
 from lidarfield.registration.core import register_pair
 from lidarfield.study.config import validate_config
-from lidarfield.commands.jobs import recorded_scan
 
 # The vehicle waiting in the south arm of the traffic scene, 0.1 s and 0.7 m apart: its up lidar
 # at (2, -9, 1.95) and (2.5, -8.5, 1.95) m, as tests/unit/test_free_space_layouts.py's sensors.

@@ -13,8 +13,8 @@ import numpy as np
 
 from .errors import InputError
 from .io.parquet_table import read_table, write_table
-from .lidars import Lidar, LidarView, check_lidar_ids, cloud_lidars, lidars_from_meta, lidars_to_meta
 from .sensors.models import SensorModel
+from .sensors.rig import Lidar, LidarView, check_lidar_ids, cloud_lidars, lidars_from_meta, lidars_to_meta
 
 
 @dataclass

@@ -6,8 +6,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .lidars import Lidar, check_lidar_ids
 from .sensors.models import SensorModel
+from .sensors.rig import Lidar, check_lidar_ids
 
 # Attributes the contracts know; readers may add others (kept as they are). ``object`` is a
 # simulated point's label: the moving object it hit, 0 for the static scene.
@@ -32,7 +32,7 @@ class Scan:
     # {"velocity_mps": [3], "angular_velocity_rps": [3]}, both in its sensor frame at the sweep
     # start (zero for a scan taken still or already de-skewed); None when unknown.
     sweep_motion: dict | None = None
-    # The rig when several lidars measured the scan (see lidarfield.lidars; the points'
+    # The rig when several lidars measured the scan (see lidarfield.sensors.rig; the points'
     # ``lidar`` attribute names each point's); empty: one lidar at the frame's origin.
     lidars: tuple[Lidar, ...] = ()
 

@@ -16,10 +16,10 @@ from lidarfield.hypotheses import apply_step
 from lidarfield.hypotheses import moving_objects as mo
 from lidarfield.io.formats.av2 import LIDARS
 from lidarfield.io.pose_files import write_kitti_poses
-from lidarfield.lidars import LIDAR, Lidar
 from lidarfield.pair import RegisteredPair, read_pair, write_pair
 from lidarfield.poses import in_sensor_frame, invert_pose, pose_from_xyzrpy
 from lidarfield.registration.core import register_pair
+from lidarfield.sensors.rig import LIDAR, Lidar
 from lidarfield.study.config import validate_config
 
 # The vehicle waiting in the south arm of the traffic scene, 0.1 s and 0.7 m apart: its up lidar

@@ -22,12 +22,12 @@ from ..field.grid import field_settings_from_config
 from ..io import read_scan, write_scan
 from ..io.atomic import write_text
 from ..io.parquet_table import read_table, write_table
-from ..lidars import LIDAR, rig_of_spec
 from ..pair import read_pair, write_pair
 from ..poses import apply_pose, invert_pose
 from ..scan import Scan
 from ..sensors.fit import log_fit
 from ..sensors.models import sensor_model
+from ..sensors.rig import LIDAR, rig_of_spec
 from ..storage.stage_points import CHANGES, read_stage_points, write_changes
 from ..study.stack import Stage, next_stage
 from ..study.summary import summary_row

@@ -227,8 +227,8 @@ def field_of_scans(
     from ..field.file import field_meta, write_field
     from ..field.grid import field_settings_from_config
     from ..io.pose_files import read_pose
-    from ..lidars import LIDAR
     from ..poses import apply_pose, parse_pose_arg
+    from ..sensors.rig import LIDAR
 
     # Everything that can fail on the user's input happens before the first file is written.
     settings = field_settings_from_config(grid_section)

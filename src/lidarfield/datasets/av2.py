@@ -12,7 +12,7 @@ t; between listed poses the vehicle's pose is interpolated (translation linear, 
 slerp), and a sweep without a listed pose within 50 ms, or outside the poses' time span, is an
 error. ``lidars`` (default both) chooses whose points the scans keep.
 
-Lidars: each scan is a rig (:mod:`lidarfield.lidars`) of the lidars it keeps, each placed
+Lidars: each scan is a rig (:mod:`lidarfield.sensors.rig`) of the lidars it keeps, each placed
 where the calibration mounts it in the scan's frame (``T_frame_vehicle @
 egovehicle_SE3_<lidar>``), each a ``vlp32c`` (or the sequence's ``sensor:``), and each point
 names its lidar (``lidar`` attribute, from ``laser_number``): the hypotheses that reason about

@@ -41,10 +41,10 @@ from functools import cached_property
 
 import numpy as np
 
-from ..lidars import LidarView
 from ..pair import RegisteredPair
 from ..poses import in_sensor_frame
 from ..sensors.models import SensorModel
+from ..sensors.rig import LidarView
 
 # The margin across the ray is rounded up to a step of this ratio, so that few windows are filtered.
 _WINDOW_RATIO = 1.25

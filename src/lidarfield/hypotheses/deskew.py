@@ -12,7 +12,7 @@ fired ``s`` seconds after the reference time is, in the reference frame, ``Rot(w
 simulator and for a Velodyne/Ouster driver's scan stamped at its first packet, ``mid`` or ``end``
 for data stamped otherwise. Cloud 2 is de-skewed in sensor 2's frame (through ``T_1_2``) and
 put back in frame 1; sensor 2's pose is not changed. A scan of several lidars
-(:mod:`lidarfield.lidars`) moves as one body (its velocities are its frame's); what is each
+(:mod:`lidarfield.sensors.rig`) moves as one body (its velocities are its frame's); what is each
 lidar's own is the time of a point without a time attribute: from its azimuth about its own
 lidar, at that lidar's rotation rate.
 

@@ -6,7 +6,7 @@ elevation ``atan2(z, hypot(x, y))`` is strictly below or above the sensor's elev
 (the lowest and highest channel of its model, or ``elevation_deg``), widened by ``margin_deg``.
 Where the model has them (or the parameters give them), points outside the range limits
 ``[min_range_m, max_range_m]`` and the azimuth sector are dropped by the same rule. A scan of
-several lidars (:mod:`lidarfield.lidars`) sees what any of its lidars sees: a point is kept
+several lidars (:mod:`lidarfield.sensors.rig`) sees what any of its lidars sees: a point is kept
 when it is inside the limits of one of them, about that lidar's own origin and axes.
 """
 
@@ -18,9 +18,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import NotApplicableError
-from ..lidars import LidarView
 from ..pair import RegisteredPair
 from ..sensors.models import SensorModel
+from ..sensors.rig import LidarView
 from .geometry import in_sensor_frame
 from .params import doc
 

@@ -10,7 +10,7 @@ passes and the next one hits is not free space, nor is a surface that the regist
 moved by less than m. Directions the other sensor did not see give no evidence either way: no
 return in the point's cell, a point outside its elevation limits or nearer than its minimum
 range, a point behind what it measured (occluded), and a point in a wide gap between channels
-that no ray passed near. A scan of several lidars (:mod:`lidarfield.lidars`) has a range image
+that no ray passed near. A scan of several lidars (:mod:`lidarfield.sensors.rig`) has a range image
 per lidar, in its own frame: a point is evidence in the free space of any of them.
 
 A moving object gives such evidence only on its leading and trailing parts, so evidence grows
@@ -46,9 +46,9 @@ from ..field.free_space import (
     sensor_image,
     uniform_channels,
 )
-from ..lidars import LidarView
 from ..pair import RegisteredPair
 from ..sensors.models import SensorModel
+from ..sensors.rig import LidarView
 from .outcome import Outcome
 from .params import doc
 from .voxel_objects import connected_voxels, off_ground, overlapping_objects, packed, voxel_grid

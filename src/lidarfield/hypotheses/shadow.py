@@ -8,7 +8,7 @@ than ``jump_m``; the first segment holding more than ``min_points`` points is th
 sensor sees first, and the cell's points nearer or farther than that segment are removed. A
 cell with no such segment, and a point outside the grid, is left alone. Removals over all
 origins are united: a point that one sensor sees past an object's edge, where the other is
-blocked, is dropped. A scan of several lidars (:mod:`lidarfield.lidars`) gives one origin per
+blocked, is dropped. A scan of several lidars (:mod:`lidarfield.sensors.rig`) gives one origin per
 lidar: its points are binned about each lidar's own origin and axes.
 
 :func:`first_cluster_keep` is the vectorised kernel (one sort, then cumulative tricks);

@@ -13,7 +13,7 @@ sweep file and nothing else; read on its own (``lidarfield info sweep.feather``)
 both lidars in the vehicle frame. Attributes: ``intensity``, ``ring`` (``laser_number`` as
 stored: the down lidar's rings are 32-63) and ``time`` (``offset_ns`` in seconds after the
 sweep's timestamp). With ``lidar_poses`` (each kept lidar's pose in ``frame``, which the
-dataset reader gives from the calibration), the scan is a rig (:mod:`lidarfield.lidars`): its
+dataset reader gives from the calibration), the scan is a rig (:mod:`lidarfield.sensors.rig`): its
 ``lidars`` in the order of ``lidars``, each with the given sensor model (default ``vlp32c``),
 and each point's ``lidar`` attribute its lidar's index there.
 """
@@ -25,10 +25,10 @@ from pathlib import Path
 import numpy as np
 
 from ...errors import InputError
-from ...lidars import LIDAR, Lidar
 from ...poses import apply_pose, rigid_pose
 from ...scan import Scan
 from ...sensors.models import PRESETS, SensorModel
+from ...sensors.rig import LIDAR, Lidar
 from ..rows import scan_from_rows
 
 # lidar -> its laser_number range [first, last + 1) in a sweep

@@ -1,6 +1,6 @@
 """The scan Parquet contract: columns x, y, z (float64) plus attributes; metadata key
 ``lidarfield`` = {"sensor", "pose", "source", "dropped_invalid", "stamp_s", "sweep_motion",
-"lidars"} (``lidars``: a multi-lidar rig, see :mod:`lidarfield.lidars`; absent: one lidar)."""
+"lidars"} (``lidars``: a multi-lidar rig, see :mod:`lidarfield.sensors.rig`; absent: one lidar)."""
 
 from __future__ import annotations
 
@@ -9,9 +9,9 @@ from pathlib import Path
 import numpy as np
 
 from ...errors import InputError, LidarfieldError
-from ...lidars import check_lidar_ids, lidars_from_meta, lidars_to_meta
 from ...scan import Scan
 from ...sensors.models import SensorModel
+from ...sensors.rig import check_lidar_ids, lidars_from_meta, lidars_to_meta
 from ..parquet_table import read_table, write_table
 from ..rows import scan_from_rows
 

@@ -18,8 +18,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .errors import InputError
-from .sensors.models import SensorModel
+from ..errors import InputError
+from .models import SensorModel
 
 LIDAR = "lidar"  # the points' attribute: the index of the lidar that measured each point
 

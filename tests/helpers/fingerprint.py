@@ -1,18 +1,25 @@
-"""A study's results as digests: every column of its summary and of each stage's field.
+"""A study's results as a fingerprint: every column of its summary and of each stage's field.
 
-Two runs of the same study give the same fingerprint only if every value of the summary and
-every value of every field is the same, bit for bit. ``tests/data/default_study.json`` is the
-default study's, written by the code before stages were stored as their changes (main at
-e16a60a, the survivor copies, with the day's other work merged) with
+Each numeric column is kept as its row count, its count of non-finite values and three sums
+of its finite values (plain, absolute and weighted by row position, so a reordering shows);
+every other column as a digest. Two fingerprints agree (:func:`differences`) when the other
+columns are equal and every sum agrees within ``RTOL``: a changed count, vector or verdict
+anywhere is a difference; a last-bit difference in a normal or a standard error is not.
+Exact digests were not portable: numpy's SIMD kernels and LAPACK's differ by a few ulps from
+one processor to another (2026-11-27: on this project's AVX-512 machine main's own code gave
+other last bits of nx, ny, nz, planarity, se, wu, wv, ww and z than the digests written on the
+machine before, with counts, means and vectors identical).
 
-    snakemake --cores 2 results/summary.parquet   # in a checkout of that commit
+``tests/data/default_study.json`` is the default study's, written with
+
+    snakemake --cores 2 results/summary.parquet
     python tests/helpers/fingerprint.py results tests/data/default_study.json
 
-and tests/workflow/test_stage_changes.py checks the code of today against it. Regenerated on
-branch covis (2026-11-25) the same way, when the vectors' covariance gained the change of
-viewpoint on what both sensors saw: every field's se, z, wu, wv and ww changed, and the
-summary's voxels_significant, share_significant, p_direction, p_coherence and verdict (the
-paper-sim pair's stages 1 and 2 went from patterned to random); nothing else did.
+and tests/workflow/test_stage_changes.py checks the code of today against it. History: first
+written by the code that stored every stage's survivors (e16a60a); regenerated on branch covis
+(2026-11-25) when the vectors' covariance gained the change of viewpoint (se, z, wu, wv, ww and
+the summary's significance columns changed); rewritten in this form on 2026-11-27 from main's
+outputs (bit-identical to those of 93528e2 on this machine).
 """
 
 from __future__ import annotations
@@ -25,11 +32,22 @@ from pathlib import Path
 import numpy as np
 import pyarrow.parquet as pq
 
+# How closely two fingerprints' sums must agree, relative to the column's sum of |x|: far above a
+# few ulps in each of a few hundred values, far below one point more in a voxel (about 1e-5 of
+# a field's counts) or a vector moved by a micrometre.
+RTOL = 1e-7
 
-def column_digest(values: np.ndarray) -> str:
+
+def column_digest(values: np.ndarray) -> str | list[float]:
+    """A numeric column's [rows, non-finite, sum, sum of |x|, position-weighted sum]; any other
+    column's digest."""
     values = np.asarray(values)
     if values.dtype.kind in "biuf":
-        return hashlib.sha256(np.ascontiguousarray(values).tobytes()).hexdigest()[:16]
+        x = values.astype(np.float64)
+        finite = np.isfinite(x)
+        weights = (np.arange(len(x)) % 97 + 1) / 97.0
+        x = np.where(finite, x, 0.0)
+        return [len(x), int(np.count_nonzero(~finite)), float(x.sum()), float(np.abs(x).sum()), float(x @ weights)]
     return hashlib.sha256(json.dumps([None if v is None else str(v) for v in values]).encode()).hexdigest()[:16]
 
 
@@ -49,6 +67,27 @@ def fingerprint(results: Path) -> dict:
         for path in sorted(results.glob("*/stages/*/field.parquet"))
     }
     return {"summary": table_digests(results / "summary.parquet", ("pair", "stage")), "fields": fields}
+
+
+def differences(got: dict, expected: dict, rtol: float = RTOL) -> list[str]:
+    """Where two fingerprints disagree: ``table: column`` for each column that differs, and
+    the tables that only one of them has."""
+    tables = {"summary": (got["summary"], expected["summary"])}
+    tables |= {key: (got["fields"].get(key), columns) for key, columns in expected["fields"].items()}
+    found = [f"{key}: only in the results" for key in sorted(set(got["fields"]) - set(expected["fields"]))]
+    for key, (mine, theirs) in tables.items():
+        if mine is None:
+            found.append(f"{key}: missing")
+            continue
+        for name in sorted(set(mine) | set(theirs)):
+            a, b = mine.get(name), theirs.get(name)
+            same = a == b
+            if isinstance(a, list) and isinstance(b, list):
+                scale = rtol * max(a[3], b[3])
+                same = a[:2] == b[:2] and all(abs(x - y) <= scale for x, y in zip(a[2:], b[2:], strict=True))
+            if not same:
+                found.append(f"{key}: {name} {a} != {b}")
+    return found
 
 
 if __name__ == "__main__":

@@ -48,7 +48,7 @@ LOCKED_RESULTANT = 0.9
 PHASE_SUBSAMPLE = 7
 # A ring with fewer points than this does not count as a channel (a stray return).
 MIN_RING_POINTS = 10
-# An edge within this of a channel (deg) is on it.
+# An edge within this of a channel (deg), or of a firing (in steps), is on it.
 _ON = 1e-6
 
 
@@ -78,44 +78,43 @@ def pair_binning(settings: FieldSettings, pair: RegisteredPair) -> Binning:
     grid = settings.grid
     if not isinstance(grid, SphericalGrid):
         return Binning(settings, "cartesian grid: no bands nor columns")
-    channels, source = pair_channels(pair)
-    azimuth, azimuth_reason = grid.azimuth_edges(), ""
-    model = pair.sensor1 or pair.sensor2
-    if model is not None:
-        step = 360.0 / model.firings_per_revolution
-        phase = edge_phase([firing_phase(xyz, step) for xyz in (pair.xyz1, pair.xyz2)], step)
-        if phase is None:
-            azimuth_reason = (
-                f"azimuth edges as given: the scans' azimuths are not on a lattice of {model.name}'s {step:g} deg"
-            )
-        else:
-            azimuth = edges_at_phase(azimuth, phase, step)
-            azimuth_reason = _moved("azimuth", grid.azimuth_edges(), azimuth, f"the firings, {step:g} deg apart")
-    warning = ""
-    if channels is None:
-        elevation = grid.elevation_edges()
-        span = f"[{elevation[0]:g}, {elevation[-1]:g}] deg"
-        reason = f"no sensor model nor rings: elevation {span}, " + (
-            "the grid gives no elevation_deg" if grid.follows_sensor else "edges as given"
-        )
-        warning = edge_warning(elevation, pair)
-    else:
-        nominal = sensor_span_edges(channels, grid.elevation_bins) if grid.follows_sensor else grid.elevation_edges()
-        elevation = edges_between_channels(nominal, channels)
-        if elevation is None:
-            elevation = nominal
-            reason = f"elevation edges as given: more bands than gaps between {source}"
-            warning = edge_warning(elevation, pair)
-        elif grid.follows_sensor:
-            reason = (
-                f"elevation [{elevation[0]:.4g}, {elevation[-1]:.4g}] deg from {source} (half a gap beyond the outer "
-                f"channels; the grid gives no elevation_deg), {len(elevation) - 1} bands of whole channels"
-            )
-        else:
-            reason = _moved("elevation", nominal, elevation, source)
-    reason = "; ".join(filter(None, (reason, azimuth_reason)))
+    elevation, elevation_reason, warning = _elevation_edges(grid, pair)
+    azimuth, azimuth_reason = _azimuth_edges(grid, pair)
     effective = replace(settings, grid=grid.with_edges(elevation, azimuth))
-    return Binning(effective, reason, warning)
+    return Binning(effective, "; ".join(filter(None, (elevation_reason, azimuth_reason))), warning)
+
+
+def _elevation_edges(grid: SphericalGrid, pair: RegisteredPair) -> tuple[np.ndarray, str, str]:
+    """The band edges, why, and the warning ('' where the channels are known)."""
+    channels, source = pair_channels(pair)
+    if channels is None:
+        edges = grid.elevation_edges()
+        given = "the grid gives no elevation_deg" if grid.follows_sensor else "edges as given"
+        reason = f"no sensor model nor rings: elevation [{edges[0]:g}, {edges[-1]:g}] deg, {given}"
+        return edges, reason, edge_warning(edges, pair)
+    if not grid.follows_sensor:
+        edges = edges_between_channels(grid.elevation_edges(), channels)
+        return edges, _moved("elevation", grid.elevation_edges(), edges, source), ""
+    edges = edges_between_channels(sensor_span_edges(channels, grid.elevation_bins), channels)
+    reason = (
+        f"elevation [{edges[0]:.4g}, {edges[-1]:.4g}] deg from {source} (half a gap beyond the outer "
+        f"channels; the grid gives no elevation_deg), {len(edges) - 1} bands of whole channels"
+    )
+    return edges, reason, ""
+
+
+def _azimuth_edges(grid: SphericalGrid, pair: RegisteredPair) -> tuple[np.ndarray, str]:
+    """The column edges and why ('' without a sensor model: the azimuth sampling is unknown)."""
+    edges = grid.azimuth_edges()
+    model = pair.sensor1 or pair.sensor2
+    if model is None:
+        return edges, ""
+    step = 360.0 / model.firings_per_revolution
+    phase = edge_phase([firing_phase(xyz, step) for xyz in (pair.xyz1, pair.xyz2)], step)
+    if phase is None:
+        return edges, f"azimuth edges as given: the scans' azimuths are not on a lattice of {model.name}'s {step:g} deg"
+    moved = edges_at_phase(edges, phase, step)
+    return moved, _moved("azimuth", edges, moved, f"the firings, {step:g} deg apart")
 
 
 def pair_channels(pair: RegisteredPair) -> tuple[np.ndarray | None, str]:
@@ -171,26 +170,28 @@ def sensor_span_edges(channels: np.ndarray, bands: int) -> np.ndarray:
     return np.linspace(lo, hi, bands + 1)
 
 
-def edges_between_channels(edges: np.ndarray, channels: np.ndarray) -> np.ndarray | None:
+def edges_between_channels(edges: np.ndarray, channels: np.ndarray) -> np.ndarray:
     """Each edge within the channels' span (up to one gap beyond the outer channels, as wide as
     the outer gap) moved to midway between the two channels around it; edges farther out stay.
-    An edge on a channel moves down (the channel stays in the band above it, as a bin's lower
-    edge belongs to it), the top edge up (the grid's last band holds its top). None when two
-    edges would share a gap: bands narrower than the channel spacing cannot hold whole channels."""
+    Edges sharing a gap (bands narrower than a wide gap, as below a VLP-32C's -15.6 deg) are
+    spread evenly across it. An edge on a channel moves down (the channel stays in the band above
+    it, as a bin's lower edge belongs to it), the top edge up (the grid's last band holds its top)."""
     c = merged_channels(channels)
     edges = np.asarray(edges, dtype=np.float64)
     if len(c) < 2:
         return edges.copy()
     padded = np.concatenate([[2 * c[0] - c[1]], c, [2 * c[-1] - c[-2]]])
-    moved = edges.copy()
+    gap = np.full(len(edges), -1)
     for i, edge in enumerate(edges):
         nearest = padded[np.argmin(np.abs(padded - edge))]
         edge = nearest if abs(nearest - edge) < _ON else edge
-        if not padded[0] < edge < padded[-1]:
-            continue
-        j = np.searchsorted(padded, edge, side="left" if i < len(edges) - 1 else "right") - 1
-        moved[i] = 0.5 * (padded[j] + padded[j + 1])
-    return moved if np.all(np.diff(moved) > 0) else None
+        if padded[0] < edge < padded[-1]:
+            gap[i] = np.searchsorted(padded, edge, side="left" if i < len(edges) - 1 else "right") - 1
+    moved = edges.copy()
+    for j in np.unique(gap[gap >= 0]):
+        sharing = np.flatnonzero(gap == j)
+        moved[sharing] = padded[j] + (padded[j + 1] - padded[j]) * np.arange(1, len(sharing) + 1) / (len(sharing) + 1)
+    return moved
 
 
 def firing_phase(xyz: np.ndarray, step_deg: float) -> float | None:
@@ -223,7 +224,11 @@ def edges_at_phase(edges: np.ndarray, phase_deg: float, step_deg: float) -> np.n
     """Each azimuth edge moved to the nearest azimuth at ``phase_deg`` modulo ``step_deg`` (by
     at most half a step; the same shift for the edges 360 deg apart)."""
     edges = np.asarray(edges, dtype=np.float64)
-    return phase_deg + step_deg * np.round((edges - phase_deg) / step_deg)
+    # Half up, and a tie within rounding of a whole number taken as the tie: edges 360 deg apart
+    # then move alike (a firing count need not be even, nor 360 / step exact in floats).
+    k = (edges - phase_deg) / step_deg + 0.5
+    whole = np.round(k)
+    return phase_deg + step_deg * np.floor(np.where(np.abs(k - whole) < _ON, whole, k))
 
 
 def edge_warning(edges: np.ndarray, pair: RegisteredPair) -> str:

@@ -13,6 +13,18 @@ branch covis (2026-11-25) the same way, when the vectors' covariance gained the 
 viewpoint on what both sensors saw: every field's se, z, wu, wv and ww changed, and the
 summary's voxels_significant, share_significant, p_direction, p_coherence and verdict (the
 paper-sim pair's stages 1 and 2 went from patterned to random); nothing else did.
+Regenerated on branch binning (2026-11-27) the same way (in a copy of the workdir, with
+``--snakefile`` of the branch), for channel-aware binning (lidarfield.field.channels): the
+field's band edges moved between paper-sim-80's channels (-7.5 -> -7.4, 0 -> -0.2, 7.5 ->
+7.4 deg; 0 deg is a channel) and its azimuth columns between firings (offset 0 -> 0.1 deg).
+Every field column changed (bins, counts, means, vectors and what follows from them); in the
+summary the field's statistics (magnitudes, energy shares, rigid part, p_direction,
+p_coherence, share_significant, voxels, voxels_valid) and four new columns
+(elevation_edges_deg, azimuth_edges_deg, binning, binning_warning). Unchanged: n1, n2,
+removed1, removed2 (and every removed.parquet, compared file by file), the verdicts and
+voxels_significant. The code before the change, run here, also differed from the stored
+digests in nx, ny, nz, planarity, se, z, wu, wv, ww and four summary statistics (last-digit
+differences of this machine's linear algebra), so those are not all this change's.
 """
 
 from __future__ import annotations

@@ -1,5 +1,5 @@
 """What a reader of a study should not miss, in words, from its summary rows: a scan that does
-not fit its sensor model, a stage that removes more than half of a cloud, a field without a
+not fit its sensor model, points on a band edge, a stage that removes more than half of a cloud, a field without a
 valid voxel. The report and ``lidarfield run`` print these statements."""
 
 from __future__ import annotations
@@ -32,8 +32,10 @@ def stage_findings(row: dict) -> list[str]:
 
 
 def pair_findings(row: dict) -> list[str]:
-    """The statements about the pair a summary row belongs to (the same in each of its rows)."""
-    return [str(row["sensor_warning"])] if row.get("sensor_warning") else []
+    """The statements about the pair a summary row belongs to (the same in each of its rows):
+    a scan that does not fit its sensor model, points clustering on a band edge (the grid's
+    ``binning_warning``, field.channels)."""
+    return [str(row[key]) for key in ("sensor_warning", "binning_warning") if row.get(key)]
 
 
 def findings_items(rows: list[dict]) -> list[str]:

@@ -39,6 +39,8 @@ def _default(key: str) -> str:
 
 
 def add_parser(subparsers) -> None:
+    from ..field.grid import SENSORLESS_ELEVATION_DEG
+
     p = subparsers.add_parser(
         "field",
         help="discrepancy-vector field of two scans: field.parquet + summary.json",
@@ -68,7 +70,8 @@ def add_parser(subparsers) -> None:
         type=float,
         nargs=2,
         metavar=("LO", "HI"),
-        help=f"elevation range (default {_default('elevation_deg')})",
+        help=f"elevation range (default: the scans' sensor span, else {list(SENSORLESS_ELEVATION_DEG)}); "
+        "band edges move between known channels",
     )
     p.add_argument("--elevation-bins", type=int, help=f"elevation bins (default {_default('elevation_bins')})")
     p.add_argument(

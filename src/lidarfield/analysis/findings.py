@@ -31,11 +31,19 @@ def stage_findings(row: dict) -> list[str]:
     return found
 
 
+def sensor_findings(row: dict) -> list[str]:
+    """A scan of the pair that does not fit its sensor model (the same in each of its rows)."""
+    return [str(row["sensor_warning"])] if row.get("sensor_warning") else []
+
+
+def grid_findings(row: dict) -> list[str]:
+    """Points of the pair clustering on a band edge nobody could move (field.channels)."""
+    return [str(row["binning_warning"])] if row.get("binning_warning") else []
+
+
 def pair_findings(row: dict) -> list[str]:
-    """The statements about the pair a summary row belongs to (the same in each of its rows):
-    a scan that does not fit its sensor model, points clustering on a band edge (the grid's
-    ``binning_warning``, field.channels)."""
-    return [str(row[key]) for key in ("sensor_warning", "binning_warning") if row.get(key)]
+    """The statements about the pair a summary row belongs to (the same in each of its rows)."""
+    return sensor_findings(row) + grid_findings(row)
 
 
 def findings_items(rows: list[dict]) -> list[str]:

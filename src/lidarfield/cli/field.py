@@ -178,5 +178,9 @@ def _table(summary: dict) -> str:
         ("significant voxels", f"{s['voxels_significant']} (|z| >= {summary['z_min']:g})"),
         ("randomness", f"{s['verdict']} (p_direction {_p(s['p_direction'])}, p_coherence {_p(s['p_coherence'])})"),
     ]
+    if s.get("binning"):  # a spherical grid: its edges, as moved between channels, and why
+        rows.append(("grid", s["binning"]))
+    if s.get("binning_warning"):
+        rows.append(("grid warning", s["binning_warning"]))
     width = max(len(name) for name, _ in rows)
     return "\n".join(f"{name:<{width}}  {value}" for name, value in rows)

@@ -2,7 +2,7 @@
 its firings.
 
 A spinning lidar's points lie on one cone per channel and, where its firings are locked to its
-encoder (the simulator, Ouster), on a lattice of azimuths. A band edge on a channel puts every
+encoder (the simulator, an Ouster), on a lattice of azimuths. A band edge on a channel puts every
 point of that channel on the edge: the band each lands in is decided by floating-point rounding
 and, for scan 2, by sub-millimetre differences in where its sensor stood, so a whole ring moves
 between voxels and the field reads a pattern that is not there (issue 35).
@@ -10,7 +10,8 @@ between voxels and the field reads a pattern that is not there (issue 35).
 So, where the channels are known, each edge of the field's spherical grid is moved to midway
 between the two channels around it (bands of whole channels), and where a sensor model gives
 the azimuth sampling and the scans' azimuths sit on its lattice (firings locked to the
-encoder: the simulator; not a real Velodyne, whose firings drift from sweep to sweep), each
+encoder: the simulator, the shared OS1-128 frames; not a real Velodyne, whose firings drift
+from sweep to sweep), each
 column edge to midway between two firings. The channels come from
 the scans' sensor models, else from their ``ring`` attribute (the median elevation of each
 ring's points about its own sensor). Points are still binned by their measured angles, not by
@@ -41,8 +42,8 @@ NOISE_DEG = 0.05
 CLUSTER_MIN_SHARE = 0.005
 CLUSTER_RATIO = 2.5
 # The firings of a cloud are on a lattice of azimuths when the mean resultant length of their
-# phase on it is at least this (the simulator's: 1; a real Velodyne's, whose firings drift
-# from sweep to sweep and whose lasers fire one after another: far less). Every
+# phase on it is at least this (the simulator's: 1; the shared OS1-128 frame's: 0.98; the real
+# VLP-16 and HDL-32E scans', whose firings drift from sweep to sweep: 0.02 and 0.08). Every
 # PHASE_SUBSAMPLE-th point is enough to tell.
 LOCKED_RESULTANT = 0.9
 PHASE_SUBSAMPLE = 7

@@ -274,3 +274,25 @@ def test_the_issue_case_reads_random_after_realign(simulated):
     free, after = analyse_field(pair, settings), analyse_field(realigned, settings)
     assert after[1]["verdict"] == "random"
     assert abs(after[1]["rms_magnitude"] - free[1]["rms_magnitude"]) <= 1e-3
+
+
+def test_the_report_and_the_command_line_say_which_edges_and_why(simulated):
+    """The pair page's Grid section (the edges, the reason) and the warning among the findings
+    that the report and lidarfield run print."""
+    from lidarfield.analysis.findings import findings_items
+    from lidarfield.cli.run import findings_lines
+    from lidarfield.report.pair_page import grid_parts
+
+    settings = FieldSettings(SphericalGrid(elevation_deg=(-31.0, 11.0), elevation_bins=6))
+    statistics = analyse_field(simulated("hdl32"), settings)[1]
+    warned = analyse_field(without_model(simulated("hdl32"), rings=False), settings)[1]
+    rows = [{"pair": "p", "stage": "00-none-x", "level": 0, "n1": 1, "n2": 1, "removed1": 0, "removed2": 0}]
+    rows[0].update(statistics)
+    text = "".join(grid_parts(rows))
+    assert "Elevation band edges -31.33, -24.67, -16.67, -10, -3.333, 3.333, 11.33 deg" in text
+    # 0 deg is a firing (moves up half a step); 10 deg lies midway between two already
+    assert "36 azimuth columns from 0.08 deg" in text and "moved between the channels of hdl32" in text
+    assert findings_lines(rows) == []
+    rows[0].update(binning_warning=warned["binning_warning"])
+    assert findings_lines(rows) == [f"grid: {warned['binning_warning']}"]
+    assert findings_items(rows) == [f"pair p: {warned['binning_warning']}"]

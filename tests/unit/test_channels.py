@@ -296,3 +296,21 @@ def test_the_report_and_the_command_line_say_which_edges_and_why(simulated):
     rows[0].update(binning_warning=warned["binning_warning"])
     assert findings_lines(rows) == [f"grid: {warned['binning_warning']}"]
     assert findings_items(rows) == [f"pair p: {warned['binning_warning']}"]
+
+
+def test_shadow_keeps_its_cells_as_configured():
+    """shadow's cells do not follow the sensor (its removals stay): a study grid without
+    elevation_deg gives them [-20, 20] as before (the same stage ids), explicit edges carry over."""
+    from lidarfield.hypotheses.shadow import Params
+
+    study = FieldSettings(SphericalGrid()).grid.to_config()
+    assert study["elevation_deg"] is None
+    assert Params().in_study(study).grid == {
+        "azimuth_bins": 36,
+        "azimuth_offset_deg": 0.0,
+        "elevation_deg": [-20.0, 20.0],
+        "elevation_bins": 5,
+    }
+    given = Params().in_study({**study, "elevation_edges_deg": [-25.0, -3.3, 15.0]}).grid
+    assert given["elevation_edges_deg"] == [-25.0, -3.3, 15.0]
+    assert (given["elevation_deg"], given["elevation_bins"]) == ([-25.0, 15.0], 2)

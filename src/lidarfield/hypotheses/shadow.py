@@ -22,7 +22,7 @@ import numpy as np
 
 from ..errors import ConfigError
 from ..field.free_space import ranges
-from ..field.grid import SphericalGrid, grid_from_config
+from ..field.grid import SENSORLESS_ELEVATION_DEG, SphericalGrid, grid_from_config
 from ..pair import RegisteredPair
 from .geometry import in_sensor_frame
 from .params import doc
@@ -49,7 +49,10 @@ class Params:
     grid: dict | None = field(
         default=None,
         metadata=doc(
-            "angular grid {azimuth_bins, azimuth_offset_deg, elevation_deg, elevation_bins}; null: the study's grid"
+            "angular grid {azimuth_bins, azimuth_offset_deg, elevation_deg, elevation_bins} (or explicit "
+            "elevation_edges_deg, azimuth_edges_deg); null: the study's grid as configured, "
+            f"{list(SENSORLESS_ELEVATION_DEG)} deg where it "
+            "gives no elevation_deg (the cells do not follow the sensor)"
         ),
     )
 

@@ -111,10 +111,12 @@ def _azimuth_edges(grid: SphericalGrid, pair: RegisteredPair) -> tuple[np.ndarra
     if model is None:
         return edges, ""
     step = 360.0 / model.firings_per_revolution
-    phase = edge_phase([firing_phase(xyz, step) for xyz in (pair.xyz1, pair.xyz2)], step)
+    phases = [firing_phase(xyz, step) for xyz in (pair.xyz1, pair.xyz2)]
+    phase = edge_phase(phases, step)
     if phase is None:
         return edges, f"azimuth edges as given: the scans' azimuths are not on a lattice of {model.name}'s {step:g} deg"
-    moved = edges_at_phase(edges, phase, step)
+    reference = next(p for p in phases if p is not None)  # scan 1's lattice where it has one
+    moved = edges_at_phase(edges, phase, step, reference)
     return moved, _moved("azimuth", edges, moved, f"the firings, {step:g} deg apart")
 
 
@@ -221,15 +223,17 @@ def edge_phase(phases: list[float | None], step_deg: float) -> float | None:
     return float((known[widest] + gaps[widest] / 2) % step_deg)
 
 
-def edges_at_phase(edges: np.ndarray, phase_deg: float, step_deg: float) -> np.ndarray:
-    """Each azimuth edge moved to the nearest azimuth at ``phase_deg`` modulo ``step_deg`` (by
-    at most half a step; the same shift for the edges 360 deg apart)."""
-    edges = np.asarray(edges, dtype=np.float64)
-    # Half up, and a tie within rounding of a whole number taken as the tie: edges 360 deg apart
-    # then move alike (a firing count need not be even, nor 360 / step exact in floats).
-    k = (edges - phase_deg) / step_deg + 0.5
+def edges_at_phase(edges: np.ndarray, phase_deg: float, step_deg: float, reference_deg: float = 0.0) -> np.ndarray:
+    """Each azimuth edge moved to ``phase_deg`` (modulo ``step_deg``) inside its gap between the
+    firings of the lattice at ``reference_deg``; an edge on one of those firings takes the gap
+    above it. The gap depends on the reference lattice alone (scan 1's), so a small change of
+    ``phase_deg`` (scan 2 turned by 0.01 deg) moves the edges a little, never to another gap."""
+    k = (np.asarray(edges, dtype=np.float64) - reference_deg) / step_deg
+    # on a firing within rounding: the same gap for edges 360 deg apart (360 / step is not
+    # exact in floats, nor the firing count even)
     whole = np.round(k)
-    return phase_deg + step_deg * np.floor(np.where(np.abs(k - whole) < _ON, whole, k))
+    gap = np.floor(np.where(np.abs(k - whole) < _ON, whole, k))
+    return reference_deg + step_deg * gap + (phase_deg - reference_deg) % step_deg
 
 
 def edge_warning(edges: np.ndarray, pair: RegisteredPair) -> str:

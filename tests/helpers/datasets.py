@@ -74,7 +74,8 @@ def stage_statistics(planned, pair_name: str) -> list[tuple[int, int, dict]]:
 
 def assert_same_stage_statistics(stages: list, other: list) -> None:
     """The same points removed, stage by stage, and the same statistics within 1e-9 (the rigid
-    fit's information matrix, in points x m^2 (~1e4), relatively)."""
+    fit's information matrix, in points x m^2 (up to ~1e6), within 1e-9 of its largest entry:
+    its small entries differ by ~1e-12 of that, rounding)."""
     assert len(stages) == len(other)
     for (*removed, stats), (*removed_other, stats_other) in zip(stages, other):
         assert removed == removed_other
@@ -83,5 +84,5 @@ def assert_same_stage_statistics(stages: list, other: list) -> None:
             if isinstance(value, str):
                 assert value == stats_other[key], key
             else:
-                rtol = 1e-9 if key == "rigid_information" else 0
-                assert np.allclose(value, stats_other[key], rtol=rtol, atol=1e-9, equal_nan=True), key
+                atol = 1e-9 * np.abs(value).max() if key == "rigid_information" else 1e-9
+                assert np.allclose(value, stats_other[key], rtol=0, atol=atol, equal_nan=True), key

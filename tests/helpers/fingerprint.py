@@ -19,7 +19,15 @@ and tests/workflow/test_stage_changes.py checks the code of today against it. Hi
 written by the code that stored every stage's survivors (e16a60a); regenerated on branch covis
 (2026-11-25) when the vectors' covariance gained the change of viewpoint (se, z, wu, wv, ww and
 the summary's significance columns changed); rewritten in this form on 2026-11-27 from main's
-outputs (bit-identical to those of 93528e2 on this machine).
+outputs (bit-identical to those of 93528e2 on this machine). Regenerated the same day for
+channel-aware binning (lidarfield.field.channels): the field's band edges moved between
+paper-sim-80's channels (-7.5 -> -7.4, 0 -> -0.2, 7.5 -> 7.4 deg; 0 deg is a channel) and its
+azimuth columns between firings (offset 0 -> 0.1 deg). Every field column changed (bins,
+counts, means, vectors and what follows from them); in the summary the field's statistics
+(magnitudes, energy shares, rigid part, p_direction, p_coherence, share_significant, voxels,
+voxels_valid) and four new columns (elevation_edges_deg, azimuth_edges_deg, binning,
+binning_warning). Unchanged: n1, n2, removed1, removed2 (and every removed.parquet, compared
+file by file), the verdicts and voxels_significant.
 """
 
 from __future__ import annotations

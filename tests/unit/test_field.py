@@ -95,6 +95,13 @@ def test_points_outside_elevation_are_counted_not_folded():
 GRIDS = {
     "spherical": SphericalGrid(azimuth_bins=12, azimuth_offset_deg=7.0, elevation_deg=(-30.0, 25.0), elevation_bins=6),
     "spherical-shells": SphericalGrid(range_edges_m=(1.0, 4.0, 8.0, 15.0, 30.0)),
+    # channel-aware edges (field.channels): uneven, looked up rather than computed; the
+    # columns start at -170 deg and wrap past +180
+    "spherical-uneven": SphericalGrid(
+        elevation_edges_deg=(-30.0, -22.4, -10.1, -3.3, 0.2, 8.7, 25.0),
+        azimuth_edges_deg=(-170.0, -100.5, -20.0, 3.3, 77.0, 150.0, 190.0),
+        range_edges_m=(1.0, 8.0, 30.0),
+    ),
     "cartesian": CartesianGrid(cell_m=2.5, origin=(0.3, -0.2, 0.1)),
     "cartesian-sparse": CartesianGrid(cell_m=0.2),  # a bounding box too large for dense counting
 }

@@ -35,6 +35,11 @@ def test_field_of_the_expd_pair(expd, tmp_path, capsys):
     assert code == 0
     printed = capsys.readouterr().out
     assert "paper max metric" in printed and "mean resultant length" in printed
+    # Text scans carry no model nor rings: the edges as given; the VLP-16's channels (odd
+    # degrees) lie between them, so its points do not cluster on one and nothing is warned.
+    grid = next(line for line in printed.splitlines() if line.startswith("grid "))
+    assert grid.split(None, 1)[1] == "no sensor model nor rings: elevation [-20, 20] deg, edges as given"
+    assert "grid warning" not in printed
     columns, meta = read_field(out / "field.parquet")
     assert meta["grid"]["azimuth_bins"] == 36 and meta["grid"]["elevation_bins"] == 5
     assert columns["valid"].sum() > 50

@@ -31,6 +31,33 @@ def test_spherical_bins_of_known_directions():
     assert grid.assign(points).max() < grid.n_voxels == 180
 
 
+def test_uneven_edges_known_bins_and_uniform_edges_bin_as_arithmetic():
+    """Explicit edges (channel-aware binning): known bins on both sides of each edge, and
+    explicit edges that are uniform give the ids of the uniform grid (``with_edges`` then
+    returns the uniform grid itself, binned by arithmetic)."""
+    grid = SphericalGrid(elevation_edges_deg=(-31.333, -24.667, -3.333, 11.333), azimuth_edges_deg=(-0.1, 9.9, 359.9))
+    assert (grid.elevation_bins, grid.elevation_deg, grid.azimuth_bins, grid.azimuth_offset_deg) == (
+        3,
+        (-31.333, 11.333),
+        2,
+        -0.1,
+    )
+    points = direction([-0.05, -0.15, 9.85, 9.95, 200.0, 200.0], [-24.6, -24.7, -3.3, -3.4, 11.3, -31.3])
+    bins = grid.bins(grid.assign(points))
+    assert bins["az_bin"].tolist() == [0, 1, 0, 1, 1, 1]
+    assert bins["el_bin"].tolist() == [1, 0, 2, 1, 2, 0]
+    assert grid.assign(direction(0.0, [11.4, -31.4])).tolist() == [-1, -1]
+    uniform = SphericalGrid(azimuth_bins=12, azimuth_offset_deg=7.0, elevation_deg=(-30.0, 25.0), elevation_bins=6)
+    explicit = SphericalGrid(
+        elevation_edges_deg=tuple(np.linspace(-30.0, 25.0, 7)), azimuth_edges_deg=tuple(7.0 + np.arange(13) * 30.0)
+    )
+    rng = np.random.default_rng(3)
+    points = rng.normal(scale=[10.0, 10.0, 3.0], size=(20_000, 3))
+    np.testing.assert_array_equal(explicit.assign(points), uniform.assign(points))
+    assert explicit.with_edges(explicit.elevation_edges(), explicit.azimuth_edges()) == uniform
+    assert grid_from_config(grid.to_config()) == grid  # the field file's metadata round trip
+
+
 def test_azimuth_offset_and_origin_shift():
     grid = SphericalGrid(azimuth_bins=4, azimuth_offset_deg=-45.0)  # bin 0 = [-45, 45)
     points = direction([0.0, 60.0, 170.0, 260.0, 314.0], 0.0)

@@ -22,7 +22,7 @@ from lidarfield.field.significance import SPREAD_FLOOR_M
 from lidarfield.pair import RegisteredPair
 from lidarfield.sensors.models import PRESETS
 
-SETTINGS = FieldSettings(SphericalGrid())  # 36 x 10 deg, 5 x 8 deg from -20 to +20
+SETTINGS = FieldSettings(SphericalGrid(elevation_deg=(-20.0, 20.0)))  # 36 x 10 deg, 5 x 8 deg from -20 to +20
 
 
 def cylinder_and_ground(n: int, seed: int) -> np.ndarray:

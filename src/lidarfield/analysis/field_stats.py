@@ -21,6 +21,9 @@ figure is undefined, e.g. no valid voxel; ``summary_json_safe`` turns NaN into n
   ``p_direction``, ``p_coherence`` and ``verdict``: is the field random (``randomness``);
   ``field_energy`` = sum min(n1, n2) |v|^2 and, when the field carries tag columns,
   ``energy_share_{tag}`` for each tag (``tags``).
+- ``elevation_edges_deg``, ``azimuth_edges_deg``, ``binning`` and ``binning_warning`` (from
+  ``analyse_field``): the grid's edges the pair's field used, why, and a warning when its
+  points cluster on an edge (``field.channels``).
 """
 
 from __future__ import annotations
@@ -30,6 +33,7 @@ import math
 import numpy as np
 
 from ..defaults import default
+from ..field.channels import pair_binning
 from ..field.free_space import shared_points
 from ..field.grid import FieldSettings
 from ..field.kernel import WHITENED_COLUMNS, field_from_voxel_ids
@@ -64,7 +68,11 @@ STATISTIC_KEYS = (
 
 
 def analyse_field(pair: RegisteredPair, settings: FieldSettings) -> tuple[dict[str, np.ndarray], dict]:
-    """The field of a pair (binned about sensor 1) with its tag columns, and its statistics."""
+    """The field of a pair (binned about sensor 1, on the grid of ``settings`` made
+    channel-aware for the pair: ``field.channels``) with its tag columns, and its statistics
+    (with the edges used and why)."""
+    binning = pair_binning(settings, pair)
+    settings = binning.settings
     ids = settings.grid.assign(pair.xyz1), settings.grid.assign(pair.xyz2)  # binned once: the tags need them too
     shared = shared_points(pair)
     viewpoint = None if shared is None else Viewpoint(pair.origin2, *shared)
@@ -72,7 +80,7 @@ def analyse_field(pair: RegisteredPair, settings: FieldSettings) -> tuple[dict[s
         ids[0], pair.xyz1, ids[1], pair.xyz2, settings, patterns=scan_patterns(pair), viewpoint=viewpoint
     )
     columns.update(voxel_tags(columns, pair, settings, ids))
-    return columns, field_statistics(columns, settings)
+    return columns, {**field_statistics(columns, settings), **binning.statistics()}
 
 
 def scan_patterns(pair: RegisteredPair) -> tuple[ScanPattern | None, ScanPattern | None]:

@@ -1,5 +1,5 @@
 """What a reader of a study should not miss, in words, from its summary rows: a scan that does
-not fit its sensor model, a stage that removes more than half of a cloud, a field without a
+not fit its sensor model, points on a band edge, a stage that removes more than half of a cloud, a field without a
 valid voxel. The report and ``lidarfield run`` print these statements."""
 
 from __future__ import annotations
@@ -31,9 +31,19 @@ def stage_findings(row: dict) -> list[str]:
     return found
 
 
+def sensor_findings(row: dict) -> list[str]:
+    """A scan of the pair that does not fit its sensor model (the same in each of its rows)."""
+    return [str(row["sensor_warning"])] if row.get("sensor_warning") else []
+
+
+def grid_findings(row: dict) -> list[str]:
+    """Points of the pair clustering on a band edge nobody could move (field.channels)."""
+    return [str(row["binning_warning"])] if row.get("binning_warning") else []
+
+
 def pair_findings(row: dict) -> list[str]:
     """The statements about the pair a summary row belongs to (the same in each of its rows)."""
-    return [str(row["sensor_warning"])] if row.get("sensor_warning") else []
+    return sensor_findings(row) + grid_findings(row)
 
 
 def findings_items(rows: list[dict]) -> list[str]:

@@ -40,6 +40,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import HypothesisError, NotApplicableError
+from ..field.channels import pair_binning
 from ..field.grid import FieldSettings
 from ..field.kernel import field_from_voxel_ids
 from ..hypotheses import BUILTINS, CORRECTING, apply_step, validate_step
@@ -114,6 +115,7 @@ def suggestions(
     ``defaults``: the candidates are the default ones, so one that cannot apply to this pair is
     skipped (and logged) rather than an error.
     """
+    settings = pair_binning(settings, pair).settings  # the grid of the stage's own field
     ids1, ids2 = settings.grid.assign(pair.xyz1), settings.grid.assign(pair.xyz2)
     before = field_from_voxel_ids(ids1, pair.xyz1, ids2, pair.xyz2, settings)
     shares = tag_energy_shares(before)

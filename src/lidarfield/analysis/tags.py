@@ -139,10 +139,10 @@ def _near_a_sensor(xyz: np.ndarray, pair: RegisteredPair) -> np.ndarray:
 
 
 def _on_depth_edge(pair: RegisteredPair, settings: FieldSettings) -> list[np.ndarray]:
-    from ..hypotheses.shadow import ANGULAR_KEYS, Params, shadow
+    from ..hypotheses.shadow import Params, angular_config, shadow
 
-    grid = settings.grid
-    angular = {key: grid.to_config()[key] for key in ANGULAR_KEYS} if isinstance(grid, SphericalGrid) else None
+    grid = settings.grid  # the field's own cells, channel-aware edges included
+    angular = angular_config(grid.to_config()) if isinstance(grid, SphericalGrid) else None
     keep1, keep2 = shadow(pair, Params(grid=angular))
     return [~keep1, ~keep2]
 

@@ -36,6 +36,8 @@ def _default(key: str) -> str:
 
 
 def add_parser(subparsers) -> None:
+    from ..field.grid import SENSORLESS_ELEVATION_DEG
+
     p = subparsers.add_parser(
         "field",
         help="discrepancy-vector field of two scans: field.parquet + summary.json",
@@ -65,7 +67,8 @@ def add_parser(subparsers) -> None:
         type=float,
         nargs=2,
         metavar=("LO", "HI"),
-        help=f"elevation range (default {_default('elevation_deg')})",
+        help=f"elevation range (default: the scans' sensor span, else {list(SENSORLESS_ELEVATION_DEG)}); "
+        "band edges move between known channels",
     )
     p.add_argument("--elevation-bins", type=int, help=f"elevation bins (default {_default('elevation_bins')})")
     p.add_argument(
@@ -137,5 +140,9 @@ def _table(summary: dict) -> str:
         ("significant voxels", f"{s['voxels_significant']} (|z| >= {summary['z_min']:g})"),
         ("randomness", f"{s['verdict']} (p_direction {_p(s['p_direction'])}, p_coherence {_p(s['p_coherence'])})"),
     ]
+    if s.get("binning"):  # a spherical grid: its edges, as moved between channels, and why
+        rows.append(("grid", s["binning"]))
+    if s.get("binning_warning"):
+        rows.append(("grid warning", s["binning_warning"]))
     width = max(len(name) for name, _ in rows)
     return "\n".join(f"{name:<{width}}  {value}" for name, value in rows)

@@ -119,12 +119,13 @@ def format_table(rows: list[dict], columns: tuple[str, ...] = TABLE_COLUMNS) -> 
 
 
 def findings_lines(rows: list[dict]) -> list[str]:
-    """What the table does not say plainly: the registration's and the scans' warnings, and
-    each stage's findings (lidarfield.analysis.findings)."""
-    from ..analysis.findings import pair_findings, stage_findings
+    """What the table does not say plainly: the registration's, the scans' and the grid's
+    warnings, and each stage's findings (lidarfield.analysis.findings)."""
+    from ..analysis.findings import grid_findings, sensor_findings, stage_findings
 
     lines = [f"registration: {rows[0]['registration_warning']}"] if rows and rows[0].get("registration_warning") else []
-    lines += [f"sensor model: {text}" for text in (pair_findings(rows[0]) if rows else [])]
+    lines += [f"sensor model: {text}" for text in (sensor_findings(rows[0]) if rows else [])]
+    lines += [f"grid: {text}" for text in (grid_findings(rows[0]) if rows else [])]
     lines += [f"{row['stage']}: {text}" for row in rows for text in stage_findings(row)]
     return lines
 

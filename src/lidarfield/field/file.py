@@ -30,10 +30,14 @@ def read_field(path: str | Path) -> tuple[dict[str, np.ndarray], dict]:
 
 
 def field_meta(settings: FieldSettings, statistics: dict, **extra) -> dict:
-    """The field Parquet metadata of the layout: grid config, validity rules, statistics, plus
+    """The field Parquet metadata of the layout: grid config (with the edges the field used,
+    where the statistics give them: ``field.channels``), validity rules, statistics, plus
     ``extra`` (e.g. ``stage=...``)."""
+    grid = settings.grid
+    if statistics.get("elevation_edges_deg") is not None:  # the pair's channel-aware edges
+        grid = grid.with_edges(statistics["elevation_edges_deg"], statistics["azimuth_edges_deg"])
     return {
-        "grid": settings.grid.to_config(),
+        "grid": grid.to_config(),
         "min_points": int(settings.min_points),
         "max_component_m": settings.max_component_m,
         "z_min": float(settings.z_min),

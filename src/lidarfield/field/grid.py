@@ -32,8 +32,21 @@ CARTESIAN_BITS = 21
 CARTESIAN_OFFSET = 1 << (CARTESIAN_BITS - 1)
 _CARTESIAN_MASK = (1 << CARTESIAN_BITS) - 1
 
-SPHERICAL_KEYS = ("azimuth_bins", "azimuth_offset_deg", "elevation_deg", "elevation_bins", "range_edges_m")
+SPHERICAL_KEYS = (
+    "azimuth_bins",
+    "azimuth_offset_deg",
+    "elevation_deg",
+    "elevation_bins",
+    "range_edges_m",
+    "elevation_edges_deg",
+    "azimuth_edges_deg",
+)
 CARTESIAN_KEYS = ("cell_m", "origin")
+# The elevation span of a spherical grid whose config gives no ``elevation_deg`` when neither
+# scan has a sensor model nor rings to take it from (see ``field.channels``).
+SENSORLESS_ELEVATION_DEG = (-20.0, 20.0)
+# Edges this close (deg) to uniform ones are uniform: binned by arithmetic, not by look-up.
+_UNIFORM_TOLERANCE_DEG = 1e-9
 FIELD_KEYS = ("min_points", "max_component_m", "z_min")
 
 
@@ -54,22 +67,82 @@ def relative_columns(xyz: np.ndarray, origin) -> tuple[np.ndarray, np.ndarray, n
 @dataclass(frozen=True)
 class SphericalGrid:
     """Azimuth bins over 360 deg (bin 0 starts at ``azimuth_offset_deg``), elevation bins over
-    ``elevation_deg`` = (lo, hi), and optional range shells with edges ``range_edges_m``."""
+    ``elevation_deg`` = (lo, hi), and optional range shells with edges ``range_edges_m``.
+
+    ``elevation_deg`` None: the span follows the sensor (``field.channels``), and without one
+    it is ``SENSORLESS_ELEVATION_DEG``. ``elevation_edges_deg`` / ``azimuth_edges_deg``: explicit,
+    possibly uneven edges (channel-aware binning moves edges between channels and firings);
+    they replace ``elevation_deg`` and ``elevation_bins`` / ``azimuth_bins`` and
+    ``azimuth_offset_deg`` (the azimuth edges span 360 deg from the first).
+    """
 
     azimuth_bins: int = default("grid", "azimuth_bins")
     azimuth_offset_deg: float = default("grid", "azimuth_offset_deg")
-    elevation_deg: tuple[float, float] = tuple(default("grid", "elevation_deg"))
+    elevation_deg: tuple[float, float] | None = default("grid", "elevation_deg")
     elevation_bins: int = default("grid", "elevation_bins")
     range_edges_m: tuple[float, ...] | None = default("grid", "range_edges_m")
+    elevation_edges_deg: tuple[float, ...] | None = default("grid", "elevation_edges_deg")
+    azimuth_edges_deg: tuple[float, ...] | None = default("grid", "azimuth_edges_deg")
 
     kind = "spherical"
 
     def __post_init__(self) -> None:
-        for name in ("elevation_deg", "range_edges_m"):
+        for name in ("elevation_deg", "range_edges_m", "elevation_edges_deg", "azimuth_edges_deg"):
             object.__setattr__(self, name, _number_tuple(getattr(self, name)))
         if is_number(self.azimuth_offset_deg):
             object.__setattr__(self, "azimuth_offset_deg", float(self.azimuth_offset_deg))
+        _check_edges(self.elevation_edges_deg, "elevation_edges_deg", -90.0, 90.0)
+        _check_edges(self.azimuth_edges_deg, "azimuth_edges_deg", -math.inf, math.inf)
+        if self.elevation_edges_deg is not None:
+            edges = self.elevation_edges_deg
+            object.__setattr__(self, "elevation_deg", (edges[0], edges[-1]))
+            object.__setattr__(self, "elevation_bins", len(edges) - 1)
+        if self.azimuth_edges_deg is not None:
+            edges = self.azimuth_edges_deg
+            if not math.isclose(edges[-1] - edges[0], 360.0, abs_tol=1e-6):
+                raise ConfigError(f"grid.azimuth_edges_deg: must span 360 deg (last = first + 360), got {edges!r}")
+            object.__setattr__(self, "azimuth_offset_deg", edges[0])
+            object.__setattr__(self, "azimuth_bins", len(edges) - 1)
         _check_spherical(self)
+
+    @property
+    def follows_sensor(self) -> bool:
+        """The config gave no elevation span: it is the sensor's (``field.channels``)."""
+        return self.elevation_deg is None
+
+    @property
+    def elevation_span_deg(self) -> tuple[float, float]:
+        return SENSORLESS_ELEVATION_DEG if self.elevation_deg is None else self.elevation_deg
+
+    def elevation_edges(self) -> np.ndarray:
+        """The elevation band edges (deg, increasing; ``elevation_bins`` + 1 of them)."""
+        if self.elevation_edges_deg is not None:
+            return np.asarray(self.elevation_edges_deg, dtype=np.float64)
+        lo, hi = self.elevation_span_deg
+        return np.linspace(lo, hi, self.elevation_bins + 1)
+
+    def azimuth_edges(self) -> np.ndarray:
+        """The azimuth column edges (deg, increasing, the last 360 deg after the first)."""
+        if self.azimuth_edges_deg is not None:
+            return np.asarray(self.azimuth_edges_deg, dtype=np.float64)
+        return self.azimuth_offset_deg + np.linspace(0.0, 360.0, self.azimuth_bins + 1)
+
+    def with_edges(self, elevation_edges, azimuth_edges) -> "SphericalGrid":
+        """This grid with the given edges (deg); edges that are uniform give a uniform grid
+        (binned by arithmetic, and its config as before)."""
+        elevation_edges = np.asarray(elevation_edges, dtype=np.float64)
+        azimuth_edges = np.asarray(azimuth_edges, dtype=np.float64)
+        settings = {"range_edges_m": self.range_edges_m}
+        lo, hi = float(elevation_edges[0]), float(elevation_edges[-1])
+        if _uniform(elevation_edges):
+            settings.update(elevation_deg=(lo, hi), elevation_bins=len(elevation_edges) - 1)
+        else:
+            settings["elevation_edges_deg"] = tuple(float(e) for e in elevation_edges)
+        if _uniform(azimuth_edges):
+            settings.update(azimuth_offset_deg=float(azimuth_edges[0]), azimuth_bins=len(azimuth_edges) - 1)
+        else:
+            settings["azimuth_edges_deg"] = tuple(float(e) for e in azimuth_edges)
+        return SphericalGrid(**settings)
 
     @property
     def range_bins(self) -> int:
@@ -89,29 +162,41 @@ class SphericalGrid:
         points outside the grid (the field kernel uses ``n_voxels`` so a bincount needs no mask)."""
         # Angles stay in radians and the modulo is a table look-up on integers: np.hypot,
         # np.degrees and float % are each several times slower than this arithmetic.
+        # Explicit (uneven) edges are looked up with searchsorted instead.
         a = self.azimuth_bins
         rho = dx * dx
         rho += dy * dy
         np.sqrt(rho, out=rho)
         az = np.arctan2(dy, dx)
-        az *= a / (2.0 * math.pi)
-        # atan2 gives [-a/2, a/2] bins and the offset is taken in [-a/2, a/2): adding a makes
-        # the value non-negative, so truncation is floor, and the table wraps [a, 2a] to [0, a].
-        az += a - ((self.azimuth_offset_deg + 180.0) % 360.0 - 180.0) * (a / 360.0)
-        with np.errstate(invalid="ignore"):  # NaN points get a garbage bin, masked out below
-            az_int = az.astype(np.int64)
-        np.clip(az_int, 0, 2 * a, out=az_int)
-        ids = np.take(np.arange(2 * a + 1) % a, az_int)
+        if self.azimuth_edges_deg is None:
+            az *= a / (2.0 * math.pi)
+            # atan2 gives [-a/2, a/2] bins and the offset is taken in [-a/2, a/2): adding a makes
+            # the value non-negative, so truncation is floor, and the table wraps [a, 2a] to [0, a].
+            az += a - ((self.azimuth_offset_deg + 180.0) % 360.0 - 180.0) * (a / 360.0)
+            with np.errstate(invalid="ignore"):  # NaN points get a garbage bin, masked out below
+                az_int = az.astype(np.int64)
+            np.clip(az_int, 0, 2 * a, out=az_int)
+            ids = np.take(np.arange(2 * a + 1) % a, az_int)
+        else:
+            edges = np.radians(self.azimuth_edges())
+            first = (edges[0] + math.pi) % (2.0 * math.pi) - math.pi  # in [-pi, pi): az - first > -2 pi
+            az -= first
+            az[az < 0.0] += 2.0 * math.pi
+            ids = np.searchsorted(edges - edges[0], az, side="right") - 1
+            np.clip(ids, 0, a - 1, out=ids)  # NaN sorts last: masked out below
 
-        lo, hi = (math.radians(e) for e in self.elevation_deg)
+        lo, hi = (math.radians(e) for e in self.elevation_span_deg)
         el = np.arctan2(dz, rho)
         inside = el >= lo
         inside &= el <= hi  # both False for NaN
-        el -= lo
-        el *= self.elevation_bins / (hi - lo)
-        with np.errstate(invalid="ignore"):
-            el_bin = el.astype(np.int64)
-        np.minimum(el_bin, self.elevation_bins - 1, out=el_bin)
+        if self.elevation_edges_deg is None:
+            el -= lo
+            el *= self.elevation_bins / (hi - lo)
+            with np.errstate(invalid="ignore"):
+                el_bin = el.astype(np.int64)
+        else:
+            el_bin = np.searchsorted(np.radians(self.elevation_edges()), el, side="right") - 1
+        np.clip(el_bin, 0, self.elevation_bins - 1, out=el_bin)
         el_bin *= a
         ids += el_bin
 
@@ -143,14 +228,19 @@ class SphericalGrid:
         return {"az_bin": az, "el_bin": el, "r_bin": r}
 
     def to_config(self) -> dict[str, Any]:
-        return {
+        config = {
             "kind": self.kind,
             "azimuth_bins": self.azimuth_bins,
             "azimuth_offset_deg": self.azimuth_offset_deg,
-            "elevation_deg": list(self.elevation_deg),
+            "elevation_deg": None if self.elevation_deg is None else list(self.elevation_deg),
             "elevation_bins": self.elevation_bins,
             "range_edges_m": None if self.range_edges_m is None else list(self.range_edges_m),
         }
+        # explicit edges only where set: a uniform grid's config stays what it always was
+        for name in ("elevation_edges_deg", "azimuth_edges_deg"):
+            if getattr(self, name) is not None:
+                config[name] = list(getattr(self, name))
+        return config
 
 
 @dataclass(frozen=True)
@@ -275,18 +365,32 @@ def _check_spherical(g: SphericalGrid) -> None:
     if not is_number(g.azimuth_offset_deg, finite=True):
         raise ConfigError(f"grid.azimuth_offset_deg: must be a finite number, got {g.azimuth_offset_deg!r}")
     el = g.elevation_deg
-    if (
+    if el is not None and (
         not isinstance(el, tuple)
         or len(el) != 2
         or not all(is_number(a) for a in el)
         or not -90.0 <= el[0] < el[1] <= 90.0
     ):
-        raise ConfigError(f"grid.elevation_deg: must be [lo, hi] with -90 <= lo < hi <= 90, got {el!r}")
+        raise ConfigError(f"grid.elevation_deg: must be null or [lo, hi] with -90 <= lo < hi <= 90, got {el!r}")
     edges = g.range_edges_m
     if edges is not None:
         ok = isinstance(edges, tuple) and len(edges) >= 2 and all(is_number(e, finite=True) for e in edges)
         if not ok or edges[0] < 0 or any(b <= a for a, b in zip(edges, edges[1:])):
             raise ConfigError(f"grid.range_edges_m: must be null or >= 2 increasing finite edges >= 0, got {edges!r}")
+
+
+def _check_edges(edges, name: str, lo: float, hi: float) -> None:
+    if edges is None:
+        return
+    ok = isinstance(edges, tuple) and len(edges) >= 2 and all(is_number(e, finite=True) for e in edges)
+    if not ok or edges[0] < lo or edges[-1] > hi or any(b <= a for a, b in zip(edges, edges[1:])):
+        raise ConfigError(
+            f"grid.{name}: must be null or >= 2 increasing finite edges in [{lo:g}, {hi:g}], got {edges!r}"
+        )
+
+
+def _uniform(edges: np.ndarray) -> bool:
+    return bool(np.all(np.abs(edges - np.linspace(edges[0], edges[-1], len(edges))) <= _UNIFORM_TOLERANCE_DEG))
 
 
 def _check_cartesian(g: CartesianGrid) -> None:

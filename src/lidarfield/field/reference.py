@@ -49,11 +49,19 @@ def plain_voxel_ids(grid: SphericalGrid | CartesianGrid, xyz: np.ndarray, origin
         return np.where(inside, ids, -1)
     azimuth = np.degrees(np.arctan2(d[:, 1], d[:, 0]))
     elevation = np.degrees(np.arctan2(d[:, 2], np.hypot(d[:, 0], d[:, 1])))
-    lo, hi = grid.elevation_deg
+    lo, hi = grid.elevation_span_deg
     inside = (elevation >= lo) & (elevation <= hi)  # False for NaN points
-    az = np.floor(((azimuth - grid.azimuth_offset_deg) % 360.0) / (360.0 / grid.azimuth_bins))
+    if grid.azimuth_edges_deg is None:
+        az = np.floor(((azimuth - grid.azimuth_offset_deg) % 360.0) / (360.0 / grid.azimuth_bins))
+    else:  # uneven columns: the last edge at or below the point's azimuth, counted from the first
+        edges = np.asarray(grid.azimuth_edges_deg) - grid.azimuth_edges_deg[0]
+        az = np.array([np.count_nonzero(edges <= a) - 1 for a in (azimuth - grid.azimuth_edges_deg[0]) % 360.0])
     az = np.where(inside, az, 0).astype(np.int64) % grid.azimuth_bins
-    el = np.minimum(np.floor((elevation - lo) / ((hi - lo) / grid.elevation_bins)), grid.elevation_bins - 1)
+    if grid.elevation_edges_deg is None:
+        el = np.floor((elevation - lo) / ((hi - lo) / grid.elevation_bins))
+    else:
+        el = np.array([np.count_nonzero(np.asarray(grid.elevation_edges_deg) <= e) - 1 for e in elevation])
+    el = np.minimum(el, grid.elevation_bins - 1)
     ids = az + grid.azimuth_bins * np.where(inside, el, 0).astype(np.int64)
     if grid.range_edges_m is not None:
         edges = np.asarray(grid.range_edges_m, dtype=np.float64)

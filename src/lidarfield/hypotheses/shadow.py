@@ -24,7 +24,7 @@ import numpy as np
 
 from ..errors import ConfigError
 from ..field.free_space import ranges
-from ..field.grid import SphericalGrid, grid_from_config
+from ..field.grid import SENSORLESS_ELEVATION_DEG, SphericalGrid, grid_from_config
 from ..pair import RegisteredPair
 from .geometry import in_sensor_frame
 from .params import doc
@@ -32,6 +32,9 @@ from .params import doc
 # The keys of a grid section that shape the angular cells (range shells play no part: the
 # segmentation runs along the range).
 ANGULAR_KEYS = ("azimuth_bins", "azimuth_offset_deg", "elevation_deg", "elevation_bins")
+# Explicit edges (a grid's channel-aware or given ones): in a grid only where set, so the
+# canonical JSON of a uniform grid, and the stage ids, stay what they were.
+EDGE_KEYS = ("elevation_edges_deg", "azimuth_edges_deg")
 
 
 @dataclass(frozen=True)
@@ -48,7 +51,10 @@ class Params:
     grid: dict | None = field(
         default=None,
         metadata=doc(
-            "angular grid {azimuth_bins, azimuth_offset_deg, elevation_deg, elevation_bins}; null: the study's grid"
+            "angular grid {azimuth_bins, azimuth_offset_deg, elevation_deg, elevation_bins} (or explicit "
+            "elevation_edges_deg, azimuth_edges_deg); null: the study's grid as configured, "
+            f"{list(SENSORLESS_ELEVATION_DEG)} deg where it "
+            "gives no elevation_deg (the cells do not follow the sensor)"
         ),
     )
 
@@ -64,10 +70,11 @@ class Params:
         ):
             raise ValueError(f"origins must list sensor 1, sensor 2 or both, got {list(self.origins)}")
         if self.grid is not None:
-            unknown = sorted(set(self.grid) - set(ANGULAR_KEYS) - {"kind"})
+            unknown = sorted(set(self.grid) - set(ANGULAR_KEYS + EDGE_KEYS) - {"kind"})
             if unknown or self.grid.get("kind", "spherical") != "spherical":
                 raise ValueError(
-                    f"grid takes the angular keys {', '.join(ANGULAR_KEYS)} of a spherical grid, got {self.grid}"
+                    f"grid takes the angular keys {', '.join(ANGULAR_KEYS + EDGE_KEYS)} of a spherical grid, "
+                    f"got {self.grid}"
                 )
             try:
                 grid_from_config(self.grid)
@@ -78,14 +85,22 @@ class Params:
         """These parameters with the study's angular grid filled in under any keys not given."""
         if study_grid is None or study_grid.get("kind", "spherical") != "spherical":
             return self
-        study = {key: study_grid[key] for key in ANGULAR_KEYS if key in study_grid}
+        study = {key: study_grid[key] for key in ANGULAR_KEYS + EDGE_KEYS if study_grid.get(key) is not None}
         given = {key: value for key, value in (self.grid or {}).items() if key != "kind"}
-        merged = SphericalGrid(**{**study, **given}).to_config()
-        return replace(self, grid={key: merged[key] for key in ANGULAR_KEYS})
+        grid = SphericalGrid(**{**study, **given})
+        # The cells do not follow the sensor (field.channels is the field's): a study grid
+        # without elevation_deg gives them the sensorless span, as before it could be omitted.
+        merged = grid.to_config() | {"elevation_deg": list(grid.elevation_span_deg)}
+        return replace(self, grid=angular_config(merged))
 
     def angular_grid(self) -> SphericalGrid:
         """The grid of the cells (the grid defaults where neither params nor study gave one)."""
         return SphericalGrid(**{key: value for key, value in (self.grid or {}).items() if key != "kind"})
+
+
+def angular_config(grid_config: dict) -> dict:
+    """The keys of a spherical grid's config that shadow's cells take."""
+    return {key: value for key, value in grid_config.items() if key in ANGULAR_KEYS + EDGE_KEYS}
 
 
 def first_cluster_keep(cells: np.ndarray, r: np.ndarray, jump_m: float, min_points: int) -> np.ndarray:

@@ -77,8 +77,12 @@ def _polar_axes(fig, position, grid: dict, title: str):
 
 
 def _polar_mesh(ax, grid: dict, cells: np.ndarray, cmap: str, norm: Normalize):
-    theta = np.radians(grid.get("azimuth_offset_deg", 0.0) + np.linspace(0, 360, grid["azimuth_bins"] + 1))
-    r = np.linspace(0, grid["elevation_deg"][1] - grid["elevation_deg"][0], grid["elevation_bins"] + 1)
+    from ..field.grid import grid_from_config
+
+    spherical = grid_from_config(grid)  # its edges: even, or moved between channels (field.channels)
+    theta = np.radians(spherical.azimuth_edges())
+    elevation = spherical.elevation_edges()
+    r = elevation - elevation[0]
     return ax.pcolormesh(theta, r, np.ma.masked_invalid(cells), cmap=cmap, norm=norm, edgecolors="0.5", linewidth=0.2)
 
 

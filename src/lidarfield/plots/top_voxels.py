@@ -62,27 +62,28 @@ def voxel_wireframe(grid: Grid, voxel_id: int, voxel_ids_of_points: np.ndarray, 
     if isinstance(grid, CartesianGrid):
         lo = np.asarray(grid.origin) + grid.cell_m * np.array([bins["ix"], bins["iy"], bins["iz"]])
         return box_wireframe(lo, lo + grid.cell_m)
-    width = 360.0 / grid.azimuth_bins
-    a0 = grid.azimuth_offset_deg + bins["az_bin"] * width
-    lo, hi = grid.elevation_deg
-    height = (hi - lo) / grid.elevation_bins
-    e0 = lo + bins["el_bin"] * height
+    azimuth, elevation = _voxel_angles(grid, bins)
     if grid.range_edges_m is not None:
         r = (grid.range_edges_m[bins["r_bin"]], grid.range_edges_m[bins["r_bin"] + 1])
     else:
         ranges = np.linalg.norm(points[voxel_ids_of_points == voxel_id], axis=1)
         r = (float(ranges.min()), float(ranges.max())) if len(ranges) else (0.0, 0.0)
-    return spherical_voxel_wireframe((a0, a0 + width), (e0, e0 + height), r)
+    return spherical_voxel_wireframe(azimuth, elevation, r)
+
+
+def _voxel_angles(grid: SphericalGrid, bins: dict) -> tuple[tuple[float, float], tuple[float, float]]:
+    """(first, last) azimuth and elevation (deg) of a spherical voxel: its grid's edges, even or
+    moved between channels (field.channels)."""
+    azimuth, elevation = grid.azimuth_edges(), grid.elevation_edges()
+    a, e = bins["az_bin"], bins["el_bin"]
+    return (float(azimuth[a]), float(azimuth[a + 1])), (float(elevation[e]), float(elevation[e + 1]))
 
 
 def voxel_description(grid: Grid, voxel_id: int) -> str:
     bins = {k: int(v[0]) for k, v in grid.bins(np.array([voxel_id])).items()}
     if isinstance(grid, SphericalGrid):
-        width = 360.0 / grid.azimuth_bins
-        a0 = grid.azimuth_offset_deg + bins["az_bin"] * width
-        lo, hi = grid.elevation_deg
-        e0 = lo + bins["el_bin"] * (hi - lo) / grid.elevation_bins
-        text = f"az {a0:g} to {a0 + width:g}°, el {e0:g} to {e0 + (hi - lo) / grid.elevation_bins:g}°"
+        (a0, a1), (e0, e1) = _voxel_angles(grid, bins)
+        text = f"az {a0:.4g} to {a1:.4g}°, el {e0:.4g} to {e1:.4g}°"
         return text + (f", shell {bins['r_bin']}" if bins["r_bin"] >= 0 else "")
     return f"cell ({bins['ix']}, {bins['iy']}, {bins['iz']})"
 

@@ -85,7 +85,7 @@ def steps_csv(steps: list[dict]) -> str:
 def stage_data(pair_name: str, explained: ExplainedStage, settings: FieldSettings) -> StageData:
     """An explained stage as the figures take a stage folder's contents."""
     stage = explained.stage
-    field = vector_field(explained.columns, field_meta(settings, {}))
+    field = vector_field(explained.columns, field_meta(settings, explained.statistics))  # its own edges
     meta = stage.metadata(explained.label)
     return StageData(Path(pair_name) / "explain" / explained.label, stage.pair, meta, stage.removed_columns(), field)
 

@@ -218,6 +218,21 @@ def not_drawn_note(on_demand: str | None, last_suggested: bool) -> str:
     )
 
 
+def grid_parts(rows: list[dict]) -> list[str]:
+    """The band and column edges the pair's fields used and why (field.channels), from its
+    first stage's row; nothing for rows without them (a Cartesian grid, older results)."""
+    first = min(rows, key=lambda r: float(r.get("level") or 0), default={})
+    elevation, azimuth = first.get("elevation_edges_deg"), first.get("azimuth_edges_deg")
+    if elevation is None or azimuth is None or not len(elevation):
+        return []
+    edges = ", ".join(f"{e:.4g}" for e in elevation)
+    return [
+        "<h2>Grid</h2>",
+        f'<p class="note">Elevation band edges {esc(edges)} deg; {len(azimuth) - 1} azimuth columns from '
+        f"{azimuth[0]:.4g} deg. {esc(str(first.get('binning') or ''))}.</p>",
+    ]
+
+
 def header_parts(name: str, stage_dirs: list[Path], overview_href: str | None) -> list:
     parts = [f'<nav><a href="{esc(overview_href)}">← study overview</a></nav>'] if overview_href else []
     return parts + [
@@ -246,7 +261,7 @@ def pair_page_parts(
     the names of the stages whose suggestions it shows (None: every stage's)."""
     suggested = {d.name for d in stage_dirs} if suggested is None else suggested
     pair_dir = stage_dirs[0].parent.parent if stage_dirs else None
-    parts = header_parts(name, stage_dirs, overview_href) + findings_parts(rows)
+    parts = header_parts(name, stage_dirs, overview_href) + findings_parts(rows) + grid_parts(rows)
     parts += ["<h2>Stages</h2>", stages_table(rows), pair_rematch_table(rows)]
     if with_figures:
         parts += [

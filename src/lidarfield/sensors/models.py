@@ -31,6 +31,12 @@ class SensorModel:
         return float(min(self.elevation_deg)), float(max(self.elevation_deg))
 
     @property
+    def firings_per_revolution(self) -> int:
+        """Azimuth steps in a revolution: the resolution rounded to a whole number of steps
+        (the simulator fires step j at ``360 j / n`` deg; Ouster columns are locked likewise)."""
+        return max(1, int(round(360.0 / self.azimuth_resolution_deg)))
+
+    @property
     def channels(self) -> int:
         return len(self.elevation_deg)
 

@@ -34,7 +34,7 @@ _REFERENCE_CHUNK = 4096  # rays per block of the numpy kernel: bounds its memory
 def azimuth_steps(sensor: SensorModel) -> tuple[np.ndarray, int]:
     """Indices j of the azimuth steps the sensor fires (within its azimuth limits) and the
     number n of steps in a revolution; step j points at azimuth ``360 j / n`` degrees."""
-    n = max(1, int(round(360.0 / sensor.azimuth_resolution_deg)))
+    n = sensor.firings_per_revolution
     steps = np.arange(n)
     if sensor.azimuth_limits_deg is not None:
         start, end = sensor.azimuth_limits_deg

@@ -4,6 +4,7 @@ with the calibration, posed by the vehicle's interpolated city poses."""
 from __future__ import annotations
 
 import shutil
+from fractions import Fraction
 
 import numpy as np
 import pyarrow as pa
@@ -42,7 +43,8 @@ def test_the_scans_are_the_sweeps_with_the_lidar_poses_and_times(log):
     sequence = read_dataset(dataset(log))
     assert [scan.path for scan in sequence.scans] == [str(path) for path in log.sweeps]  # notes.txt ignored
     assert [scan.format for scan in sequence.scans] == ["av2"] * 4
-    assert [scan.stamp_s for scan in sequence.scans] == [stamp * 1e-9 for stamp in log.stamps_ns]
+    # correctly rounded: the stamps (about 3e17 ns) exceed 2**53, so ``stamp * 1e-9`` rounds twice
+    assert [scan.stamp_s for scan in sequence.scans] == [float(Fraction(int(stamp), 10**9)) for stamp in log.stamps_ns]
     # sweep 0's pose is listed; sweeps 1-3 are interpolated between poses 30 ms before and 20 ms after
     assert np.abs(np.array([scan.pose for scan in sequence.scans]) - log.up_poses).max() < 1e-9
     options = sequence.scans[0].options

@@ -70,7 +70,7 @@ def read_index(settings: dict, base_dir: Path) -> DatasetSequence:
             str(root / SWEEPS / path.name),
             "av2",
             (_pose_at(stamps_ns, city, stamp, path, folder / POSES) @ vehicle_frame).tolist(),
-            stamp * 1e-9,
+            stamp / 10**9,  # int / int: correctly rounded (the ns exceed 2**53: * 1e-9 rounds twice)
             options,
         )
         for stamp, path in sweeps

@@ -77,7 +77,7 @@ def read_av2(
     attributes = {
         "intensity": columns["intensity"][keep],
         "ring": laser[keep].astype(np.uint16),
-        "time": np.asarray(columns["offset_ns"], dtype=np.float64)[keep] * 1e-9,
+        "time": np.asarray(columns["offset_ns"], dtype=np.float64)[keep] / 1e9,  # one rounding, not two
     }
     if lidar_poses is None:
         return scan_from_rows(xyz, attributes, path, sensor=sensor)

@@ -549,3 +549,27 @@ def test_the_workflow_warms_the_worker_up_only_for_studies_with_many_figures(tmp
         launch.spawn(tmp_path / "results", figure_jobs=figure_jobs)
         launch.stop()
     assert ["--warm-up" in command for command in commands] == [False, False, True, True]
+
+
+def test_the_workers_log_in_a_shared_folder_is_its_users_own_file(tmp_path):
+    """In an allocation the log lies in the node's shared temporary folder: created 0600, and a
+    symlink or another user's file placed at its name is never written through (no worker)."""
+    from lidarfield.runner.launch import open_private_log
+
+    umask = os.umask(0o002)
+    try:
+        with open_private_log(tmp_path / "new.log") as log:
+            log.write("started\n")
+    finally:
+        os.umask(umask)
+    assert stat.S_IMODE((tmp_path / "new.log").stat().st_mode) == 0o600
+    victim = tmp_path / "victim.txt"
+    victim.write_text("kept\n")
+    (tmp_path / "link.log").symlink_to(victim)
+    assert open_private_log(tmp_path / "link.log") is None
+    assert victim.read_text() == "kept\n"
+    if os.getuid() == 0:  # a file that another user made
+        theirs = tmp_path / "theirs.log"
+        theirs.write_text("")
+        os.chown(theirs, pwd.getpwnam("nobody").pw_uid, -1)
+        assert open_private_log(theirs) is None

@@ -69,6 +69,21 @@ def socket_path(private: str | Path) -> str:
     return str(path) if len(str(path)) < 100 else os.path.relpath(path)
 
 
+def open_private_log(log: Path):
+    """``log`` opened to append, created 0600; None when it is a symlink or not this user's own
+    file (in an allocation it lies in a node's shared temporary folder, where another user could
+    have placed either)."""
+    try:
+        fd = os.open(log, os.O_WRONLY | os.O_APPEND | os.O_CREAT | os.O_NOFOLLOW, 0o600)
+    except OSError:  # ELOOP: a symlink
+        return None
+    info = os.fstat(fd)
+    if info.st_uid != os.getuid() or not stat.S_ISREG(info.st_mode):
+        os.close(fd)
+        return None
+    return os.fdopen(fd, "a")
+
+
 def remove_private_folder(private: Path) -> None:
     """A worker's folder and its socket, if still there."""
     (private / SOCKET_NAME).unlink(missing_ok=True)
@@ -152,7 +167,11 @@ def _spawn(folder: Path, stem: str, log: Path, idle_timeout_s: float, figure_job
         _socket = socket_path(private)
         env = {**os.environ, **{name: "1" for name in THREAD_VARS}}
         env.pop(ENV, None)
-        with open(log, "a") as log_file:
+        log_file = open_private_log(log)
+        if log_file is None:
+            remove_private_folder(private)
+            return None
+        with log_file:
             _running = subprocess.Popen(
                 [
                     sys.executable,

@@ -142,3 +142,19 @@ def test_on_the_real_os1_128_frames_it_removes_the_object_that_approached(shared
     first, second = removed(0, 1)
     assert 5 <= len(first) <= 20 and len(second) == 0
     assert np.abs(first - [2.1, 14.15, 4.8]).max() < 1.2  # the thin line 15 m away
+
+
+def test_a_ring_that_is_no_channel_is_read_as_the_nearest_channel():
+    """A driver that writes ring 0 for every point (as a bag of a scan without rings does), or
+    rings of another layout: a ring whose returns lie farther from its channel than a gap is
+    ignored, so the rows are those of no ring at all; real rings are kept."""
+    channels = np.radians(np.arange(-15.0, 16.0, 2.0))
+    rng = np.random.default_rng(7)
+    true = rng.integers(0, len(channels), 5000)
+    elevation = channels[true] + rng.normal(0.0, np.radians(0.05), len(true))
+    assert np.array_equal(
+        fs.channel_rows(elevation, channels, np.zeros(len(true))), fs.channel_rows(elevation, channels)
+    )
+    assert np.array_equal(fs.channel_rows(elevation, channels, true.astype(float)), true)
+    reversed_ids = (len(channels) - 1 - true).astype(float)  # another numbering: matched by elevation
+    assert np.array_equal(fs.channel_rows(elevation, channels, reversed_ids), true)

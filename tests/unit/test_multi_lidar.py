@@ -101,7 +101,9 @@ def test_moving_objects_from_both_lidars_at_the_rates_of_one(log, both):
     evidence_rig, evidence_as_one = (
         np.concatenate(mo.pair_evidence(p, mo.Params()))[moving].sum() for p in (both, as_one)
     )
-    assert evidence_rig > 1.5 * evidence_as_one  # measured 1,654 against 926
+    # measured 1,654 against 1,502 (926 before a ring that is no channel of the model fell back
+    # to the nearest channel: the down lidar's rings, read as the up one's, now do)
+    assert evidence_rig > 1.05 * evidence_as_one
 
 
 def test_co_visibility_takes_each_points_lidar(both):

@@ -176,7 +176,10 @@ def channel_rows(elevation: np.ndarray, channels: np.ndarray, ring: np.ndarray |
     nearest its elevation. Drivers number rings differently (a VLP-32C's by laser ID in
     Argoverse 2, by elevation in ROS), so a ring is matched to a channel by the mean elevation
     of its returns: in the same order when there are as many rings as channels, else the
-    nearest; returns without a ring (NaN, negative) take the channel nearest their own."""
+    nearest; returns without a ring (NaN, negative) take the channel nearest their own, and so do
+    the returns of a ring that is no channel: one whose returns lie on average farther from its
+    channel than the layout's usual gap (a driver that writes ring 0 for every point, or rings
+    of another layout)."""
     rows = nearest_channel(elevation, channels)
     if ring is None:
         return rows
@@ -193,7 +196,10 @@ def channel_rows(elevation: np.ndarray, channels: np.ndarray, ring: np.ndarray |
         row_of_ring[names[np.argsort(mean, kind="stable")]] = np.arange(len(names))
     else:
         row_of_ring[names] = nearest_channel(mean, channels)
-    rows[known] = row_of_ring[which]
+    gap = float(np.median(np.diff(channels))) if len(channels) > 1 else np.inf
+    off = np.bincount(which, weights=np.abs(elevation[known] - channels[row_of_ring[which]]), minlength=len(count))
+    is_channel = off <= gap * np.maximum(count, 1)  # mean distance from its channel within one gap
+    rows[known] = np.where(is_channel[which], row_of_ring[which], rows[known])
     return rows
 
 

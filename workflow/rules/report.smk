@@ -34,6 +34,7 @@ rule pair_report:
         suggestions=pair_suggestions,
         pair_figures=pair_page_pair_figures,
         stage_figures=pair_page_stage_figures,
+        explorer=pair_page_explorer,
     output:
         f"{RESULTS}/{{pair}}/{{page}}.html",
     log:

@@ -1,0 +1,162 @@
+"""The report's interactive parts in the system's Chromium, driven by Playwright (offline, no
+downloaded browser): the pair explorer's slider, hover and camera; every request stays on the
+machine. Assertions are on the drawn data (Plotly's traces) and the hover label's text, never
+on pixels."""
+
+from __future__ import annotations
+
+import re
+import shutil
+
+import numpy as np
+import pytest
+
+from helpers.synthetic_study import write_synthetic_study
+from lidarfield.io.parquet_table import read_table
+from lidarfield.plots import plot_stage
+from lidarfield.report import discover, write_report
+from lidarfield.report.explorer import points_script, stage_script
+from lidarfield.report.explorer_data import read_script
+
+pytestmark = pytest.mark.slow
+
+CHROMIUM = shutil.which("chromium")
+BUDGET = 2000  # points drawn of each cloud: fewer than the pair has, so the page states a cut
+STUDY = {"grid": {"kind": "spherical"}, "plots": {"figures": ["field_top"], "interactive": False, "dpi": 50}}
+STUDY["report"] = {"explorer_points": BUDGET}
+
+
+@pytest.fixture(scope="module")
+def study(tmp_path_factory):
+    """A two-pair, three-stage synthetic study with its report: (root, {pair: stage folders})."""
+    if CHROMIUM is None:
+        pytest.skip("chromium not on PATH (Debian: apt-get install chromium)")
+    sync_api = pytest.importorskip("playwright.sync_api")
+    root = tmp_path_factory.mktemp("results")
+    pairs = write_synthetic_study(root, n_pairs=2, levels=3, n=6000)
+    for dirs in pairs.values():
+        for i, d in enumerate(dirs):
+            plot_stage(d, dirs[i - 1] if i else None, d / "figures", STUDY["plots"])
+    found, rows = discover(root)
+    write_report(STUDY, found, rows, root / "report.html")
+    with sync_api.sync_playwright() as p:
+        browser = p.chromium.launch(executable_path=CHROMIUM, args=["--enable-unsafe-swiftshader"])
+        yield root, pairs, browser
+        browser.close()
+
+
+@pytest.fixture
+def page(study):
+    """A page of the study's browser that records every request and every script error."""
+    _, _, browser = study
+    context = browser.new_context(viewport={"width": 1400, "height": 1000})
+    tab = context.new_page()
+    tab.requests, tab.errors = [], []
+    tab.on("request", lambda r: tab.requests.append(r.url))
+    tab.on("pageerror", lambda e: tab.errors.append(str(e)))
+    tab.on("console", lambda m: tab.errors.append(m.text) if m.type == "error" else None)
+    yield tab
+    context.close()
+
+
+def open_explorer(page, url: str) -> None:
+    page.goto(url)
+    page.wait_for_selector(".explorer[data-ready='1']", state="attached", timeout=60_000)
+
+
+def traces(page, view: str = "3d") -> dict:
+    """The drawn traces of a view by name: their point counts and (vector tips) coordinates."""
+    return page.evaluate(
+        """view => Object.fromEntries(document.querySelector(`.explorer-${view}`).data.map(t =>
+             [t.name, {n: (t.x || []).length, x: Array.from(t.x || []), y: Array.from(t.y || []),
+                       visible: t.visible}]))""",
+        view,
+    )
+
+
+def move_slider(page, stage: int) -> None:
+    page.eval_on_selector(
+        ".stage-slider", "(s, v) => { s.value = v; s.dispatchEvent(new Event('input')); }", str(stage)
+    )
+    page.wait_for_function("k => document.querySelector('.explorer').explorer.stage === k", arg=stage, timeout=10_000)
+    page.wait_for_timeout(300)  # Plotly.react resolves after the redraw
+
+
+def test_the_slider_changes_the_vectors_and_removed_points_and_keeps_the_camera(study, page):
+    root, pairs, _ = study
+    dirs = pairs["pair-00"]
+    pair_dir = dirs[0].parent.parent
+    open_explorer(page, (pair_dir / "report.html").as_uri())
+    assert "2,000 of 6,000 points drawn" in page.inner_text(".budget-drawn")  # the budget's cut, stated
+    page.evaluate(
+        "() => Plotly.relayout(document.querySelector('.explorer-3d'), {'scene.camera.eye': {x: 0.3, y: -2.1, z: 0.9}})"
+    )
+    removed_so_far = 0
+    for level, d in enumerate(dirs):
+        if level:
+            move_slider(page, level)
+        _, _, data = read_script(stage_script(pair_dir, d.name))
+        field, _ = read_table(d / "field.parquet")
+        drawn = traces(page)
+        assert drawn["vector tips"]["n"] == int(np.count_nonzero(field["valid"]))
+        removed_so_far += len(data.get("removed1", [])) + len(data.get("removed2", []))
+        assert drawn["removed points"]["n"] == removed_so_far
+        assert drawn["cloud 1 (kept)"]["n"] + drawn["cloud 2 (kept)"]["n"] == 2 * BUDGET - removed_so_far
+        # the same vectors in the top view
+        assert traces(page, "top")["vector tips"]["n"] == drawn["vector tips"]["n"]
+        eye = page.evaluate("() => document.querySelector('.explorer-3d')._fullLayout.scene.camera.eye")
+        assert eye == pytest.approx({"x": 0.3, "y": -2.1, "z": 0.9})
+    assert removed_so_far > 0
+    assert page.evaluate("location.hash") == f"#stage={len(dirs) - 1}"
+    # a layer toggled off is drawn invisible, and stays so when the stage changes
+    page.uncheck("input.layer[value='removed']")
+    move_slider(page, 1)
+    assert traces(page)["removed points"]["visible"] is False
+    assert page.errors == []
+
+
+def test_hover_on_a_vector_shows_its_voxels_counts_and_length(study, page):
+    root, pairs, _ = study
+    d = pairs["pair-01"][1]
+    open_explorer(page, f"{(d.parent.parent / 'report.html').as_uri()}#stage=1")
+    field, _ = read_table(d / "field.parquet")
+    # the largest vector's tip in the top view, in the page's pixels
+    box = page.evaluate(
+        """() => {
+          const gd = document.querySelector('.explorer-top'), L = gd._fullLayout;
+          const tips = gd.data.find(t => t.name === 'vector tips'), r = gd.getBoundingClientRect();
+          const mags = tips.hovertext.map(h => parseFloat(/\\|d\\| ([0-9.]+)/.exec(h)[1]));
+          const best = mags.indexOf(Math.max(...mags));
+          return {x: r.left + L._size.l + L.xaxis.l2p(tips.x[best]), y: r.top + L._size.t + L.yaxis.l2p(tips.y[best]),
+                  voxel: tips.customdata[best]};
+        }"""
+    )
+    page.mouse.move(box["x"], box["y"])
+    label = page.wait_for_selector(".explorer-top .hoverlayer .hovertext", state="attached", timeout=10_000)
+    # the label's lines (SVG tspans), one per line
+    text = label.evaluate("g => [...g.querySelectorAll('tspan.line')].map(t => t.textContent).join('\\n')")
+    voxel = int(re.search(r"voxel (\d+)", text).group(1))
+    assert voxel == box["voxel"]
+    row = int(np.flatnonzero(field["voxel"] == voxel)[0])
+    assert int(re.search(r"n1 (\d+)", text).group(1)) == field["n1"][row]
+    assert int(re.search(r"n2 (\d+)", text).group(1)) == field["n2"][row]
+    assert float(re.search(r"\|d\| ([0-9.]+) m", text).group(1)) == pytest.approx(field["magnitude"][row], abs=5e-5)
+    assert f"az {field['az_bin'][row]}, el {field['el_bin'][row]}" in text
+    # clicking selects the voxel; the selection stays when the stage changes
+    page.mouse.click(box["x"], box["y"])
+    page.wait_for_function("() => document.querySelector('.explorer').explorer.selected !== null")
+    move_slider(page, 0)
+    assert f"voxel {voxel}" in page.inner_text(".selected-voxel")
+    assert page.errors == []
+
+
+def test_the_report_requests_nothing_off_the_machine(study, page):
+    root, pairs, _ = study
+    open_explorer(page, (pairs["pair-00"][0].parent.parent / "report.html").as_uri())
+    page.goto((root / "report.html").as_uri())
+    page.wait_for_load_state("load")
+    assert page.requests and all(url.startswith(("file://", "data:")) for url in page.requests), page.requests
+    loaded = {url.rsplit("/", 1)[-1] for url in page.requests}
+    assert {"plotly.min.js", "explorer.js", "points.js"} <= loaded
+    assert points_script(pairs["pair-00"][0].parent.parent).is_file()
+    assert page.errors == []

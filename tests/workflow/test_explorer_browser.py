@@ -160,3 +160,47 @@ def test_the_report_requests_nothing_off_the_machine(study, page):
     assert {"plotly.min.js", "explorer.js", "points.js"} <= loaded
     assert points_script(pairs["pair-00"][0].parent.parent).is_file()
     assert page.errors == []
+
+
+def test_a_heat_map_cell_opens_that_pair_at_that_stage(study, page):
+    root, pairs, _ = study
+    page.goto((root / "report.html").as_uri())
+    cell = page.locator("table.heatmap a[href='pair-01/report.html#stage=2']")
+    title = cell.get_attribute("title")
+    assert title.startswith("pair-01 · stage 02 field_of_view: p95_magnitude ")
+    cell.click()
+    page.wait_for_selector(".explorer[data-ready='1']", state="attached", timeout=60_000)
+    assert page.url.endswith("/pair-01/report.html#stage=2")
+    assert page.evaluate("document.querySelector('.stage-slider').value") == "2"
+    assert page.inner_text(".stage-label") == "02 field_of_view"
+    assert page.errors == []
+
+
+def test_the_ranked_table_sorts_and_filters(study, page):
+    root, _, _ = study
+    page.goto((root / "report.html").as_uri())
+    page.wait_for_selector("html[data-overview-ready='1']", state="attached")
+    table = "table.sortable"
+
+    def column(name: str) -> list[str]:
+        return page.eval_on_selector(
+            table,
+            """(t, name) => { const i = [...t.tHead.rows[0].cells].findIndex(c => c.textContent === name);
+                 return [...t.tBodies[0].rows].filter(r => !r.hidden).map(r => r.cells[i].textContent); }""",
+            name,
+        )
+
+    ranked = column("pair")
+    assert sorted(ranked) == ["pair-00", "pair-01"]
+    page.click(f"{table} th:text-is('p95 (m)')")  # ascending: the ranking reversed
+    assert column("pair") == ranked[::-1]
+    p95 = [float(v) for v in column("p95 (m)")]
+    assert p95 == sorted(p95) and p95[0] < p95[1]
+    page.click(f"{table} th:text-is('p95 (m)')")  # again: descending
+    assert column("pair") == ranked
+    page.fill(".table-filter input", ranked[1])
+    assert column("pair") == [ranked[1]]
+    assert page.inner_text(".filter-count") == "1 of 2 pairs shown"
+    page.fill(".table-filter input", "")
+    assert column("pair") == ranked
+    assert page.errors == []

@@ -47,14 +47,16 @@ rule explorer_stage:
         " --changes {input.changes:q} --budget {params.budget} --out {output:q} > {log:q} 2>&1"
 
 
-# The viewer's script, one copy for the study (beside plotly.min.js), copied from the package.
-rule explorer_js:
+# The report's own scripts, one copy for the study (beside plotly.min.js): the explorer's and
+# the overview's, copied from the package.
+rule report_js:
     output:
-        f"{RESULTS}/assets/explorer.js",
+        explorer=f"{RESULTS}/assets/explorer.js",
+        overview=f"{RESULTS}/assets/overview.js",
     log:
-        f"{RESULTS}/logs/explorer_js.log",
+        f"{RESULTS}/logs/report_js.log",
     benchmark:
-        f"{RESULTS}/benchmarks/explorer_js.tsv"
+        f"{RESULTS}/benchmarks/report_js.tsv"
     localrule: True
     conda:
         "../envs/lidarfield.yaml"
@@ -62,4 +64,4 @@ rule explorer_js:
     resources:
         mem_mb=500,
     shell:
-        "lidarfield job explorer-js --out {output:q} > {log:q} 2>&1"
+        "lidarfield job report-js --out {output:q} > {log:q} 2>&1"

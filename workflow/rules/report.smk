@@ -68,6 +68,7 @@ rule report:
         figures=f"{RESULTS}/study/figures",
         suggestions=last_stage_suggestions,
         explain=explain_records,
+        script=f"{RESULTS}/assets/overview.js",
     output:
         report(
             f"{RESULTS}/report.html",

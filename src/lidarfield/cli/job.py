@@ -109,9 +109,9 @@ def add_parser(subparsers) -> None:
     p.add_argument("--out", required=True)
     p.set_defaults(func=_explorer_stage)
 
-    p = jobs.add_parser("explorer-js")
-    p.add_argument("--out", required=True)
-    p.set_defaults(func=_explorer_js)
+    p = jobs.add_parser("report-js")
+    p.add_argument("--out", nargs="+", required=True, help="where to write the report's scripts (named as shipped)")
+    p.set_defaults(func=_report_js)
 
     p = jobs.add_parser("plot-pair")
     p.add_argument("--stats", nargs="+", required=True)
@@ -267,10 +267,11 @@ def _explorer_stage(args: argparse.Namespace) -> None:
     write_stage_script(args.registered, args.field, args.changes or None, args.budget, args.out)
 
 
-def _explorer_js(args: argparse.Namespace) -> None:
-    from ..report.explorer import write_viewer
+def _report_js(args: argparse.Namespace) -> None:
+    from ..report.explorer import write_script
 
-    write_viewer(args.out)
+    for path in args.out:
+        write_script(path)
 
 
 def _plot_pair(args: argparse.Namespace) -> None:

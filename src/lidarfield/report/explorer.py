@@ -12,6 +12,7 @@ import json
 from importlib import resources
 from pathlib import Path
 
+from ..errors import InputError
 from ..io.atomic import write_text
 from ..layout import level_of
 from ..plots.interactive import write_plotly_js
@@ -20,6 +21,7 @@ from .page import esc, relative_href
 
 ASSETS = "assets"  # the results folder's shared scripts
 VIEWER = "explorer.js"
+OVERVIEW = "overview.js"  # the overview's table sorting and filter (lidarfield.report.study_view)
 PLOTLY = "plotly.min.js"
 STYLE = """<style>
 .explorer { margin: 0.6em 0; }
@@ -32,14 +34,18 @@ STYLE = """<style>
 </style>"""
 
 
-def viewer_source() -> str:
-    """The viewer's JavaScript, as the package ships it."""
-    return resources.files(__package__).joinpath("assets", VIEWER).read_text()
+def script_source(name: str) -> str:
+    """One of the report's scripts, as the package ships it."""
+    return resources.files(__package__).joinpath("assets", name).read_text()
 
 
-def write_viewer(out: str | Path) -> Path:
-    write_text(out, viewer_source())
-    return Path(out)
+def write_script(path: str | Path) -> Path:
+    """One of the report's own scripts (the explorer's or the overview's), named as shipped."""
+    path = Path(path)
+    if path.name not in (VIEWER, OVERVIEW):
+        raise InputError(f"not one of the report's scripts ({VIEWER}, {OVERVIEW})", path)
+    write_text(path, script_source(path.name))
+    return path
 
 
 def explorer_dir(pair_dir: Path) -> Path:
@@ -106,8 +112,8 @@ def write_explorer_data(pair_dir: Path, stage_dirs: list[Path], budget: int) -> 
 
 
 def write_assets(assets: Path) -> list[Path]:
-    """The viewer's scripts in ``assets`` (plotly.js only when absent)."""
-    written = [write_viewer(assets / VIEWER)]
+    """The report's scripts in ``assets`` (plotly.js only when absent)."""
+    written = [write_script(assets / name) for name in (VIEWER, OVERVIEW)]
     if not (assets / PLOTLY).is_file():
         written.append(write_plotly_js(assets / PLOTLY))
     return written

@@ -19,8 +19,9 @@ from ..defaults import default
 from ..study.tables import compute_study_tables
 from .explain import RECORD_FILE, read_explanations
 from .explorer import ASSETS, write_assets, write_explorer_data
-from .overview import PAIR_PAGE, write_overview
+from .overview import write_overview
 from .pair_page import write_pair_page
+from .study_view import PAIR_PAGE
 
 log = logging.getLogger(__name__)
 
@@ -49,8 +50,7 @@ def write_report(
     plotted = {name for name, dirs in pairs.items() if has_stage_figures(dirs)}
     max_mb = max_mb if max_mb is not None else ((study or {}).get("report") or {}).get("max_mb")
     explorer_points = ((study or {}).get("report") or {}).get("explorer_points", default("report", "explorer_points"))
-    if plotted:
-        write_assets(out_html.parent / ASSETS)
+    write_assets(out_html.parent / ASSETS)
     for name, dirs in pairs.items():
         if name in plotted:
             write_explorer_data(dirs[0].parent.parent, dirs, explorer_points)

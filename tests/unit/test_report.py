@@ -103,13 +103,12 @@ def test_report_writes_an_overview_and_a_page_per_pair(plotted_study, tmp_path):
         # 2 pair figures and every stage figure drawn: stage 0 has 3, stage 1 all six
         assert image_count(page) == N_PAIR_FIGURES + 3 + 6 and 'class="missing"' not in page
         assert 'class="flag"' not in page
-        # the explorer's scripts, by relative path, and its spec (JSON data, not a script)
+        # the viewer's scripts by relative path; its spec (JSON, not a script) names the pair's data files
         scripts = re.findall(r"<script([^>]*)>", page)
-        assert scripts[-1] == ' type="application/json"'
-        sources = [re.fullmatch(r' src="([^"]+)"', s).group(1) for s in scripts[:-1]]
-        assert sources[:2] == ["../assets/plotly.min.js", "../assets/explorer.js"]
+        assert scripts == [' src="../assets/plotly.min.js"', ' src="../assets/explorer.js"', ' type="application/json"']
+        spec = json.loads(re.search(r'<script type="application/json">(.*?)</script>', page).group(1))
         stems = ["points", *(d.name for d in dirs)]
-        assert [os.path.normpath(tmp_path / name / s) for s in sources[2:]] == [
+        assert [os.path.normpath(tmp_path / name / s) for s in spec["scripts"]] == [
             str(root / name / "explorer" / f"{stem}.js") for stem in stems
         ]
     link = re.findall(r'href="([^"#]+field_3d\.html)"', pair_page(tmp_path, "pair-00"))

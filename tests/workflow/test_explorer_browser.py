@@ -14,7 +14,7 @@ import pytest
 from helpers.synthetic_study import write_synthetic_study
 from lidarfield.io.parquet_table import read_table
 from lidarfield.plots import plot_stage
-from lidarfield.report import discover, write_report
+from lidarfield.report import compare_studies, discover, write_report
 from lidarfield.report.explorer import points_script, stage_script
 from lidarfield.report.explorer_data import read_script
 
@@ -203,4 +203,25 @@ def test_the_ranked_table_sorts_and_filters(study, page):
     assert page.inner_text(".filter-count") == "1 of 2 pairs shown"
     page.fill(".table-filter input", "")
     assert column("pair") == ranked
+    assert page.errors == []
+
+
+def test_compare_shows_a_pair_of_both_studies_with_the_camera_and_stage_linked(study, page, tmp_path):
+    root, _, _ = study
+    out = compare_studies(root, root, tmp_path / "compare.html")
+    page.goto(out.as_uri())
+    page.wait_for_selector(".explorer[data-linked='1']", state="attached", timeout=60_000)
+    assert page.locator(".explorer").count() == 4  # two pairs, A beside B
+    eye = {"x": 0.2, "y": -1.9, "z": 1.1}
+    page.evaluate(
+        "eye => Plotly.relayout(document.querySelectorAll('.explorer-3d')[0], {'scene.camera.eye': eye})", eye
+    )
+    page.wait_for_timeout(500)
+    cameras = page.evaluate(
+        "() => [...document.querySelectorAll('.explorer-3d')].map(v => v._fullLayout.scene.camera.eye)"
+    )
+    assert cameras[1] == pytest.approx(eye) and cameras[2] != pytest.approx(eye)  # B's view of pair-00 only
+    move_slider(page, 2)  # the first explorer's slider moves its partner's
+    stages = page.evaluate("() => [...document.querySelectorAll('.explorer')].map(e => e.explorer.stage)")
+    assert stages == [2, 2, 0, 0]
     assert page.errors == []

@@ -66,30 +66,45 @@ def stage_label(stage_id: str) -> str:
     return f"{level} {rest.rsplit('-', 1)[0]}" if level_of(stage_id) is not None else stage_id
 
 
-def explorer_parts(name: str, stage_dirs: list[Path], out_dir: Path, assets: Path, how: str) -> list[str]:
-    """The explorer's section of a page in ``out_dir`` for the pair of ``stage_dirs``
-    (``{pair}/stages/{stage}``), its viewer's scripts in ``assets``; ``how``: what makes its
-    data when it is not written (HTML)."""
+def explorer_scripts(assets: Path, out_dir: Path) -> list[str]:
+    """The viewer's scripts (in ``assets``), loaded once by a page in ``out_dir``, and its style."""
+    return [STYLE, *(f'<script src="{esc(relative_href(assets / s, out_dir))}"></script>' for s in (PLOTLY, VIEWER))]
+
+
+def explorer_div(name: str, stage_dirs: list[Path], out_dir: Path, how: str, link: str = "") -> str:
+    """One explorer of the pair of ``stage_dirs`` (``{pair}/stages/{stage}``) on a page in
+    ``out_dir``: it loads the pair's data files; ``how``: what makes them when they are not
+    written (HTML); explorers of one ``link`` share their camera and stage."""
     pair_dir = stage_dirs[0].parent.parent
+    data = [points_script(pair_dir), *(stage_script(pair_dir, d.name) for d in stage_dirs)]
     spec = {
         "pair": name,
         "stages": [{"id": d.name, "label": stage_label(d.name)} for d in stage_dirs],
+        "scripts": [relative_href(path, out_dir) for path in data],
         "how": how,
     }
-    scripts = [assets / PLOTLY, assets / VIEWER, points_script(pair_dir)]
-    scripts += [stage_script(pair_dir, d.name) for d in stage_dirs]
     # "</" would end the JSON's script element early: JSON allows "<\/" for it
     spec_json = json.dumps(spec).replace("</", "<\\/")
+    linked = f' data-link="{esc(link)}"' if link else ""
+    return f'<div class="explorer"{linked}><script type="application/json">{spec_json}</script></div>'
+
+
+EXPLAINER = (
+    '<p class="note">The pair at every stage: drag the slider to step through the hypotheses; the camera and '
+    "the selected voxel stay. Points are grey (cloud 1) and blue-grey (cloud 2); the points a stage removed are "
+    "in that stage's colour, where they were when it removed them; a correcting stage's moves are segments from "
+    "before to after. Hover a vector's tip for its voxel; click it to select it. Each view's camera icon, or "
+    "its PNG button, saves what it shows.</p>"
+)
+
+
+def explorer_parts(name: str, stage_dirs: list[Path], out_dir: Path, assets: Path, how: str) -> list[str]:
+    """The explorer's section of a pair's page in ``out_dir``, its viewer's scripts in ``assets``."""
     return [
         "<h2>Explorer</h2>",
-        '<p class="note">The pair at every stage: drag the slider to step through the hypotheses; the camera and '
-        "the selected voxel stay. Points are grey (cloud 1) and blue-grey (cloud 2); the points a stage removed are "
-        "in that stage's colour, where they were when it removed them; a correcting stage's moves are segments from "
-        "before to after. Hover a vector's tip for its voxel; click it to select it. Each view's camera icon, or "
-        "its PNG button, saves what it shows.</p>",
-        STYLE,
-        *(f'<script src="{esc(relative_href(s, out_dir))}"></script>' for s in scripts),
-        f'<div class="explorer"><script type="application/json">{spec_json}</script></div>',
+        EXPLAINER,
+        *explorer_scripts(assets, out_dir),
+        explorer_div(name, stage_dirs, out_dir, how),
     ]
 
 

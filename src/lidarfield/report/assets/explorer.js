@@ -3,7 +3,7 @@
 // lidarfieldExplorer.add(key, base64 blob); see lidarfield.report.explorer_data for the format.
 (function () {
   "use strict";
-  const blobs = {};
+  let blobs = {}; // the explorer whose data scripts are loading: its blobs by key
   const DTYPES = { f8: Float64Array, f4: Float32Array, i4: Int32Array, u4: Uint32Array, u1: Uint8Array };
 
   function decode(b64) {
@@ -289,7 +289,33 @@
     return el;
   }
 
-  function build(root) {
+  // A data script, loaded by a script element (file:// pages may load scripts, not fetch files):
+  // resolves true when it ran, false when it is missing.
+  function loadScript(src) {
+    return new Promise(resolve => {
+      const el = document.createElement("script");
+      el.src = src;
+      el.onload = () => resolve(true);
+      el.onerror = () => resolve(false);
+      document.head.appendChild(el);
+    });
+  }
+
+  // Each explorer's data, one script after another (two explorers of one page, as in
+  // lidarfield compare, may hold keys of the same name): its blobs by key.
+  let queue = Promise.resolve();
+  function loadData(spec) {
+    const mine = {};
+    queue = queue.then(async () => {
+      for (const src of spec.scripts) {
+        blobs = mine;
+        await loadScript(src);
+      }
+    });
+    return queue.then(() => mine);
+  }
+
+  function build(root, blobs) {
     const spec = JSON.parse(root.querySelector("script[type='application/json']").textContent);
     const note = control("p", { className: "note" }, root);
     if (typeof Plotly === "undefined") {
@@ -316,7 +342,7 @@
     };
     const bar = control("div", { className: "explorer-controls" }, root);
     control("span", { textContent: "stage " }, bar);
-    const slider = control("input", { type: "range", min: 0, max: stages.length - 1, step: 1, value: ctx.stage, className: "stage-slider" }, bar);
+    const slider = ctx.ui.slider = control("input", { type: "range", min: 0, max: stages.length - 1, step: 1, value: ctx.stage, className: "stage-slider" }, bar);
     ctx.ui.label = control("strong", { className: "stage-label" }, bar);
     control("span", { textContent: " · colour by " }, bar);
     const colour = control("select", { className: "colour-by" }, bar);
@@ -352,6 +378,7 @@
           const p = e.points.find(q => q.data.name === "vector tips");
           if (p) { ctx.selected = p.customdata; draw(ctx); }
         });
+      root.dataset.readyMs = performance.now().toFixed(0); // open to interactive (bench/explorer.py)
       root.dataset.ready = "1";
     });
     root.explorer = ctx;
@@ -363,7 +390,45 @@
     decode,
     build,
   };
+  // Explorers of one group (data-link) share their camera and their stage: lidarfield compare.
+  function link(contexts) {
+    let syncing = false;
+    for (const ctx of contexts) {
+      const others = contexts.filter(c => c !== ctx);
+      ctx.ui["3d"].on("plotly_relayout", e => {
+        // a drag reports scene.camera, a script may set a part of it (scene.camera.eye)
+        if (syncing || !Object.keys(e).some(k => k.startsWith("scene.camera"))) return;
+        syncing = true;
+        const camera = JSON.parse(JSON.stringify(ctx.ui["3d"]._fullLayout.scene.camera));
+        Promise.all(others.map(o => Plotly.relayout(o.ui["3d"], { "scene.camera": camera }))).then(() => {
+          syncing = false;
+        });
+      });
+      ctx.ui.slider.addEventListener("input", () => {
+        for (const o of others) {
+          o.ui.slider.value = Math.min(ctx.stage, o.stages.length - 1);
+          o.stage = +o.ui.slider.value;
+          draw(o);
+        }
+      });
+    }
+  }
+
   document.addEventListener("DOMContentLoaded", () => {
-    for (const root of document.querySelectorAll(".explorer")) build(root);
+    const groups = {};
+    for (const root of document.querySelectorAll(".explorer")) {
+      const spec = JSON.parse(root.querySelector("script[type='application/json']").textContent);
+      const built = loadData(spec).then(mine => {
+        const ctx = build(root, mine);
+        return ctx && ctx.ready.then(() => Object.assign(ctx, { root }));
+      });
+      if (root.dataset.link) (groups[root.dataset.link] = groups[root.dataset.link] || []).push(built);
+    }
+    for (const group of Object.values(groups))
+      Promise.all(group).then(contexts => {
+        if (!contexts.every(Boolean)) return;
+        link(contexts);
+        for (const ctx of contexts) ctx.root.dataset.linked = "1";
+      });
   });
 })();

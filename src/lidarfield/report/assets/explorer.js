@@ -264,6 +264,7 @@
 
   function draw(ctx) {
     const k = ctx.stage;
+    performance.mark("explorer draw");
     ctx.ui.label.textContent = ctx.labels[k];
     if (!ctx.stages[k]) {
       ctx.ui.budget.innerHTML = `The data of stage ${ctx.labels[k]} is not written (its explorer job has not run).`;
@@ -419,6 +420,7 @@
     for (const root of document.querySelectorAll(".explorer")) {
       const spec = JSON.parse(root.querySelector("script[type='application/json']").textContent);
       const built = loadData(spec).then(mine => {
+        performance.mark("explorer data loaded");
         const ctx = build(root, mine);
         return ctx && ctx.ready.then(() => Object.assign(ctx, { root }));
       });

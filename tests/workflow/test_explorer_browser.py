@@ -142,6 +142,12 @@ def test_hover_on_a_vector_shows_its_voxels_counts_and_length(study, page):
     assert int(re.search(r"n2 (\d+)", text).group(1)) == field["n2"][row]
     assert float(re.search(r"\|d\| ([0-9.]+) m", text).group(1)) == pytest.approx(field["magnitude"][row], abs=5e-5)
     assert f"az {field['az_bin'][row]}, el {field['el_bin'][row]}" in text
+    # the 3-D view's tips carry the same hover texts as the top view's
+    hovers = page.evaluate(
+        "() => ['3d', 'top'].map(v => document.querySelector(`.explorer-${v}`).data.find(t => t.name === 'vector tips')"
+        ".hovertext)"
+    )
+    assert hovers[0] == hovers[1] and len(hovers[0]) == int(np.count_nonzero(field["valid"]))
     # clicking selects the voxel; the selection stays when the stage changes
     page.mouse.click(box["x"], box["y"])
     page.wait_for_function("() => document.querySelector('.explorer').explorer.selected !== null")

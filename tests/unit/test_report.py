@@ -62,7 +62,7 @@ def embedded_elements(html: str, caption_end: str) -> list[str]:
 
 
 N_PAIR_FIGURES = 3  # a pair page's stage-by-stage figures
-N_STUDY_FIGURES = 2 + 2  # hypotheses, all pairs; a polar map per stage level (the heat map is a grid of links)
+N_STUDY_FIGURES = 2  # hypotheses, all pairs (the heat map is a grid of links, the polar maps SVG)
 
 
 def stage_figure_files(pairs) -> set:

@@ -25,6 +25,7 @@ from .explain import study_explain_parts
 from .explorer import ASSETS
 from .page import esc, image, image_file, page, table
 from .pair_page import DPI, findings_parts
+from .polar_svg import polar_map_parts
 from .rematch import study_rematch_parts
 from .study_view import STYLE, heatmap_parts, ranking_filter, ranking_table, script_tag
 from .suggestions import study_suggestions
@@ -117,9 +118,9 @@ def study_level_parts(tables: StudyTables, figures_dir: Path | None) -> list[str
             "pairs where its magnitude exceeds that pair-stage's median magnitude; about 0.5 everywhere means no "
             "direction stands out, red where the same direction is large along the drive (a ring, a sector of the "
             "own vehicle, a mounting effect). Table: <code>study/voxels.parquet</code>.</p>",
-            '<div class="figures">',
-            *(figure_html(f, figures_dir) for f in maps),
-            "</div>",
+            '<p class="note">Hover a cell for its voxel, its median magnitude, its share and in how many pairs it '
+            "is valid (the same maps as <code>study/figures/voxels_{level}.png</code>).</p>",
+            *polar_map_parts(tables.voxels, tables.grid),
         ]
     else:
         parts.append(

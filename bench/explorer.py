@@ -162,6 +162,7 @@ def main() -> None:
     parser.add_argument("--runs", type=int, default=3)
     parser.add_argument("--no-default-study", action="store_true")
     parser.add_argument("--default-results", type=Path, help="the default study's results folder, already run")
+    parser.add_argument("--overviews-only", action="store_true", help="only the overviews")
     args = parser.parse_args()
     print(machine())
     results = []
@@ -186,6 +187,9 @@ def main() -> None:
             results.append(
                 measure(browser, f"{n}-pair overview", synthetic_overview(work, n), OVERVIEW_READY, args.runs)
             )
+        if args.overviews_only:
+            print(json.dumps(results, indent=1))
+            return
         for budget, label in ((50_000, "default budget, 50,000 a cloud drawn"), (0, "every point drawn")):
             page = big_pair(work, budget)
             results.append(measure(browser, f"2 x 120,000 points, 4 stages, {label}", page, EXPLORER_READY, args.runs))

@@ -104,6 +104,7 @@ def test_report_writes_an_overview_and_a_page_per_pair(plotted_study, tmp_path):
         assert image_count(page) == N_PAIR_FIGURES + 3 + 6 and 'class="missing"' not in page
         assert 'class="flag"' not in page
         # the viewer's scripts by relative path; its spec (JSON, not a script) names the pair's data files
+        assert (tmp_path / "assets" / "plotly.min.js").is_file()  # the explorer's, once for the report
         scripts = re.findall(r"<script([^>]*)>", page)
         assert scripts == [' src="../assets/plotly.min.js"', ' src="../assets/explorer.js"', ' type="application/json"']
         spec = json.loads(re.search(r'<script type="application/json">(.*?)</script>', page).group(1))

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from helpers.synthetic_study import write_field_study
-from lidarfield.report import discover
+from lidarfield.report import discover, write_report
 from lidarfield.report.polar_svg import SIZE, cell_path, polar_map_parts
 from lidarfield.report.study_view import heatmap_grid, removed_shares
 from lidarfield.study.tables import compute_study_tables
@@ -76,3 +76,13 @@ def test_cells_sit_where_the_png_puts_them():
     assert x < 0 and abs(y) < 1e-6
     inner, outer = np.hypot(*first_point(0, 0)), np.hypot(*first_point(0, 4))
     assert 0 < inner < outer
+
+
+def test_a_report_without_an_explorer_writes_its_scripts_but_not_plotly(tmp_path):
+    """No pair has figures, so no page has an explorer: no 4.8 MB plotly.js beside the report."""
+    write_field_study(tmp_path, 2, levels=2, n=1000)
+    pairs, rows = discover(tmp_path)
+    overview = write_report({}, pairs, rows, tmp_path / "report.html").read_text()
+    assert sorted(p.name for p in (tmp_path / "assets").iterdir()) == ["explorer.js", "overview.js"]
+    assert '<script src="assets/overview.js"></script>' in overview
+    assert 'class="explorer"' not in (tmp_path / "pair-000" / "report.html").read_text()

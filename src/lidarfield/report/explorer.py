@@ -126,9 +126,10 @@ def write_explorer_data(pair_dir: Path, stage_dirs: list[Path], budget: int) -> 
     return written
 
 
-def write_assets(assets: Path) -> list[Path]:
-    """The report's scripts in ``assets`` (plotly.js only when absent)."""
+def write_assets(assets: Path, explorer: bool = True) -> list[Path]:
+    """The report's scripts in ``assets``; with ``explorer``, plotly.js too (when absent: 4.8 MB
+    that a report without an explorer does not need)."""
     written = [write_script(assets / name) for name in (VIEWER, OVERVIEW)]
-    if not (assets / PLOTLY).is_file():
+    if explorer and not (assets / PLOTLY).is_file():
         written.append(write_plotly_js(assets / PLOTLY))
     return written

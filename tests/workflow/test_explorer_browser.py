@@ -15,7 +15,7 @@ from helpers.synthetic_study import write_synthetic_study
 from lidarfield.io.parquet_table import read_table
 from lidarfield.report import compare_studies, discover, write_report
 from lidarfield.report.explorer import points_script, stage_script
-from lidarfield.report.explorer_data import read_script
+from lidarfield.report.explorer_data import encode, read_script, wrap_script
 
 pytestmark = pytest.mark.slow
 
@@ -230,4 +230,36 @@ def test_compare_shows_a_pair_of_both_studies_with_the_camera_and_stage_linked(s
     move_slider(page, 2)  # the first explorer's slider moves its partner's
     stages = page.evaluate("() => [...document.querySelectorAll('.explorer')].map(e => e.explorer.stage)")
     assert stages == [2, 2, 0, 0]
+    assert page.errors == []
+
+
+def test_a_correcting_stage_draws_its_moves_from_before_to_after(study, page, tmp_path):
+    """Stage 2's file of a copy of the study gains moves of three sampled points of cloud 2: the
+    corrections layer draws each from where stage 1 left it to where stage 2 put it, and the
+    kept points are drawn where they were moved to."""
+    root, pairs, _ = study
+    copy = tmp_path / "results"
+    shutil.copytree(root, copy)
+    pair_dir = copy / "pair-00"
+    stage2 = stage_script(pair_dir, pairs["pair-00"][2].name)
+    key, header, arrays = read_script(stage2)
+    _, _, points = read_script(points_script(pair_dir))
+    by_stage1 = read_script(stage_script(pair_dir, pairs["pair-00"][1].name))[2]["removed2"]
+    kept = np.setdiff1d(np.arange(BUDGET), np.concatenate([arrays["removed2"], by_stage1]))  # cloud 2's at stage 2
+    moved = kept[:3].astype(np.uint32)
+    to = points["xyz2"][moved] + np.float32([0.5, -0.25, 1.0])
+    arrays = {**arrays, "moved2": moved, "moved2_xyz": to.astype(np.float32)}
+    header["clouds"][1]["moved"] = {"total": 3, "drawn": 3}
+    stage2.write_text(wrap_script(key, encode(header, arrays)))
+    open_explorer(page, f"{(pair_dir / 'report.html').as_uri()}#stage=2")
+    segments = page.evaluate(
+        "() => { const t = document.querySelector('.explorer-3d').data.find(t => t.name === 'corrections');"
+        " return [Array.from(t.x), Array.from(t.y), Array.from(t.z)]; }"
+    )
+    drawn = np.array(segments, dtype=float).T.reshape(3, 3, 3)  # a segment: before, after, NaN
+    assert np.allclose(drawn[:, 0], points["xyz2"][moved], atol=1e-5)
+    assert np.allclose(drawn[:, 1], to, atol=1e-5)
+    assert "moved 3 of 3" in page.inner_text(".budget-drawn")
+    move_slider(page, 1)  # stage 1 moved nothing
+    assert traces(page)["corrections"]["n"] == 0
     assert page.errors == []

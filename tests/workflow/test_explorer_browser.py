@@ -260,6 +260,12 @@ def test_a_correcting_stage_draws_its_moves_from_before_to_after(study, page, tm
     assert np.allclose(drawn[:, 0], points["xyz2"][moved], atol=1e-5)
     assert np.allclose(drawn[:, 1], to, atol=1e-5)
     assert "moved 3 of 3" in page.inner_text(".budget-drawn")
+    kept2 = page.evaluate(
+        "() => { const t = document.querySelector('.explorer-3d').data.find(t => t.name === 'cloud 2 (kept)');"
+        " return [Array.from(t.x), Array.from(t.y), Array.from(t.z)]; }"
+    )
+    kept2 = np.array(kept2, dtype=float).T
+    assert all(np.min(np.linalg.norm(kept2 - p, axis=1)) < 1e-5 for p in to)  # drawn where they were moved to
     move_slider(page, 1)  # stage 1 moved nothing
     assert traces(page)["corrections"]["n"] == 0
     assert page.errors == []

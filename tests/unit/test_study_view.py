@@ -86,3 +86,13 @@ def test_a_report_without_an_explorer_writes_its_scripts_but_not_plotly(tmp_path
     assert sorted(p.name for p in (tmp_path / "assets").iterdir()) == ["explorer.js", "overview.js"]
     assert '<script src="assets/overview.js"></script>' in overview
     assert 'class="explorer"' not in (tmp_path / "pair-000" / "report.html").read_text()
+
+
+def test_a_ranked_row_links_its_pair_and_its_last_stage(tables):
+    from lidarfield.report.study_view import ranking_table
+
+    table = ranking_table(tables, set(), {})
+    for r in tables.pairs.to_dict("records"):
+        level = int(r["level"])
+        assert f'<a href="{r["pair"]}/report.html">{r["pair"]}</a>' in table
+        assert f'<a href="{r["pair"]}/report.html#stage={level}">{level:02d} {r["hypothesis"]}</a>' in table

@@ -134,7 +134,8 @@ def ranking_parts(tables: StudyTables, stage_figures: set[str], last_stages: dic
         "<h2>Pairs ranked by what remains at the last stage</h2>",
         '<p class="note">Ranked by the p95 magnitude of the last stage, largest first '
         "(<code>study/pairs.parquet</code>); a click on a column's header sorts by it. "
-        "A pair's name opens its page: its table, its stage-by-stage figures and, where drawn "
+        "A pair's name opens its page, its last stage opens that page at that stage: its table, its "
+        "stage-by-stage figures and, where drawn "
         "(<code>plots.pairs</code>), its explorer and stage figures. What to try next: the best candidate at "
         "the last stage, where computed (<code>suggest_pairs</code>). Removed share: of both clouds' points, by "
         "all the stages. Rows in red: the registration did not converge or warned.</p>",

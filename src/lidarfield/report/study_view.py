@@ -145,7 +145,7 @@ def ranking_table(tables, stage_figures: set[str], last_stages: dict[str, Path])
             [
                 int(r["rank"]),
                 link(pair_href(pair), str(pair)),
-                f"{int(r['level']):02d} {r['hypothesis']}",
+                link(pair_href(pair, int(r["level"])), f"{int(r['level']):02d} {r['hypothesis']}"),
                 r["p95_magnitude"],
                 r["max_magnitude"],
                 r["rms_magnitude"],

@@ -14,6 +14,7 @@ include: "workflow/rules/rematch.smk"
 include: "workflow/rules/plot.smk"
 include: "workflow/rules/study.smk"
 include: "workflow/rules/explain.smk"
+include: "workflow/rules/explorer.smk"
 include: "workflow/rules/report.smk"
 
 

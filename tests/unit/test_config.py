@@ -95,8 +95,13 @@ def test_bad_configs_say_what_is_wrong(config, message):
 
 
 def test_the_report_budget_is_read_or_defaults_to_20_mb():
-    assert validate_config({"report": {"max_mb": 5}}, require_pairs=False).config["report"] == {"max_mb": 5}
-    assert validate_config({}, require_pairs=False).config["report"] == {"max_mb": 20}
+    report = validate_config({"report": {"max_mb": 5}}, require_pairs=False).config["report"]
+    assert report == {"max_mb": 5, "explorer_points": 50000}
+    assert validate_config({}, require_pairs=False).config["report"] == {"max_mb": 20, "explorer_points": 50000}
+    report = validate_config({"report": {"explorer_points": 0}}, require_pairs=False).config["report"]
+    assert report["explorer_points"] == 0  # every point
+    with pytest.raises(LidarfieldError, match="explorer_points"):
+        validate_config({"report": {"explorer_points": -1}}, require_pairs=False)
 
 
 def _simulated(**changes) -> dict:

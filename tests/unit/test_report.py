@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 import re
 import shutil
 
@@ -61,7 +62,7 @@ def embedded_elements(html: str, caption_end: str) -> list[str]:
 
 
 N_PAIR_FIGURES = 3  # a pair page's stage-by-stage figures
-N_STUDY_FIGURES = 3 + 2  # heat map, hypotheses, all pairs; a polar map per stage level
+N_STUDY_FIGURES = 2  # hypotheses, all pairs (the heat map is a grid of links, the polar maps SVG)
 
 
 def stage_figure_files(pairs) -> set:
@@ -87,7 +88,8 @@ def test_report_writes_an_overview_and_a_page_per_pair(plotted_study, tmp_path):
     assert image_count(html) == N_STUDY_FIGURES  # the study level only: each pair's figures are on its page
     assert html.index("The study level") < html.index("Pairs ranked") < html.index("<details><summary>the config")
     assert "<script>alert(1)</script>" not in html and "&lt;script&gt;alert(1)&lt;/script&gt;" in html
-    assert "<script" not in html  # one static page: no script at all
+    # no inline script: only the report's own, by relative path
+    assert re.findall(r"<script[^>]*>", html) == ['<script src="assets/overview.js"></script>'[:-9]]
     # The ranking gives each pair's last-stage verdict and significant voxels.
     ranking = html.split("Pairs ranked", 1)[1].split("</table>", 1)[0]
     assert "<th>verdict</th>" in ranking
@@ -102,7 +104,16 @@ def test_report_writes_an_overview_and_a_page_per_pair(plotted_study, tmp_path):
             assert d.name in page
         # 2 pair figures and every stage figure drawn: stage 0 has 3, stage 1 all six
         assert image_count(page) == N_PAIR_FIGURES + 3 + 6 and 'class="missing"' not in page
-        assert "<script" not in page and 'class="flag"' not in page
+        assert 'class="flag"' not in page
+        # the viewer's scripts by relative path; its spec (JSON, not a script) names the pair's data files
+        assert (tmp_path / "assets" / "plotly.min.js").is_file()  # the explorer's, once for the report
+        scripts = re.findall(r"<script([^>]*)>", page)
+        assert scripts == [' src="../assets/plotly.min.js"', ' src="../assets/explorer.js"', ' type="application/json"']
+        spec = json.loads(re.search(r'<script type="application/json">(.*?)</script>', page).group(1))
+        stems = ["points", *(d.name for d in dirs)]
+        assert [os.path.normpath(tmp_path / name / s) for s in spec["scripts"]] == [
+            str(root / name / "explorer" / f"{stem}.js") for stem in stems
+        ]
     link = re.findall(r'href="([^"#]+field_3d\.html)"', pair_page(tmp_path, "pair-00"))
     assert len(link) == 1 and (tmp_path / "pair-00" / link[0]).is_file()
 

@@ -40,5 +40,5 @@ def test_the_slurm_profile_keeps_its_settings_beside_the_workstation_profile(tmp
     assert args.latency_wait == 60
     assert args.slurm_allocation_status_command == "squeue"
     assert args.slurm_allocation_pass_command_as_script is True
-    assert args.groups["mitigate"] == args.groups["field"] == "pair"
+    assert args.groups["mitigate"] == args.groups["field"] == args.groups["explorer_stage"] == "pair"
     assert args.groups["simulate"] == "scans"

@@ -115,6 +115,11 @@ def test_full_run_writes_the_study_level_and_a_page_per_pair(study_dir):
         page = (results / pair / "report.html").read_text()
         assert "field_3d.html" not in page or "interactive 3-D view" in page
         assert page.count("field from above</figcaption>") == 3 and 'class="missing"' not in page
+        # the explorer: the pair's points and one data file per stage, loaded by the page
+        stages = sorted(p.name for p in (results / pair / "stages").iterdir())
+        explorer = sorted(p.name for p in (results / pair / "explorer").iterdir())
+        assert explorer == sorted(["points.js", *(f"{s}.js" for s in stages)])
+        assert all(f'"explorer/{name}"' in page for name in explorer)  # the explorer's spec lists them
 
 
 def test_unchanged_config_plans_nothing(study_dir):
@@ -128,6 +133,7 @@ def test_appending_a_hypothesis_plans_one_stage_per_pair(study_dir):
         "field": 2,
         "suggest": 2,
         "plot_stage": 2,
+        "explorer_stage": 2,
         "plot_pair": 2,
         "summary": 1,
         "study_voxels": 1,
@@ -145,6 +151,7 @@ def test_editing_hypothesis_two_replans_stage_two_only(study_dir):
         "field": 2,
         "suggest": 2,
         "plot_stage": 2,
+        "explorer_stage": 2,
         "plot_pair": 2,
         "summary": 1,
         "study_voxels": 1,
@@ -161,6 +168,7 @@ def test_editing_the_grid_replans_only_fields_plots_and_report(study_dir):
         "field": 6,
         "suggest": 6,
         "plot_stage": 6,
+        "explorer_stage": 6,
         "plot_pair": 2,
         "summary": 1,
         "study_voxels": 1,
@@ -250,6 +258,7 @@ def test_editing_a_plugin_source_replans_its_stage_and_later(study_dir):
         "field": 4,
         "suggest": 4,
         "plot_stage": 4,
+        "explorer_stage": 4,
         "plot_pair": 2,
         "summary": 1,
         "study_voxels": 1,

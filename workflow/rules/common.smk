@@ -336,3 +336,25 @@ def explain_records(wildcards):
     with them, once `snakemake explain` (or one pair's target) has built them."""
     records = [f"{explain_dir(pair)}/explain.json" for pair in PAIRS]
     return [record for record in records if Path(record).is_file()]
+
+
+# The pair explorer (explorer.smk): its point budget, a stage's own changes, a page's files.
+EXPLORER_POINTS = config["report"]["explorer_points"]
+
+
+@planned
+def stage_own_changes(wildcards):
+    """What stage k itself changed: none for stage 0."""
+    if stage_level(wildcards) == 0:
+        return []
+    return f"{this_stage_dir(wildcards)}/changes.parquet"
+
+
+@planned
+def pair_page_explorer(wildcards):
+    if not page_has_figures(wildcards):
+        return []
+    folder = f"{RESULTS}/{wildcards.pair}/explorer"
+    stages = [f"{folder}/{stage}.js" for stage in STAGES[wildcards.pair]]
+    assets = [f"{RESULTS}/assets/explorer.js", f"{RESULTS}/assets/plotly.min.js"]
+    return [f"{folder}/points.js", *stages, *assets]

@@ -34,6 +34,7 @@ rule pair_report:
         suggestions=pair_suggestions,
         pair_figures=pair_page_pair_figures,
         stage_figures=pair_page_stage_figures,
+        explorer=pair_page_explorer,
     output:
         f"{RESULTS}/{{pair}}/{{page}}.html",
     log:
@@ -67,6 +68,7 @@ rule report:
         figures=f"{RESULTS}/study/figures",
         suggestions=last_stage_suggestions,
         explain=explain_records,
+        script=f"{RESULTS}/assets/overview.js",
     output:
         report(
             f"{RESULTS}/report.html",

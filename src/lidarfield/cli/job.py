@@ -95,6 +95,24 @@ def add_parser(subparsers) -> None:
     p.add_argument("--out", required=True)
     p.set_defaults(func=_plotly_js)
 
+    p = jobs.add_parser("explorer-points")
+    p.add_argument("--registered", required=True, help="the pair's registered.parquet")
+    p.add_argument("--budget", type=int, required=True, help="the most points drawn of each cloud (0: all)")
+    p.add_argument("--out", required=True)
+    p.set_defaults(func=_explorer_points)
+
+    p = jobs.add_parser("explorer-stage")
+    p.add_argument("--registered", required=True, help="the pair's registered.parquet")
+    p.add_argument("--field", required=True, help="the stage's field.parquet")
+    p.add_argument("--changes", nargs="?", help="the stage's changes.parquet (none for stage 0)")
+    p.add_argument("--budget", type=int, required=True, help="the most points drawn of each cloud (0: all)")
+    p.add_argument("--out", required=True)
+    p.set_defaults(func=_explorer_stage)
+
+    p = jobs.add_parser("report-js")
+    p.add_argument("--out", nargs="+", required=True, help="where to write the report's scripts (named as shipped)")
+    p.set_defaults(func=_report_js)
+
     p = jobs.add_parser("plot-pair")
     p.add_argument("--stats", nargs="+", required=True)
     p.add_argument("--rematch", nargs="*", default=[], help="the stages' rematch.parquet files (rematch studies)")
@@ -235,6 +253,25 @@ def _plotly_js(args: argparse.Namespace) -> None:
     from ..plots import write_plotly_js
 
     write_plotly_js(args.out)
+
+
+def _explorer_points(args: argparse.Namespace) -> None:
+    from ..report.explorer_data import write_points_script
+
+    write_points_script(args.registered, args.budget, args.out)
+
+
+def _explorer_stage(args: argparse.Namespace) -> None:
+    from ..report.explorer_data import write_stage_script
+
+    write_stage_script(args.registered, args.field, args.changes or None, args.budget, args.out)
+
+
+def _report_js(args: argparse.Namespace) -> None:
+    from ..report.explorer import write_script
+
+    for path in args.out:
+        write_script(path)
 
 
 def _plot_pair(args: argparse.Namespace) -> None:

@@ -17,6 +17,7 @@ from ..plots.pair_stats import column, sorted_rows, stage_ticks
 from ..plots.style import figure
 from ..storage.layout import level_of
 from .discover import discover
+from .explorer import ASSETS, explorer_div, explorer_scripts, points_script, write_assets
 from .page import esc, image, image_file, page, table
 
 COMPARED = (
@@ -89,6 +90,28 @@ def _stage_dir_by_level(stage_dirs: list[Path]) -> dict[int, Path]:
     return {level_of(d.name): d for d in stage_dirs if level_of(d.name) is not None}
 
 
+# Two explorers beside each other: each one's views above each other.
+SIDE_BY_SIDE_STYLE = "<style>.side-by-side .explorer-views { flex-direction: column; }</style>"
+
+
+def explorers_side_by_side(name: str, stages_a: list[Path], stages_b: list[Path], out_dir: Path) -> list[str]:
+    """The pair in A's explorer beside B's, camera and stage linked, where both have its explorer data."""
+    if not (stages_a and stages_b and points_script(stages_a[0].parent.parent).is_file()):
+        return []
+    if not points_script(stages_b[0].parent.parent).is_file():
+        return []
+    cells = [
+        f"<div><p><b>{label}</b></p>{explorer_div(name, stages, out_dir, '', link=f'pair-{name}')}</div>"
+        for label, stages in (("A", stages_a), ("B", stages_b))
+    ]
+    return [
+        f"<h3>{esc(name)}: A and B in the explorer</h3>",
+        '<p class="note">Rotating one 3-D view turns the other; the slider moves both to the same level.</p>',
+        SIDE_BY_SIDE_STYLE,
+        '<div class="figures side-by-side">' + "".join(cells) + "</div>",
+    ]
+
+
 def compare_studies(results_a: str | Path, results_b: str | Path, out_html: str | Path) -> Path:
     """Write a page comparing two results folders; returns its path."""
     results_a, results_b, out_html = Path(results_a), Path(results_b), Path(out_html)
@@ -110,6 +133,7 @@ def compare_studies(results_a: str | Path, results_b: str | Path, out_html: str 
         )
         + "</ul>",
     ]
+    explored = False
     for name in names:
         pa = [r for r in rows_a if str(r.get("pair")) == name]
         pb = [r for r in rows_b if str(r.get("pair")) == name]
@@ -118,6 +142,9 @@ def compare_studies(results_a: str | Path, results_b: str | Path, out_html: str 
             comparison_table(pa, pb),
             image(png_bytes(comparison_figure(name, pa, pb), DPI), f"{name}: stage by stage, A and B"),
         ]
+        explorers = explorers_side_by_side(name, pairs_a.get(name, []), pairs_b.get(name, []), out_html.parent)
+        body += explorers
+        explored = explored or bool(explorers)
         dirs_a, dirs_b = _stage_dir_by_level(pairs_a.get(name, [])), _stage_dir_by_level(pairs_b.get(name, []))
         for level in sorted(set(dirs_a) | set(dirs_b)):
             body.append(f"<h3>{esc(name)} · stage {level:02d}</h3>")
@@ -130,5 +157,8 @@ def compare_studies(results_a: str | Path, results_b: str | Path, out_html: str 
                     else f'<p class="missing">{label}: no stage {level:02d}</p>'
                 )
             body.append('<div class="figures side-by-side">' + "".join(cells) + "</div>")  # A beside B
+    if explored:
+        write_assets(out_html.parent / ASSETS)
+        body += explorer_scripts(out_html.parent / ASSETS, out_html.parent)
     write_text(out_html, page("lidarfield: two studies compared", body))
     return out_html

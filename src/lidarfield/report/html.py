@@ -15,10 +15,13 @@ from __future__ import annotations
 import logging
 from pathlib import Path
 
+from ..defaults import default
 from ..study.tables import compute_study_tables
 from .explain import RECORD_FILE, read_explanations
-from .overview import PAIR_PAGE, write_overview
+from .explorer import ASSETS, write_assets, write_explorer_data
+from .overview import write_overview
 from .pair_page import write_pair_page
+from .study_view import PAIR_PAGE
 
 log = logging.getLogger(__name__)
 
@@ -46,7 +49,11 @@ def write_report(
     pairs = {name: [Path(d) for d in dirs] for name, dirs in pairs.items()}
     plotted = {name for name, dirs in pairs.items() if has_stage_figures(dirs)}
     max_mb = max_mb if max_mb is not None else ((study or {}).get("report") or {}).get("max_mb")
+    explorer_points = ((study or {}).get("report") or {}).get("explorer_points", default("report", "explorer_points"))
+    write_assets(out_html.parent / ASSETS, explorer=bool(plotted))
     for name, dirs in pairs.items():
+        if name in plotted:
+            write_explorer_data(dirs[0].parent.parent, dirs, explorer_points)
         rows = [r for r in summary_rows if str(r.get("pair")) == name]
         write_pair_page(
             name,

@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import logging
 from pathlib import Path
-from urllib.parse import quote
 
 import numpy as np
 import yaml
@@ -23,15 +22,17 @@ from ..plots.study import StudyFigure, study_figures
 from ..study.tables import StudyTables
 from .budget import MB, budget_mb, utf8_len
 from .explain import study_explain_parts
-from .page import esc, image, image_file, link, page, table
-from .pair_page import DPI, findings_parts, registration_problem
+from .explorer import ASSETS
+from .page import esc, image, image_file, page, table
+from .pair_page import DPI, findings_parts
+from .polar_svg import polar_map_parts
 from .rematch import study_rematch_parts
+from .study_view import STYLE, heatmap_parts, ranking_filter, ranking_table, script_tag
 from .suggestions import study_suggestions
 
 log = logging.getLogger(__name__)
 
 TITLE = "lidarfield study report"
-PAIR_PAGE = "{pair}/report.html"  # a pair's page, relative to the overview
 SUGGESTED_PAIRS = 20  # the overview's next steps: for the pairs with most left; the others' on their pages
 
 
@@ -93,9 +94,11 @@ def figure_html(f: StudyFigure, figures_dir: Path | None) -> str:
 def study_level_parts(tables: StudyTables, figures_dir: Path | None) -> list[str]:
     figures = study_figures(tables.summary, tables.voxels, tables.hypotheses, tables.pairs, tables.grid)
     maps = [f for f in figures if f.stem.startswith("voxels_")]
-    others = [f for f in figures if f not in maps]
+    # the heat map is the page's grid of links (its PNG stays in study/figures, for papers)
+    others = [f for f in figures if f not in maps and f.stem != "heatmap"]
     parts = [
         "<h2>The study level</h2>",
+        *heatmap_parts(tables.summary, tables.pairs),
         '<div class="figures">',
         *(figure_html(f, figures_dir) for f in others),
         "</div>",
@@ -115,9 +118,9 @@ def study_level_parts(tables: StudyTables, figures_dir: Path | None) -> list[str
             "pairs where its magnitude exceeds that pair-stage's median magnitude; about 0.5 everywhere means no "
             "direction stands out, red where the same direction is large along the drive (a ring, a sector of the "
             "own vehicle, a mounting effect). Table: <code>study/voxels.parquet</code>.</p>",
-            '<div class="figures">',
-            *(figure_html(f, figures_dir) for f in maps),
-            "</div>",
+            '<p class="note">Hover a cell for its voxel, its median magnitude, its share and in how many pairs it '
+            "is valid (the same maps as <code>study/figures/voxels_{level}.png</code>).</p>",
+            *polar_map_parts(tables.voxels, tables.grid),
         ]
     else:
         parts.append(
@@ -126,54 +129,18 @@ def study_level_parts(tables: StudyTables, figures_dir: Path | None) -> list[str
     return parts
 
 
-def ranking_table(pairs, stage_figures: set[str]) -> str:
-    """One row per pair, ranked; the pair's name links to its page."""
-    headers = [
-        "rank",
-        "pair",
-        "last stage",
-        "p95 (m)",
-        "max (m)",
-        "rms (m)",
-        "valid voxels",
-        "significant (|z| ≥ z_min)",
-        "verdict",
-        "p95 at stage 00 (m)",
-        "stage figures",
-        "registration problem",
-    ]
-    body, classes = [], []
-    for r in pairs.to_dict("records"):
-        problem = registration_problem(r)
-        body.append(
-            [
-                int(r["rank"]),
-                link(PAIR_PAGE.format(pair=quote(str(r["pair"]))), str(r["pair"])),
-                f"{int(r['level']):02d} {r['hypothesis']}",
-                r["p95_magnitude"],
-                r["max_magnitude"],
-                r["rms_magnitude"],
-                r["voxels_valid"],
-                r.get("voxels_significant", ""),
-                r.get("verdict", ""),
-                r["p95_magnitude_stage0"],
-                "drawn" if r["pair"] in stage_figures else "",
-                problem,
-            ]
-        )
-        classes.append("flag" if problem else "")
-    return table(headers, body, classes, text_columns=3)
-
-
-def ranking_parts(tables: StudyTables, stage_figures: set[str]) -> list[str]:
+def ranking_parts(tables: StudyTables, stage_figures: set[str], last_stages: dict[str, Path]) -> list[str]:
     return [
         "<h2>Pairs ranked by what remains at the last stage</h2>",
         '<p class="note">Ranked by the p95 magnitude of the last stage, largest first '
-        "(<code>study/pairs.parquet</code>). "
-        "A pair's name opens its page: its table, its stage-by-stage figures and, where drawn "
-        "(<code>plots.pairs</code>), "
-        "its stage figures and 3-D views. Rows in red: the registration did not converge or warned.</p>",
-        ranking_table(tables.pairs, stage_figures),
+        "(<code>study/pairs.parquet</code>); a click on a column's header sorts by it. "
+        "A pair's name opens its page, its last stage opens that page at that stage: its table, its "
+        "stage-by-stage figures and, where drawn "
+        "(<code>plots.pairs</code>), its explorer and stage figures. What to try next: the best candidate at "
+        "the last stage, where computed (<code>suggest_pairs</code>). Removed share: of both clouds' points, by "
+        "all the stages. Rows in red: the registration did not converge or warned.</p>",
+        ranking_filter(),
+        ranking_table(tables, stage_figures, last_stages),
     ]
 
 
@@ -221,8 +188,10 @@ def overview_parts(
         *study_rematch_parts(rows, DPI),
         *next_steps_parts(tables, last_stages),
         *study_explain_parts(list(explained), out_dir),
-        *ranking_parts(tables, stage_figures),
+        *ranking_parts(tables, stage_figures, last_stages),
         *config_parts(config),
+        STYLE,
+        script_tag(out_dir / ASSETS, out_dir),
     ]
 
 

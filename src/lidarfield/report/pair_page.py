@@ -24,6 +24,7 @@ from ..plots.settings import PlotSettings, plot_settings
 from ..storage.layout import level_of
 from ..study.summary import LABEL_SCORES
 from .budget import Figure, Note, budget_mb, file_figure, write_within_budget
+from .explorer import ASSETS, explorer_parts
 from .page import esc, relative_href, table
 from .rematch import pair_rematch_table
 from .suggestions import stage_suggestions
@@ -262,6 +263,10 @@ def pair_page_parts(
     suggested = {d.name for d in stage_dirs} if suggested is None else suggested
     pair_dir = stage_dirs[0].parent.parent if stage_dirs else None
     parts = header_parts(name, stage_dirs, overview_href) + findings_parts(rows) + grid_parts(rows)
+    if with_figures and stage_dirs:
+        # the page sits in {results}/{pair}/, the study's shared scripts in {results}/assets/
+        how = f"<code>snakemake --cores 2 {esc(on_demand)}</code> writes them." if on_demand else ""
+        parts += explorer_parts(name, stage_dirs, out_dir, out_dir.parent / ASSETS, how)
     parts += ["<h2>Stages</h2>", stages_table(rows), pair_rematch_table(rows)]
     if with_figures:
         parts += [

@@ -28,12 +28,12 @@ from ..errors import InputError
 from ..field.file import field_meta
 from ..field.grid import FieldSettings, field_settings_from_config
 from ..io.atomic import write_text
-from ..pair import read_pair
+from ..pair import RegisteredPair, read_pair
 from ..plots.pair_stats import pair_figure_png
 from ..plots.settings import figure_settings
 from ..plots.stage import draw_stage
 from ..plots.stage_data import StageData, vector_field
-from ..study.config import load_config, validate_config
+from ..study.config import Study, load_config, validate_config
 from ..study.explain import (
     STEP_COLUMNS,
     TABLE_COLUMNS,
@@ -232,20 +232,26 @@ def explain_scans(
     study = validate_config({}, require_pairs=False) if config_path is None else load_config(config_path, None, False)
     settings = registration_settings(register, transform)
     _, pair = read_and_register(scan1, scan2, settings, sensor, poses)
-    explanation = explain_pair(
+    explanation = explain_with_study(pair, study, out_dir.resolve().name)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    run = {"scan1": str(scan1), "scan2": str(scan2), "config": config_path and str(config_path), "register": settings}
+    write_text(out_dir / EXPLAIN_MARKER, json.dumps({**run, "sensor": sensor, "poses": poses}, indent=1) + "\n")
+    write_explanation(explanation, study.grid, study.grid_section, out_dir, study.config["plots"])
+    return explanation
+
+
+def explain_with_study(pair: RegisteredPair, study: Study, pair_name: str) -> Explanation:
+    """The loop on a registered pair with a study config's grid, ``suggest`` and ``explain``
+    settings (what ``lidarfield explain`` runs once it has registered the scans)."""
+    return explain_pair(
         pair,
         study.grid,
         study.grid_section,
         explain_settings(study.config["explain"]),
         study.suggest,
         study.base_dir,
-        out_dir.resolve().name,
+        pair_name,
     )
-    out_dir.mkdir(parents=True, exist_ok=True)
-    run = {"scan1": str(scan1), "scan2": str(scan2), "config": config_path and str(config_path), "register": settings}
-    write_text(out_dir / EXPLAIN_MARKER, json.dumps({**run, "sensor": sensor, "poses": poses}, indent=1) + "\n")
-    write_explanation(explanation, study.grid, study.grid_section, out_dir, study.config["plots"])
-    return explanation
 
 
 def explain_job(

@@ -1,0 +1,102 @@
+"""The diagnosis benchmark (issue 36, bench/diagnosis.py): its fault injection does what the
+faults are, and a slice of its zoo (real and simulated) is diagnosed as the full zoo measured."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from helpers import fault_zoo as zoo
+from lidarfield.hypotheses import apply_step
+from lidarfield.pair import RegisteredPair
+from lidarfield.poses import apply_pose
+from lidarfield.scan import Scan, still_sweep
+from lidarfield.sensors.models import PRESETS
+
+
+def test_range_fault_scales_and_offsets_every_range_along_its_ray():
+    rng = np.random.default_rng(1)
+    xyz = rng.normal(size=(500, 3)) * 10
+    faulty = zoo.range_fault(xyz, 1.004, 0.03)
+    r, r_faulty = np.linalg.norm(xyz, axis=1), np.linalg.norm(faulty, axis=1)
+    np.testing.assert_allclose(r_faulty, 1.004 * r + 0.03, rtol=1e-12)
+    np.testing.assert_allclose(faulty / r_faulty[:, None], xyz / r[:, None], atol=1e-12)
+
+
+def test_elevation_fault_moves_one_channel_only_and_keeps_range_and_azimuth():
+    rng = np.random.default_rng(2)
+    xyz = rng.normal(size=(400, 3)) * 8
+    channel = rng.integers(0, 4, size=400)
+    faulty = zoo.elevation_fault(xyz, channel, 2, 0.3)
+    np.testing.assert_array_equal(faulty[channel != 2], xyz[channel != 2])
+    (r0, az0, el0), (r1, az1, el1) = zoo.spherical(xyz[channel == 2]), zoo.spherical(faulty[channel == 2])
+    np.testing.assert_allclose(r1, r0, rtol=1e-12)
+    np.testing.assert_allclose(np.degrees(el1 - el0), 0.3, atol=1e-9)
+    np.testing.assert_allclose(az1, az0, atol=1e-9)
+
+
+def test_channels_of_a_scan_without_rings_are_the_models_nearest():
+    model = PRESETS["vlp16"]
+    elevation = np.radians(np.repeat(np.asarray(model.elevation_deg), 5) + 0.2)
+    azimuth = np.tile(np.linspace(-3, 3, 5), model.channels)
+    scan = Scan(zoo.from_spherical(np.full(len(azimuth), 10.0), azimuth, elevation), sensor=model)
+    np.testing.assert_array_equal(zoo.channels(scan), np.repeat(np.arange(model.channels), 5))
+
+
+def test_ray_box_distance_known_answers_and_sampled_reference():
+    T = zoo.box_frame([5.0, 0.0, 0.0])  # a 2 m cube centred 5 m ahead
+    rays = np.array([[10.0, 0, 0], [-10.0, 0, 0], [10.0, 10.0, 0], [6.0, 0.9, 0.0]])
+    d = zoo.ray_box_distance(rays, T, (2, 2, 2))
+    assert d[0] == pytest.approx(4.0) and np.isinf(d[1]) and np.isinf(d[2])
+    assert d[3] == pytest.approx(4.0 * np.hypot(6.0, 0.9) / 6.0)  # enters the face x = 4
+    # against marching along each ray, for a turned box
+    rng = np.random.default_rng(3)
+    directions = rng.normal(size=(300, 3))
+    directions /= np.linalg.norm(directions, axis=1, keepdims=True)
+    T = zoo.box_frame([3.0, 1.0, -0.5], yaw_rad=0.7)
+    d = zoo.ray_box_distance(directions * 20, T, (4.5, 1.8, 1.5))
+    steps = np.arange(0, 20, 0.002)
+    for direction, distance in zip(directions, d):
+        inside = np.all(np.abs(apply_pose(T, steps[:, None] * direction)) <= [2.25, 0.9, 0.75], axis=1)
+        expected = steps[inside][0] if inside.any() else np.inf
+        assert distance == pytest.approx(expected, abs=0.003)
+
+
+def test_motion_fault_is_undone_by_deskew():
+    """The injected distortion is what ``deskew`` corrects: the convention matches."""
+    model = PRESETS["vlp16"]
+    rng = np.random.default_rng(4)
+    xyz = rng.uniform(-20, 20, size=(2000, 3))
+    scan = Scan(xyz, {}, model, np.eye(4))
+    moved = zoo.motion_fault(scan, 5.0)
+    assert np.abs(moved.xyz - xyz).max() > 0.4  # up to 0.5 m over a 0.1 s sweep
+    pair = RegisteredPair(xyz, moved.xyz, np.eye(4), model, model, {}, {"time": moved.attributes["time"]})
+    pair.sweeps = {"1": {"sweep_motion": still_sweep()}, "2": {"sweep_motion": moved.sweep_motion}}
+    outcome = apply_step(pair, {"deskew": {}})
+    np.testing.assert_allclose(outcome.xyz2, xyz, atol=1e-9)
+
+
+def test_fov_fault_keeps_the_sector_its_model_says():
+    model = PRESETS["hdl32"]
+    rng = np.random.default_rng(5)
+    scan = Scan(rng.normal(size=(3000, 3)), {}, model)
+    cut = zoo.fov_fault(scan, 90.0)
+    azimuth = np.degrees(np.arctan2(cut.xyz[:, 1], cut.xyz[:, 0]))
+    assert cut.sensor.azimuth_limits_deg == (-135.0, 135.0)
+    assert np.abs(azimuth).max() <= 135.0 and len(cut) == pytest.approx(0.75 * len(scan), rel=0.05)
+
+
+def test_misregistration_moves_scan_2_about_its_own_origin():
+    base = zoo.BasePair(
+        "b", *(Scan(np.random.default_rng(k).normal(size=(50, 3)), {}, None, np.eye(4)) for k in (6, 7))
+    )
+    base.scan2.pose = np.eye(4)
+    base.scan2.pose[:3, 3] = [2.0, 0, 0]
+    for scan in (base.scan1, base.scan2):
+        scan.sweep_motion = still_sweep()
+    truth = zoo.faulted_pair(base, zoo.Case("b", zoo.CONTROL, ""))
+    turned = zoo.faulted_pair(base, zoo.Case("b", "yaw", "obvious"))
+    moved = zoo.faulted_pair(base, zoo.Case("b", "translation", "visible"))
+    np.testing.assert_allclose(turned.T_1_2[:3, 3], [2.0, 0, 0], atol=1e-12)  # turned in place
+    np.testing.assert_allclose(moved.xyz2 - truth.xyz2, np.tile([0.08, 0.06, 0], (50, 1)), atol=1e-12)
+    np.testing.assert_allclose(apply_pose(turned.T_1_2, base.scan2.xyz), turned.xyz2, atol=1e-12)

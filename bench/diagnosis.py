@@ -34,6 +34,7 @@ from timing import machine  # noqa: E402 (bench/timing.py)
 
 POINTS = 20_000  # per cloud: the whole zoo in under 15 minutes on 2 cores
 VISIBLE = ("visible", "obvious")
+CORRECTIONS = ("realign", "range_calibration", "deskew")
 
 
 def run_base(task: tuple[list, int]) -> list[dict]:
@@ -65,19 +66,23 @@ def run(slice_name: str, points: int, jobs: int) -> pd.DataFrame:
             progress(len(rows), len(cases), start)
     print(file=sys.stderr)
     order = {case.name: k for k, case in enumerate(cases)}
-    return pd.DataFrame(rows).sort_values("case", key=lambda c: c.map(order)).reset_index(drop=True)
+    table = pd.DataFrame(rows).sort_values("case", key=lambda c: c.map(order)).reset_index(drop=True)
+    for column in ("named", "named_strict"):  # a case not built (its error said) named nothing
+        table[column] = table[column].fillna(False).astype(bool)
+    return table
 
 
 def rates(table: pd.DataFrame) -> pd.DataFrame:
-    """Per sensor (and all): the share of faulted cases at the visible levels whose first
+    """Per sensor, per source (real, simulated) and in all: the share of faulted cases at the visible levels whose first
     proposal names the fault (also strictly, and at the barely visible level), and of controls
     read right. Faults no hypothesis names are left out of the faulted shares."""
     ok = table[table["error"] == ""]
     nameable = ok[ok["fault"].map(lambda f: f != CONTROL and bool(NAMING[f]))]
     out = []
-    for sensor in [*sorted(set(ok["sensor"])), "all"]:
-        part = nameable if sensor == "all" else nameable[nameable["sensor"] == sensor]
-        controls = ok[(ok["fault"] == CONTROL) & ((ok["sensor"] == sensor) | (sensor == "all"))]
+    groups = [("sensor", name) for name in sorted(set(ok["sensor"]))] + [("source", "real"), ("source", "simulated")]
+    for column, sensor in [*groups, ("source", "all")]:
+        chosen = (ok[column] == sensor) | (sensor == "all")
+        part, controls = nameable[chosen[nameable.index]], ok[chosen & (ok["fault"] == CONTROL)]
         seen = part[part["level"].isin(VISIBLE)]
         barely = part[part["level"] == "barely"]
         out.append(
@@ -87,11 +92,19 @@ def rates(table: pd.DataFrame) -> pd.DataFrame:
                 "named first (visible, obvious)": seen["named"].mean(),
                 "strictly first": seen["named_strict"].mean(),
                 "named first (barely)": barely["named"].mean(),
+                "random after the correction": corrected(seen),
                 "controls": len(controls),
                 "controls right": controls["named"].mean(),
             }
         )
     return pd.DataFrame(out)
+
+
+def corrected(part: pd.DataFrame) -> float:
+    """Of the cases whose first step is the correction that names the fault (realign,
+    range_calibration, deskew), the share whose field reads random after it."""
+    fixed = part[part["named"] & part["first"].isin(CORRECTIONS)]
+    return (fixed["verdict_after_first"] == "random").mean() if len(fixed) else np.nan
 
 
 def confusion(part: pd.DataFrame) -> pd.DataFrame:
@@ -113,7 +126,8 @@ def write_outputs(table: pd.DataFrame, out: Path, header: str) -> None:
     table.to_parquet(out / "cases.parquet", index=False)
     summary = rates(table)
     formatted = summary.copy()
-    for column in ("named first (visible, obvious)", "strictly first", "named first (barely)", "controls right"):
+    shares = ("named first (visible, obvious)", "strictly first", "named first (barely)", "random after the correction")
+    for column in (*shares, "controls right"):
         formatted[column] = formatted[column].map(percent)
     ok = table[table["error"] == ""]
     md, html = [header, "", "## Overall", "", formatted.to_markdown(index=False)], [f"<p>{header}</p>"]
@@ -140,10 +154,11 @@ def rates_figure(table: pd.DataFrame, path: Path) -> None:
     fig, axes = plt.subplots(1, 2, figsize=(11, 4.5), sharey=True)
     for ax, source in zip(axes, ("real", "simulated")):
         part = faulted[faulted["source"] == source]
-        for fault in FAULTS:
+        for k, fault in enumerate(FAULTS):
             share = part[part["fault"] == fault].groupby("level")["named"].mean().reindex(LEVELS)
             if share.notna().any():
-                ax.plot(LEVELS, 100 * share.values, marker="o", label=fault)
+                style = {"color": plt.cm.tab20(k / len(FAULTS)), "marker": "os^vD"[k % 5]}
+                ax.plot(LEVELS, 100 * share.values, label=fault, **style)
         ax.set_title(f"{source} base pairs ({len(part)} faulted cases)")
         ax.set_xlabel("fault level (magnitudes per fault: docs/diagnosis.md)")
         ax.grid(alpha=0.3)
@@ -161,7 +176,12 @@ def main() -> None:
     parser.add_argument("--out", type=Path, default=Path("diagnosis-results"))
     parser.add_argument("--points", type=int, default=POINTS, help=f"per cloud, at most (default {POINTS:,})")
     parser.add_argument("--jobs", type=int, default=2, help="worker processes (default 2)")
+    parser.add_argument("--tables-from", type=Path, help="a cases.parquet: write its tables and figure, run nothing")
     args = parser.parse_args()
+    if args.tables_from:
+        table = pd.read_parquet(args.tables_from)
+        write_outputs(table, args.out, f"{len(table)} cases of {args.tables_from}")
+        return
     start = time.perf_counter()
     table = run(args.slice, args.points, args.jobs)
     wall = time.perf_counter() - start

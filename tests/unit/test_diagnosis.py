@@ -3,6 +3,8 @@ faults are, and a slice of its zoo (real and simulated) is diagnosed as the full
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 import pytest
 
@@ -100,3 +102,62 @@ def test_misregistration_moves_scan_2_about_its_own_origin():
     np.testing.assert_allclose(turned.T_1_2[:3, 3], [2.0, 0, 0], atol=1e-12)  # turned in place
     np.testing.assert_allclose(moved.xyz2 - truth.xyz2, np.tile([0.08, 0.06, 0], (50, 1)), atol=1e-12)
     np.testing.assert_allclose(apply_pose(turned.T_1_2, base.scan2.xyz), turned.xyz2, atol=1e-12)
+
+
+# A slice of the zoo, at the benchmark's subsample: cases the full zoo names today (bench/RESULTS.md,
+# 2026-11-27), one or more per fault class, simulated and real, and controls read right.
+NAMED_TODAY = [
+    ("sim-intersection-still-vlp16", "translation", "visible"),
+    ("sim-intersection-still-vlp16", "range_scale", "visible"),
+    ("sim-intersection-still-vlp16", "motion_distortion", "visible"),
+    ("sim-intersection-still-vlp16", "moving_object", "visible"),
+    ("sim-intersection-still-vlp16", "fov_cut", "visible"),
+    ("sim-canyon-drive-hdl32", "ego_body", "visible"),
+    ("real-vlp16-capture", "translation", "visible"),
+    ("real-vlp16-capture", "range_scale", "visible"),
+    ("real-vlp16-capture", "motion_distortion", "visible"),
+    ("real-expd-vlp16", "moving_object", "visible"),
+]
+CONTROLS = ["sim-intersection-still-vlp16", "sim-canyon-drive-hdl32", "real-vlp16-capture"]
+POINTS = 20_000  # bench/diagnosis.py's default
+
+
+@functools.cache  # a case runs once for all the tests that read it
+def _slice_case(base: str, fault: str, level: str) -> dict:
+    if base not in zoo.bases():
+        pytest.skip(f"real data not found at {zoo.SHARED_DATA} (set LIDARFIELD_DATA)")
+    return zoo.run_case(zoo.Case(base, fault, level), POINTS)
+
+
+@pytest.mark.parametrize("base, fault, level", NAMED_TODAY)
+def test_the_first_proposal_names_the_fault(base, fault, level):
+    row = _slice_case(base, fault, level)
+    assert row["verdict0"] == "patterned"
+    assert row["proposal"] in zoo.NAMING[fault], row["stack"]
+
+
+@pytest.mark.parametrize("base", ["sim-intersection-still-vlp16", "real-vlp16-capture"])
+def test_the_corrections_leave_a_random_field(base):
+    for fault in ("translation", "range_scale", "motion_distortion"):
+        row = _slice_case(base, fault, "visible")
+        assert row["verdict_after_first"] == "random", (fault, row["stack"])
+
+
+@pytest.mark.parametrize("base", CONTROLS)
+def test_controls_propose_nothing_and_read_random(base):
+    row = _slice_case(base, zoo.CONTROL, "")
+    assert row["named"] and row["stack"] == "" and row["final_verdict"] == "random"
+
+
+def test_a_van_s_own_body_is_passed_over_but_nothing_else():
+    """The naming rule: proposals of what a pair holds by construction that come first are
+    passed over, unless they name the fault; anything else first is the proposal."""
+    steps = [{"hypothesis": h, "displacement_max_m": 0.0} for h in ("ego_vehicle", "outliers", "realign")]
+    case = zoo.Case("b", "translation", "visible")
+    assert zoo.proposal(case, steps) == "outliers" and zoo.proposal(case, steps, strict=True) == "ego_vehicle"
+    assert zoo.proposal(zoo.Case("b", "ego_body", "car"), steps) == "ego_vehicle"
+    control = zoo.Case("b", zoo.CONTROL, "")
+    realign = [{"hypothesis": "realign", "displacement_max_m": 0.004}]
+    assert zoo.named(control, "simulated", realign, "random")  # within the reference's accuracy
+    assert not zoo.named(control, "simulated", [{"hypothesis": "realign", "displacement_max_m": 0.05}], "random")
+    assert not zoo.named(control, "real", [], "patterned")

@@ -369,8 +369,7 @@ def with_box(scan: Scan, T_box_sensor: np.ndarray, size) -> Scan:
     blocked = distance < r
     xyz = scan.xyz.copy()
     xyz[blocked] *= (distance[blocked] / r[blocked])[:, None]
-    out = Scan(xyz, dict(scan.attributes), scan.sensor, scan.pose, scan.source)
-    out.sweep_motion, out.stamp_s = scan.sweep_motion, scan.stamp_s
+    out = _with_xyz(scan, xyz)
     keep = ~blocked | (distance >= scan.sensor.min_range_m)
     return out if keep.all() else out.subset(keep)
 
@@ -454,8 +453,7 @@ def faulted_pair(base: BasePair, case: Case) -> RegisteredPair:
         s2 = motion_fault(s2, m)
     elif case.fault == "moving_object":
         center, heading, along, size = object_place(s1, m)
-        T2 = base.scan2.pose if base.scan2.pose is not None else np.eye(4)
-        T_1_2 = invert_pose(s1.pose) @ T2
+        T_1_2 = invert_pose(s1.pose) @ s2.pose
         s1 = with_box(s1, box_frame(center, heading), size)
         s2 = with_box(s2, box_frame(center + m * along, heading) @ T_1_2, size)
     elif case.fault == "ego_body":
@@ -484,6 +482,7 @@ def faulted_pair(base: BasePair, case: Case) -> RegisteredPair:
 
 
 def _with_xyz(scan: Scan, xyz: np.ndarray) -> Scan:
+    """The scan with its points moved, everything else kept."""
     out = Scan(xyz, dict(scan.attributes), scan.sensor, scan.pose, scan.source)
     out.sweep_motion, out.stamp_s = scan.sweep_motion, scan.stamp_s
     return out

@@ -161,3 +161,28 @@ def test_a_van_s_own_body_is_passed_over_but_nothing_else():
     assert zoo.named(control, "simulated", realign, "random")  # within the reference's accuracy
     assert not zoo.named(control, "simulated", [{"hypothesis": "realign", "displacement_max_m": 0.05}], "random")
     assert not zoo.named(control, "real", [], "patterned")
+
+
+def test_with_box_reports_the_box_in_front_of_returns_and_drops_it_below_min_range():
+    model = PRESETS["vlp16"]  # minimum range 0.5 m
+    xyz = np.array([[10.0, 0, 0], [3.0, 0, 0], [10.0, 5.0, 0], [0.0, 0.0, -2.0]])
+    scan = Scan(xyz, {"ring": np.arange(4)}, model)
+    seen = zoo.with_box(scan, zoo.box_frame([5.0, 0, 0]), (2, 2, 2))  # a cube 4 to 6 m ahead
+    np.testing.assert_allclose(seen.xyz[0], [4.0, 0, 0])  # behind it: the box
+    np.testing.assert_array_equal(seen.xyz[1:], xyz[1:])  # before it, or past it: unchanged
+    body = zoo.with_box(scan, zoo.box_frame([0, 0, -0.6]), (1, 1, 0.6))  # roof 0.3 m below the sensor
+    assert len(body) == 3 and list(body.attributes["ring"]) == [0, 1, 2]  # the ray down met it at 0.3 m
+
+
+def test_a_moving_object_is_placed_where_it_hides_returns_in_both_scans():
+    base = zoo.load_base("sim-intersection-still-vlp16", POINTS)
+    pair = zoo.faulted_pair(base, zoo.Case(base.name, "moving_object", "obvious"))
+    truth = zoo.faulted_pair(base, zoo.Case(base.name, zoo.CONTROL, ""))
+    for xyz, true_xyz in ((pair.xyz1, truth.xyz1), (pair.xyz2, truth.xyz2)):
+        changed = np.any(xyz != true_xyz, axis=1)
+        assert changed.sum() > 100  # the car hides returns of the scene behind it
+        assert np.all(np.linalg.norm(xyz[changed], axis=1) < np.linalg.norm(true_xyz[changed], axis=1))
+    center, heading, along, size = zoo.object_place(base.scan1, 3.0)  # in frame 1 (scan 1's)
+    for xyz, true_xyz, shift in ((pair.xyz1, truth.xyz1, 0.0), (pair.xyz2, truth.xyz2, 3.0)):
+        on_box = apply_pose(zoo.box_frame(center + shift * along, heading), xyz[np.any(xyz != true_xyz, axis=1)])
+        assert np.all(np.abs(on_box) <= np.asarray(size) / 2 + 1e-6)  # where the car is in that scan

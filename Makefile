@@ -24,7 +24,7 @@ BIN := $(abspath $(VENV))/bin
 export PATH := $(BIN):$(PATH)
 export VIRTUAL_ENV := $(abspath $(VENV))
 
-.PHONY: run test setup setup-test setup-docs setup-slurm bench lint lock docs
+.PHONY: run test setup setup-test setup-docs setup-slurm bench diagnosis lint lock docs
 
 run: setup
 	snakemake --cores $(CORES)
@@ -63,6 +63,11 @@ bench: setup
 	python bench/field_kernel.py
 	python bench/hypotheses.py
 	python bench/raycast.py
+
+# The diagnosis benchmark (docs/diagnosis.md): the whole fault zoo, tables and figure in
+# diagnosis-results/ (under 15 minutes on 2 cores).
+diagnosis: setup
+	python bench/diagnosis.py --slice full --out diagnosis-results
 
 # The documentation site (docs/, mkdocs.yml) into site/; --strict fails on any warning.
 docs: setup-docs

@@ -37,6 +37,22 @@ def test_paper_intersection_matches_the_papers_description():
     assert not any(o.moving for o in scene.objects)
 
 
+def test_street_canyon_matches_its_description():
+    """14 m between the facades, the street's centre clear for a drive, cars and posts at the kerbs."""
+    scene = load_scene("street-canyon")
+    ground, *others = scene.objects
+    assert np.allclose(ground.mesh.bounds, [[-50, -20, 0], [50, 20, 0]])
+    buildings = [o for o in others if o.name.startswith(("north", "south"))]
+    assert len(buildings) == 8 and not any(o.moving for o in scene.objects)
+    inner = [b.mesh.bounds[0, 1] if b.mesh.bounds[0, 1] > 0 else b.mesh.bounds[1, 1] for b in buildings]
+    assert sorted(np.round(np.abs(inner), 6)) == [7] * 7 + [7.5]  # one building set back 0.5 m
+    heights = sorted(b.mesh.bounds[1, 2] for b in buildings)
+    assert heights[0] == pytest.approx(8) and heights[-1] == pytest.approx(22)
+    for o in others:
+        lo, hi = o.mesh.bounds
+        assert min(abs(lo[1]), abs(hi[1])) >= 4.5 and lo[1] * hi[1] > 0  # nothing in |y| < 4.5
+
+
 def test_unknown_scene_lists_the_builtins():
     with pytest.raises(ConfigError) as e:
         load_scene("no-such-scene")

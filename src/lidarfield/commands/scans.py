@@ -9,6 +9,7 @@ from __future__ import annotations
 import json
 import logging
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -27,6 +28,9 @@ from ..study.pairs import recorded_scan_spec
 from ..study.stack import apply_stack
 from ..study.summary import read_stats, write_summary
 from .jobs import field_stage, rematch_stage, write_stage
+
+if TYPE_CHECKING:  # the config's schema and validator load only where a config is read
+    from ..study.config import Study
 
 log = logging.getLogger(__name__)
 
@@ -195,20 +199,27 @@ def explain_scans(
     study = validate_config({}, require_pairs=False) if config_path is None else load_config(config_path, None, False)
     settings = registration_settings(register, transform)
     _, pair = read_and_register(scan1, scan2, settings, sensor, poses)
-    explanation = explain_pair(
+    explanation = explain_with_study(pair, study, out_dir.resolve().name)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    run = {"scan1": str(scan1), "scan2": str(scan2), "config": config_path and str(config_path), "register": settings}
+    write_text(out_dir / EXPLAIN_MARKER, json.dumps({**run, "sensor": sensor, "poses": poses}, indent=1) + "\n")
+    write_explanation(explanation, study.grid, study.grid_section, out_dir, study.config["plots"])
+    return explanation
+
+
+def explain_with_study(pair: RegisteredPair, study: Study, pair_name: str) -> Explanation:
+    """The loop on a registered pair with a study config's grid, ``suggest`` and ``explain``
+    settings: what ``lidarfield explain`` runs once it has
+    registered the scans, and what the diagnosis benchmark runs on each case."""
+    return explain_pair(
         pair,
         study.grid,
         study.grid_section,
         explain_settings(study.config["explain"]),
         study.suggest,
         study.base_dir,
-        out_dir.resolve().name,
+        pair_name,
     )
-    out_dir.mkdir(parents=True, exist_ok=True)
-    run = {"scan1": str(scan1), "scan2": str(scan2), "config": config_path and str(config_path), "register": settings}
-    write_text(out_dir / EXPLAIN_MARKER, json.dumps({**run, "sensor": sensor, "poses": poses}, indent=1) + "\n")
-    write_explanation(explanation, study.grid, study.grid_section, out_dir, study.config["plots"])
-    return explanation
 
 
 def field_of_scans(

@@ -1,0 +1,188 @@
+"""The diagnosis benchmark (issue 36, bench/diagnosis.py): its fault injection does what the
+faults are, and a slice of its zoo (real and simulated) is diagnosed as the full zoo measured."""
+
+from __future__ import annotations
+
+import functools
+
+import numpy as np
+import pytest
+
+from helpers import fault_zoo as zoo
+from lidarfield.hypotheses import apply_step
+from lidarfield.pair import RegisteredPair
+from lidarfield.poses import apply_pose
+from lidarfield.scan import Scan, still_sweep
+from lidarfield.sensors.models import PRESETS
+
+
+def test_range_fault_scales_and_offsets_every_range_along_its_ray():
+    rng = np.random.default_rng(1)
+    xyz = rng.normal(size=(500, 3)) * 10
+    faulty = zoo.range_fault(xyz, 1.004, 0.03)
+    r, r_faulty = np.linalg.norm(xyz, axis=1), np.linalg.norm(faulty, axis=1)
+    np.testing.assert_allclose(r_faulty, 1.004 * r + 0.03, rtol=1e-12)
+    np.testing.assert_allclose(faulty / r_faulty[:, None], xyz / r[:, None], atol=1e-12)
+
+
+def test_elevation_fault_moves_one_channel_only_and_keeps_range_and_azimuth():
+    rng = np.random.default_rng(2)
+    xyz = rng.normal(size=(400, 3)) * 8
+    channel = rng.integers(0, 4, size=400)
+    faulty = zoo.elevation_fault(xyz, channel, 2, 0.3)
+    np.testing.assert_array_equal(faulty[channel != 2], xyz[channel != 2])
+    (r0, az0, el0), (r1, az1, el1) = zoo.spherical(xyz[channel == 2]), zoo.spherical(faulty[channel == 2])
+    np.testing.assert_allclose(r1, r0, rtol=1e-12)
+    np.testing.assert_allclose(np.degrees(el1 - el0), 0.3, atol=1e-9)
+    np.testing.assert_allclose(az1, az0, atol=1e-9)
+
+
+def test_channels_of_a_scan_without_rings_are_the_models_nearest():
+    model = PRESETS["vlp16"]
+    elevation = np.radians(np.repeat(np.asarray(model.elevation_deg), 5) + 0.2)
+    azimuth = np.tile(np.linspace(-3, 3, 5), model.channels)
+    scan = Scan(zoo.from_spherical(np.full(len(azimuth), 10.0), azimuth, elevation), sensor=model)
+    np.testing.assert_array_equal(zoo.channels(scan), np.repeat(np.arange(model.channels), 5))
+
+
+def test_ray_box_distance_known_answers_and_sampled_reference():
+    T = zoo.box_frame([5.0, 0.0, 0.0])  # a 2 m cube centred 5 m ahead
+    rays = np.array([[10.0, 0, 0], [-10.0, 0, 0], [10.0, 10.0, 0], [6.0, 0.9, 0.0]])
+    d = zoo.ray_box_distance(rays, T, (2, 2, 2))
+    assert d[0] == pytest.approx(4.0) and np.isinf(d[1]) and np.isinf(d[2])
+    assert d[3] == pytest.approx(4.0 * np.hypot(6.0, 0.9) / 6.0)  # enters the face x = 4
+    # against marching along each ray, for a turned box
+    rng = np.random.default_rng(3)
+    directions = rng.normal(size=(300, 3))
+    directions /= np.linalg.norm(directions, axis=1, keepdims=True)
+    T = zoo.box_frame([3.0, 1.0, -0.5], yaw_rad=0.7)
+    d = zoo.ray_box_distance(directions * 20, T, (4.5, 1.8, 1.5))
+    steps = np.arange(0, 20, 0.002)
+    for direction, distance in zip(directions, d):
+        inside = np.all(np.abs(apply_pose(T, steps[:, None] * direction)) <= [2.25, 0.9, 0.75], axis=1)
+        expected = steps[inside][0] if inside.any() else np.inf
+        assert distance == pytest.approx(expected, abs=0.003)
+
+
+def test_motion_fault_is_undone_by_deskew():
+    """The injected distortion is what ``deskew`` corrects: the convention matches."""
+    model = PRESETS["vlp16"]
+    rng = np.random.default_rng(4)
+    xyz = rng.uniform(-20, 20, size=(2000, 3))
+    scan = Scan(xyz, {}, model, np.eye(4))
+    moved = zoo.motion_fault(scan, 5.0)
+    assert np.abs(moved.xyz - xyz).max() > 0.4  # up to 0.5 m over a 0.1 s sweep
+    pair = RegisteredPair(xyz, moved.xyz, np.eye(4), model, model, {}, {"time": moved.attributes["time"]})
+    pair.sweeps = {"1": {"sweep_motion": still_sweep()}, "2": {"sweep_motion": moved.sweep_motion}}
+    outcome = apply_step(pair, {"deskew": {}})
+    np.testing.assert_allclose(outcome.xyz2, xyz, atol=1e-9)
+
+
+def test_fov_fault_keeps_the_sector_its_model_says():
+    model = PRESETS["hdl32"]
+    rng = np.random.default_rng(5)
+    scan = Scan(rng.normal(size=(3000, 3)), {}, model)
+    cut = zoo.fov_fault(scan, 90.0)
+    azimuth = np.degrees(np.arctan2(cut.xyz[:, 1], cut.xyz[:, 0]))
+    assert cut.sensor.azimuth_limits_deg == (-135.0, 135.0)
+    assert np.abs(azimuth).max() <= 135.0 and len(cut) == pytest.approx(0.75 * len(scan), rel=0.05)
+
+
+def test_misregistration_moves_scan_2_about_its_own_origin():
+    base = zoo.BasePair(
+        "b", *(Scan(np.random.default_rng(k).normal(size=(50, 3)), {}, None, np.eye(4)) for k in (6, 7))
+    )
+    base.scan2.pose = np.eye(4)
+    base.scan2.pose[:3, 3] = [2.0, 0, 0]
+    for scan in (base.scan1, base.scan2):
+        scan.sweep_motion = still_sweep()
+    truth = zoo.faulted_pair(base, zoo.Case("b", zoo.CONTROL, ""))
+    turned = zoo.faulted_pair(base, zoo.Case("b", "yaw", "obvious"))
+    moved = zoo.faulted_pair(base, zoo.Case("b", "translation", "visible"))
+    np.testing.assert_allclose(turned.T_1_2[:3, 3], [2.0, 0, 0], atol=1e-12)  # turned in place
+    np.testing.assert_allclose(moved.xyz2 - truth.xyz2, np.tile([0.08, 0.06, 0], (50, 1)), atol=1e-12)
+    np.testing.assert_allclose(apply_pose(turned.T_1_2, base.scan2.xyz), turned.xyz2, atol=1e-12)
+
+
+# A slice of the zoo, at the benchmark's subsample: cases the full zoo names today (bench/RESULTS.md,
+# 2026-11-27), one or more per fault class, simulated and real, and controls read right.
+NAMED_TODAY = [
+    ("sim-intersection-still-vlp16", "translation", "visible"),
+    ("sim-intersection-still-vlp16", "range_scale", "visible"),
+    ("sim-intersection-still-vlp16", "motion_distortion", "visible"),
+    ("sim-intersection-still-vlp16", "moving_object", "visible"),
+    ("sim-intersection-still-vlp16", "fov_cut", "visible"),
+    ("sim-canyon-drive-hdl32", "ego_body", "visible"),
+    ("real-vlp16-capture", "translation", "visible"),
+    ("real-vlp16-capture", "range_scale", "visible"),
+    ("real-vlp16-capture", "motion_distortion", "visible"),
+    ("real-expd-vlp16", "moving_object", "visible"),
+]
+CONTROLS = ["sim-intersection-still-vlp16", "sim-canyon-drive-hdl32", "real-vlp16-capture"]
+POINTS = 20_000  # bench/diagnosis.py's default
+
+
+@functools.cache  # a case runs once for all the tests that read it
+def _slice_case(base: str, fault: str, level: str) -> dict:
+    if base not in zoo.bases():
+        pytest.skip(f"real data not found at {zoo.SHARED_DATA} (set LIDARFIELD_DATA)")
+    return zoo.run_case(zoo.Case(base, fault, level), POINTS)
+
+
+@pytest.mark.parametrize("base, fault, level", NAMED_TODAY)
+def test_the_first_proposal_names_the_fault(base, fault, level):
+    row = _slice_case(base, fault, level)
+    assert row["verdict0"] == "patterned"
+    assert row["proposal"] in zoo.NAMING[fault], row["stack"]
+
+
+@pytest.mark.parametrize("base", ["sim-intersection-still-vlp16", "real-vlp16-capture"])
+def test_the_corrections_leave_a_random_field(base):
+    for fault in ("translation", "range_scale", "motion_distortion"):
+        row = _slice_case(base, fault, "visible")
+        assert row["verdict_after_first"] == "random", (fault, row["stack"])
+
+
+@pytest.mark.parametrize("base", CONTROLS)
+def test_controls_propose_nothing_and_read_random(base):
+    row = _slice_case(base, zoo.CONTROL, "")
+    assert row["named"] and row["stack"] == "" and row["final_verdict"] == "random"
+
+
+def test_a_van_s_own_body_is_passed_over_but_nothing_else():
+    """The naming rule: proposals of what a pair holds by construction that come first are
+    passed over, unless they name the fault; anything else first is the proposal."""
+    steps = [{"hypothesis": h, "displacement_max_m": 0.0} for h in ("ego_vehicle", "outliers", "realign")]
+    case = zoo.Case("b", "translation", "visible")
+    assert zoo.proposal(case, steps) == "outliers" and zoo.proposal(case, steps, strict=True) == "ego_vehicle"
+    assert zoo.proposal(zoo.Case("b", "ego_body", "car"), steps) == "ego_vehicle"
+    control = zoo.Case("b", zoo.CONTROL, "")
+    realign = [{"hypothesis": "realign", "displacement_max_m": 0.004}]
+    assert zoo.named(control, "simulated", realign, "random")  # within the reference's accuracy
+    assert not zoo.named(control, "simulated", [{"hypothesis": "realign", "displacement_max_m": 0.05}], "random")
+    assert not zoo.named(control, "real", [], "patterned")
+
+
+def test_with_box_reports_the_box_in_front_of_returns_and_drops_it_below_min_range():
+    model = PRESETS["vlp16"]  # minimum range 0.5 m
+    xyz = np.array([[10.0, 0, 0], [3.0, 0, 0], [10.0, 5.0, 0], [0.0, 0.0, -2.0]])
+    scan = Scan(xyz, {"ring": np.arange(4)}, model)
+    seen = zoo.with_box(scan, zoo.box_frame([5.0, 0, 0]), (2, 2, 2))  # a cube 4 to 6 m ahead
+    np.testing.assert_allclose(seen.xyz[0], [4.0, 0, 0])  # behind it: the box
+    np.testing.assert_array_equal(seen.xyz[1:], xyz[1:])  # before it, or past it: unchanged
+    body = zoo.with_box(scan, zoo.box_frame([0, 0, -0.6]), (1, 1, 0.6))  # roof 0.3 m below the sensor
+    assert len(body) == 3 and list(body.attributes["ring"]) == [0, 1, 2]  # the ray down met it at 0.3 m
+
+
+def test_a_moving_object_is_placed_where_it_hides_returns_in_both_scans():
+    base = zoo.load_base("sim-intersection-still-vlp16", POINTS)
+    pair = zoo.faulted_pair(base, zoo.Case(base.name, "moving_object", "obvious"))
+    truth = zoo.faulted_pair(base, zoo.Case(base.name, zoo.CONTROL, ""))
+    for xyz, true_xyz in ((pair.xyz1, truth.xyz1), (pair.xyz2, truth.xyz2)):
+        changed = np.any(xyz != true_xyz, axis=1)
+        assert changed.sum() > 100  # the car hides returns of the scene behind it
+        assert np.all(np.linalg.norm(xyz[changed], axis=1) < np.linalg.norm(true_xyz[changed], axis=1))
+    center, heading, along, size = zoo.object_place(base.scan1, 3.0)  # in frame 1 (scan 1's)
+    for xyz, true_xyz, shift in ((pair.xyz1, truth.xyz1, 0.0), (pair.xyz2, truth.xyz2, 3.0)):
+        on_box = apply_pose(zoo.box_frame(center + shift * along, heading), xyz[np.any(xyz != true_xyz, axis=1)])
+        assert np.all(np.abs(on_box) <= np.asarray(size) / 2 + 1e-6)  # where the car is in that scan

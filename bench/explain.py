@@ -24,7 +24,7 @@ from pathlib import Path
 
 from lidarfield.analysis.field_stats import analyse_field
 from lidarfield.analysis.stopping_rule import ExplainSettings
-from lidarfield.report.explain import write_explanation
+from lidarfield.report.explanation import write_explanation
 from lidarfield.study.config import validate_config
 from lidarfield.study.explain_loop import explain_pair, format_step
 from lidarfield.study.stack import apply_stack

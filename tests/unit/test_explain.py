@@ -30,7 +30,7 @@ from lidarfield.field.grid import field_settings_from_config
 from lidarfield.hypotheses import validate_step
 from lidarfield.pair import RegisteredPair
 from lidarfield.registration import register_pair
-from lidarfield.report.explain import read_explanations, study_explain_parts
+from lidarfield.report.explanation import read_explanations, study_explain_parts
 from lidarfield.study.config import load_config, validate_config
 from lidarfield.study.explain_loop import STEP_COLUMNS, explain_pair
 from lidarfield.study.stack import apply_stack

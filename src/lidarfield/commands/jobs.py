@@ -304,7 +304,7 @@ def report_job(
     """The study overview: its tables, figures, the pairs' last-stage suggestions
     (``.../{pair}/stages/{stage}/suggestions.parquet``) and what explain found."""
     from ..report import write_overview
-    from ..report.explain import read_explanations
+    from ..report.explanation import read_explanations
     from ..study.tables import read_study_tables
 
     tables = read_study_tables(summary, study_dir)
@@ -325,7 +325,7 @@ def explain_job(
     """A study pair's explain target: the loop on its registered pair, its folder written;
     returns the explanation."""
     from ..analysis.stopping_rule import explain_settings
-    from ..report.explain import write_explanation
+    from ..report.explanation import write_explanation
     from ..study.explain_loop import explain_pair
 
     pair, _ = read_pair(points)

@@ -192,7 +192,7 @@ def explain_scans(
     """``lidarfield explain``: two scans read and registered as ``lidarfield run`` does, the loop
     on the grid, ``suggest`` and ``explain`` settings of the config (the schema's defaults
     without one; its ``hypotheses`` are not used), and the explanation's folder written."""
-    from ..report.explain import write_explanation  # the figures: matplotlib, only here
+    from ..report.explanation import write_explanation  # the figures: matplotlib, only here
     from ..study.config import load_config, validate_config
 
     out_dir = check_out_dir(out_dir, EXPLAIN_MARKER, "lidarfield explain")

@@ -17,7 +17,7 @@ from pathlib import Path
 
 from ..defaults import default
 from ..study.tables import compute_study_tables
-from .explain import RECORD_FILE, read_explanations
+from .explanation import RECORD_FILE, read_explanations
 from .explorer import ASSETS, write_assets, write_explorer_data
 from .overview import write_overview
 from .pair_page import write_pair_page

@@ -21,7 +21,7 @@ from ..io.atomic import write_text
 from ..plots.study import StudyFigure, study_figures
 from ..study.tables import StudyTables
 from .budget import MB, budget_mb, utf8_len
-from .explain import study_explain_parts
+from .explanation import study_explain_parts
 from .explorer import ASSETS
 from .page import esc, image, image_file, page, table
 from .pair_page import DPI, findings_parts
@@ -208,7 +208,7 @@ def write_overview(
     """Write the study overview; returns its path. ``figures_dir``: the study figures drawn by
     the workflow (drawn here when absent); ``stage_figures``: the pairs whose stage figures are
     drawn; ``last_stages``: each pair's last stage folder (for what to try next); ``explained``:
-    the pairs' explain records (``report.explain.read_explanations``), for what explain found."""
+    the pairs' explain records (``report.explanation.read_explanations``), for what explain found."""
     out_html = Path(out_html)
     figures = None if figures_dir is None else Path(figures_dir)
     parts = overview_parts(config, tables, figures, set(stage_figures), last_stages or {}, explained, out_html.parent)

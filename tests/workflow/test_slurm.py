@@ -115,12 +115,12 @@ def test_the_smoke_study_through_slurm_matches_the_local_run(slurm_env, slurm_pr
     # One allocation for the 4 scans, one for both pairs' chains, one for the study-wide jobs.
     assert submissions(cluster.stderr) == 3, cluster.stderr
     # Each allocation's jobs ran on its job worker: one log line a job. 4 scans; a pair's
-    # registration, stage 1's mitigate, 2 stages' field, suggest and figures, its figures and page
-    # (10, twice);
+    # registration, stage 1's mitigate, 2 stages' field, suggest and figures, its figures and page,
+    # its explorer's points and 2 stages' explorer data (13, twice);
     # the summary, the three study-level jobs and the overview (5).
     worker_logs = sorted((tmp_path / "slurm" / "results" / "smoke" / "logs" / "workers").glob("slurm-*.log"))
     assert len(worker_logs) == 3
-    assert sum(log.read_text().count(": {'exit': 0}") for log in worker_logs) == 4 + 2 * 10 + 5
+    assert sum(log.read_text().count(": {'exit': 0}") for log in worker_logs) == 4 + 2 * 13 + 5
 
 
 def workers_on(node_tmp: Path) -> list[str]:

@@ -457,7 +457,7 @@ def test_a_run_with_nothing_to_do_stops_the_worker_it_started(tmp_path):
 
     write_study(tmp_path, tiny_study())
     # Everything omitted: the run plans the study, then has nothing to do.
-    proc = snakemake(tmp_path, "--cores", "1", "--omit-from", "simulate", "plotly_js")
+    proc = snakemake(tmp_path, "--cores", "1", "--omit-from", "simulate", "plotly_js", "report_js")
     assert "Nothing to be done" in proc.stdout + proc.stderr
     assert (tmp_path / "results" / "logs" / "worker.log").exists()  # spawned (it may not have logged yet)
     workers = [

@@ -32,6 +32,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from ..pair import RegisteredPair
+from ..poses import in_sensor_frame
 from .grid import SENSORLESS_ELEVATION_DEG, FieldSettings, SphericalGrid
 
 # Elevation noise of one channel's points (deg): channels nearer than this are one channel, and
@@ -144,7 +145,7 @@ def pair_channels(pair: RegisteredPair) -> tuple[np.ndarray | None, str]:
 def ring_elevations(xyz: np.ndarray, ring: np.ndarray, pose: np.ndarray) -> np.ndarray:
     """The median elevation (deg) of each ring's points about the sensor at ``pose`` (the
     sensor's pose in the points' frame), rings of at least MIN_RING_POINTS points."""
-    local = (np.asarray(xyz, dtype=np.float64) - pose[:3, 3]) @ pose[:3, :3]
+    local = in_sensor_frame(np.asarray(xyz, dtype=np.float64), pose)
     elevation = np.degrees(np.arctan2(local[:, 2], np.hypot(local[:, 0], local[:, 1])))
     ring = np.asarray(ring)
     order = np.argsort(ring, kind="stable")

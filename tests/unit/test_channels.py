@@ -165,6 +165,26 @@ def test_rings_give_the_channels_without_a_model(simulated):
     np.testing.assert_allclose(by_rings.settings.grid.elevation_edges(), by_model, atol=0.01)
 
 
+def test_a_ring_that_is_no_channel_measures_no_channel(simulated):
+    """A driver that writes ring 0 for every point (a bag of scans without rings): its one ring
+    spans the whole layout, so it gives no channel and the grid is the one of no rings at all."""
+    pair = without_model(simulated("hdl32"), rings=True)
+    zeros = RegisteredPair(
+        pair.xyz1,
+        pair.xyz2,
+        pair.T_1_2,
+        None,
+        None,
+        *({"ring": np.zeros(len(a["ring"]), np.uint16)} for a in (pair.attributes1, pair.attributes2)),
+    )
+    settings = FieldSettings(SphericalGrid(elevation_deg=(-31.0, 11.0), elevation_bins=6))
+    bare = pair_binning(settings, without_model(pair, rings=False))
+    assert pair_binning(settings, zeros).reason == bare.reason
+    np.testing.assert_array_equal(
+        pair_binning(settings, zeros).settings.grid.elevation_edges(), bare.settings.grid.elevation_edges()
+    )
+
+
 def test_points_on_an_edge_without_model_or_rings_are_warned_about(simulated):
     pair = without_model(simulated("hdl32"), rings=False)
     on_channels = pair_binning(FieldSettings(SphericalGrid(elevation_deg=(-31.0, 11.0), elevation_bins=6)), pair)

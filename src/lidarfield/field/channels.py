@@ -50,6 +50,10 @@ LOCKED_RESULTANT = 0.9
 PHASE_SUBSAMPLE = 7
 # A ring with fewer points than this does not count as a channel (a stray return).
 MIN_RING_POINTS = 10
+# A ring whose points lie farther than this from their median elevation (half of them at
+# least; deg) is no channel: a driver's ring 0 for every point, or a rig's other lidar seen from
+# this one. (The free-space rows drop such rings the same way: field.free_space.channel_rows.)
+RING_SPREAD_DEG = 0.5
 # An edge within this of a channel (deg), or of a firing (in steps), is on it.
 _ON = 1e-6
 
@@ -144,14 +148,20 @@ def pair_channels(pair: RegisteredPair) -> tuple[np.ndarray | None, str]:
 
 def ring_elevations(xyz: np.ndarray, ring: np.ndarray, pose: np.ndarray) -> np.ndarray:
     """The median elevation (deg) of each ring's points about the sensor at ``pose`` (the
-    sensor's pose in the points' frame), rings of at least MIN_RING_POINTS points."""
+    sensor's pose in the points' frame), rings of at least MIN_RING_POINTS points whose points
+    lie within RING_SPREAD_DEG of it (half of them at least)."""
     local = in_sensor_frame(np.asarray(xyz, dtype=np.float64), pose)
     elevation = np.degrees(np.arctan2(local[:, 2], np.hypot(local[:, 0], local[:, 1])))
     ring = np.asarray(ring)
     order = np.argsort(ring, kind="stable")
     rings, starts, counts = np.unique(ring[order], return_index=True, return_counts=True)
     groups = np.split(elevation[order], starts[1:])
-    return np.array([np.median(g) for g, n in zip(groups, counts) if n >= MIN_RING_POINTS and np.isfinite(g).all()])
+    medians = [
+        np.median(g) if n >= MIN_RING_POINTS and np.isfinite(g).all() else np.nan for g, n in zip(groups, counts)
+    ]
+    return np.array(
+        [m for m, g in zip(medians, groups) if np.isfinite(m) and np.median(np.abs(g - m)) <= RING_SPREAD_DEG]
+    )
 
 
 def merged_channels(channels: np.ndarray) -> np.ndarray:

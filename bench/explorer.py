@@ -9,9 +9,10 @@ first draw of both views, the overview's table handlers. Bytes: every file the p
   overview and its plotted pair's page;
 - synthetic studies of 100 and 1,000 pairs (fields and summary rows only): their overviews;
 - one pair of 2 x 120,000 points and 4 stages: its page with the explorer's default budget
-  (50,000 points a cloud) and with every point;
+  (50,000 points a cloud), then its "draw all" button (the rest of the points loaded and
+  drawn), and its page with every point;
 - the viewers considered, on the same 2 x 120,000 points: plotly.js (scatter3d, as the explorer
-  draws) and a bare WebGL point renderer (what a viewer of our own would start from).
+  drew before its own viewer) and a bare WebGL point renderer (the floor for any viewer).
 
 Run: python bench/explorer.py [--runs 3] [--no-default-study | --default-results RESULTS]
 """
@@ -56,6 +57,23 @@ def open_page(browser, path: Path, ready: str) -> tuple[float, int]:
     page.goto(path.as_uri(), wait_until="commit")
     page.wait_for_selector(ready, state="attached", timeout=180_000)
     ms = float(page.eval_on_selector(ready, "e => e.dataset.readyMs"))
+    context.close()
+    local = {Path(unquote(urlparse(url).path)) for url in files if url.startswith("file://")}
+    return ms, sum(p.stat().st_size for p in local if p.is_file())
+
+
+def show_all(browser, path: Path) -> tuple[float, int]:
+    """Milliseconds from a click on the explorer's "draw all" to every point drawn, and the bytes
+    of the files it loaded."""
+    context = browser.new_context(viewport={"width": 1400, "height": 1000})
+    page = context.new_page()
+    page.goto(path.as_uri())
+    page.wait_for_selector(EXPLORER_READY, state="attached", timeout=180_000)
+    files = []
+    page.on("request", lambda r: files.append(r.url))
+    start = page.evaluate("() => { document.querySelector('button.show-all').click(); return performance.now(); }")
+    page.wait_for_selector(".explorer[data-all-points='1']", state="attached", timeout=180_000)
+    ms = page.evaluate("() => performance.now()") - start
     context.close()
     local = {Path(unquote(urlparse(url).path)) for url in files if url.startswith("file://")}
     return ms, sum(p.stat().st_size for p in local if p.is_file())
@@ -193,6 +211,12 @@ def main() -> None:
         for budget, label in ((50_000, "default budget, 50,000 a cloud drawn"), (0, "every point drawn")):
             page = big_pair(work, budget)
             results.append(measure(browser, f"2 x 120,000 points, 4 stages, {label}", page, EXPLORER_READY, args.runs))
+            if budget:
+                clicks = [show_all(browser, page) for _ in range(args.runs)]
+                row = {"case": "2 x 120,000 points: 'draw all' clicked, the other 2 x 70,000 loaded and drawn"}
+                row |= {"median_s": statistics.median(c[0] for c in clicks) / 1000, "MB": clicks[0][1] / 1e6}
+                print(f"{row['case']}: {row['median_s']:.2f} s, {row['MB']:.2f} MB")
+                results.append(row)
         for name, page in candidates(work, page).items():
             results.append(
                 measure(browser, f"viewer candidate, 2 x 120,000 points: {name}", page, CANDIDATE_READY, args.runs)

@@ -9,11 +9,12 @@ import pytest
 from helpers.synthetic_study import write_synthetic_pair
 from lidarfield.io.parquet_table import read_table
 from lidarfield.pair import read_pair
-from lidarfield.report.explorer import points_script, stage_script, write_explorer_data
+from lidarfield.report.explorer import points_script, rest_script, stage_script, write_explorer_data
 from lidarfield.report.explorer_data import (
     ALIGN,
     change_arrays,
     decode,
+    draw_order,
     encode,
     read_script,
     sample_rows,
@@ -65,18 +66,31 @@ def pair(tmp_path_factory):
     return pair_dir, dirs
 
 
-def test_points_are_the_sampled_rows_of_each_cloud(pair):
+def test_draw_order_is_the_sample_then_the_rest():
+    order = draw_order(1000, 300)
+    assert np.array_equal(order[:300], sample_rows(1000, 300))
+    assert np.all(np.diff(order[300:]) > 0) and np.array_equal(np.sort(order), np.arange(1000))
+    assert np.array_equal(draw_order(10, 0), np.arange(10))
+
+
+def test_points_are_the_sampled_rows_of_each_cloud_and_the_rest_the_others(pair):
     pair_dir, _ = pair
     registered, _ = read_pair(pair_dir / "registered.parquet")
     _, header, arrays = read_script(points_script(pair_dir))
+    key, rest_header, rest = read_script(rest_script(pair_dir))
+    assert key == "rest" and rest_header["clouds"] == header["clouds"]
     for c, xyz in ((1, registered.xyz1), (2, registered.xyz2)):
         assert header["clouds"][c - 1] == {"total": len(xyz), "drawn": 1000}
-        assert np.array_equal(arrays[f"xyz{c}"], xyz[sample_rows(len(xyz), 1000)].astype(np.float32))
+        sample = sample_rows(len(xyz), 1000)
+        assert np.array_equal(arrays[f"xyz{c}"], xyz[sample].astype(np.float32))
+        others = np.setdiff1d(np.arange(len(xyz)), sample)
+        assert np.array_equal(rest[f"xyz{c}"], xyz[others].astype(np.float32))
 
 
-def test_a_stage_draws_the_sampled_points_it_removed_where_they_were(pair):
+def test_a_stage_names_the_points_it_removed_where_they_were(pair):
     pair_dir, dirs = pair
     _, _, points = read_script(points_script(pair_dir))
+    _, _, rest = read_script(rest_script(pair_dir))
     registered, _ = read_pair(pair_dir / "registered.parquet")
     for d in dirs[1:]:
         changes, _ = read_table(d / "changes.parquet")
@@ -84,15 +98,20 @@ def test_a_stage_draws_the_sampled_points_it_removed_where_they_were(pair):
         _, header, arrays = read_script(stage_script(pair_dir, d.name))
         for c in (1, 2):
             gone = changes["row"][(changes["cloud"] == c) & changes["removed"]]
-            sample = sample_rows(len(registered.xyz1 if c == 1 else registered.xyz2), 1000)
-            expected = np.flatnonzero(
-                np.isin(sample, gone)
-            )  # the plain reference: positions of the sampled removed rows
-            assert np.array_equal(np.sort(arrays[f"removed{c}"]), expected)
-            assert header["clouds"][c - 1]["removed"] == {"total": len(gone), "drawn": len(expected)}
-            assert 0 < len(expected) < len(gone)
-            # where the page draws them is where removed.parquet says they were
-            drawn = points[f"xyz{c}"][arrays[f"removed{c}"]].astype(np.float64)
+            count = len(registered.xyz1 if c == 1 else registered.xyz2)
+            sample = sample_rows(count, 1000)
+            # the plain reference: a row's position is its index in the sample, else 1000 + its
+            # index among the rows left out
+            others = [r for r in range(count) if r not in set(sample.tolist())]
+            position = {**{r: i for i, r in enumerate(sample)}, **{r: 1000 + i for i, r in enumerate(others)}}
+            expected = np.array([position[r] for r in gone])
+            assert np.array_equal(np.sort(arrays[f"removed{c}"]), np.sort(expected))
+            in_sample = int(np.count_nonzero(expected < 1000))
+            assert header["clouds"][c - 1]["removed"] == {"total": len(gone), "drawn": in_sample}
+            assert 0 < in_sample < len(gone)
+            # where the page draws them (sample and rest, in draw order) is where removed.parquet says they were
+            everything = np.vstack([points[f"xyz{c}"], rest[f"xyz{c}"]])
+            drawn = everything[arrays[f"removed{c}"]].astype(np.float64)
             mine = removed["cloud"] == c
             there = np.column_stack([removed[a][mine] for a in "xyz"])
             nearest = np.min(np.linalg.norm(drawn[:, None, :] - there[None, :, :], axis=2), axis=1)
@@ -126,7 +145,7 @@ def test_appending_a_stage_leaves_the_other_files_as_they_were(pair, tmp_path):
 
 
 def test_moved_points_carry_their_new_coordinates():
-    samples = (np.array([2, 5, 9]), np.array([0, 1]))
+    orders = (np.array([2, 5, 9, 0, 1, 3, 4, 6, 7, 8]), np.array([0, 1, 2]))  # samples of 3 and 2 rows first
     changes = {
         "cloud": np.array([1, 1, 1, 2], np.uint8),
         "row": np.array([5, 6, 9, 1]),
@@ -135,8 +154,8 @@ def test_moved_points_carry_their_new_coordinates():
         "y": np.array([np.nan, 4.0, 5.0, 6.0]),
         "z": np.array([np.nan, 7.0, 8.0, 9.0]),
     }
-    arrays, header = change_arrays(changes, samples)
-    assert arrays["removed1"].tolist() == [1] and arrays["moved1"].tolist() == [2]  # row 6 is not sampled
-    assert arrays["moved1_xyz"].tolist() == [[2.0, 5.0, 8.0]]
+    arrays, header = change_arrays(changes, orders, (3, 2))
+    assert arrays["removed1"].tolist() == [1] and arrays["moved1"].tolist() == [7, 2]  # row 6 is in the rest
+    assert arrays["moved1_xyz"].tolist() == [[1.0, 4.0, 7.0], [2.0, 5.0, 8.0]]
     assert arrays["moved2"].tolist() == [1] and arrays["moved2_xyz"].tolist() == [[3.0, 6.0, 9.0]]
     assert header["clouds"][0] == {"removed": {"total": 1, "drawn": 1}, "moved": {"total": 2, "drawn": 1}}

@@ -106,14 +106,15 @@ def test_report_writes_an_overview_and_a_page_per_pair(plotted_study, tmp_path):
         assert image_count(page) == N_PAIR_FIGURES + 3 + 6 and 'class="missing"' not in page
         assert 'class="flag"' not in page
         # the viewer's scripts by relative path; its spec (JSON, not a script) names the pair's data files
-        assert (tmp_path / "assets" / "plotly.min.js").is_file()  # the explorer's, once for the report
+        assert not (tmp_path / "assets" / "plotly.min.js").exists()  # the explorer draws with WebGL itself
         scripts = re.findall(r"<script([^>]*)>", page)
-        assert scripts == [' src="../assets/plotly.min.js"', ' src="../assets/explorer.js"', ' type="application/json"']
+        assert scripts == [' src="../assets/explorer.js"', ' type="application/json"']
         spec = json.loads(re.search(r'<script type="application/json">(.*?)</script>', page).group(1))
         stems = ["points", *(d.name for d in dirs)]
         assert [os.path.normpath(tmp_path / name / s) for s in spec["scripts"]] == [
             str(root / name / "explorer" / f"{stem}.js") for stem in stems
         ]
+        assert os.path.normpath(tmp_path / name / spec["rest"]) == str(root / name / "explorer" / "rest.js")
     link = re.findall(r'href="([^"#]+field_3d\.html)"', pair_page(tmp_path, "pair-00"))
     assert len(link) == 1 and (tmp_path / "pair-00" / link[0]).is_file()
 

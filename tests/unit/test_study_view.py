@@ -78,8 +78,8 @@ def test_cells_sit_where_the_png_puts_them():
     assert 0 < inner < outer
 
 
-def test_a_report_without_an_explorer_writes_its_scripts_but_not_plotly(tmp_path):
-    """No pair has figures, so no page has an explorer: no 4.8 MB plotly.js beside the report."""
+def test_a_report_without_an_explorer_writes_its_scripts_only(tmp_path):
+    """No pair has figures, so no page has an explorer; the report's own scripts, no library."""
     write_field_study(tmp_path, 2, levels=2, n=1000)
     pairs, rows = discover(tmp_path)
     overview = write_report({}, pairs, rows, tmp_path / "report.html").read_text()

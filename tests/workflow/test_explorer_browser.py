@@ -1,10 +1,12 @@
 """The report's interactive parts in the system's Chromium, driven by Playwright (offline, no
-downloaded browser): the pair explorer's slider, hover and camera; every request stays on the
-machine. Assertions are on the drawn data (Plotly's traces) and the hover label's text, never
-on pixels."""
+downloaded browser): the pair explorer's slider, hover, cameras and "show all"; every request
+stays on the machine. Assertions are on the drawn data (what the viewer hands WebGL, which it
+exposes as ``explorer.frame``) and the hover label's text, never on pixels."""
 
 from __future__ import annotations
 
+import base64
+import io
 import re
 import shutil
 
@@ -14,7 +16,7 @@ import pytest
 from helpers.synthetic_study import write_synthetic_study
 from lidarfield.io.parquet_table import read_table
 from lidarfield.report import compare_studies, discover, write_report
-from lidarfield.report.explorer import points_script, stage_script
+from lidarfield.report.explorer import points_script, rest_script, stage_script
 from lidarfield.report.explorer_data import encode, read_script, wrap_script
 
 pytestmark = pytest.mark.slow
@@ -64,13 +66,14 @@ def open_explorer(page, url: str) -> None:
     page.wait_for_selector(".explorer[data-ready='1']", state="attached", timeout=60_000)
 
 
-def traces(page, view: str = "3d") -> dict:
-    """The drawn traces of a view by name: their point counts and (vector tips) coordinates."""
+def drawn(page, index: int = 0) -> dict:
+    """What an explorer drew at its stage: point counts, vector tips, corrections, layers."""
     return page.evaluate(
-        """view => Object.fromEntries(document.querySelector(`.explorer-${view}`).data.map(t =>
-             [t.name, {n: (t.x || []).length, x: Array.from(t.x || []), y: Array.from(t.y || []),
-                       visible: t.visible}]))""",
-        view,
+        """i => { const x = document.querySelectorAll('.explorer')[i].explorer, f = x.frame;
+             return {stage: f.stage, kept: f.kept, removed: f.removed, vectors: f.vectors,
+                     tips: Array.from(f.tips), moves: f.moves, layers: x.layers,
+                     cameras: JSON.parse(JSON.stringify(x.cameras))}; }""",
+        index,
     )
 
 
@@ -78,40 +81,67 @@ def move_slider(page, stage: int) -> None:
     page.eval_on_selector(
         ".stage-slider", "(s, v) => { s.value = v; s.dispatchEvent(new Event('input')); }", str(stage)
     )
-    page.wait_for_function("k => document.querySelector('.explorer').explorer.stage === k", arg=stage, timeout=10_000)
-    page.wait_for_timeout(300)  # Plotly.react resolves after the redraw
+    page.wait_for_function(
+        "k => document.querySelector('.explorer').explorer.frame.stage === k", arg=stage, timeout=10_000
+    )
 
 
-def test_the_slider_changes_the_vectors_and_removed_points_and_keeps_the_camera(study, page):
+def drag(page, selector: str, dx: float, dy: float, index: int = 0) -> None:
+    """A mouse drag across a view's canvas, from its centre."""
+    canvas = page.locator(f"{selector} canvas.gl").nth(index)
+    canvas.scroll_into_view_if_needed()
+    box = canvas.bounding_box()
+    x, y = box["x"] + box["width"] / 2, box["y"] + box["height"] / 2
+    page.mouse.move(x, y)
+    page.mouse.down()
+    page.mouse.move(x + dx / 2, y + dy / 2)
+    page.mouse.move(x + dx, y + dy)
+    page.mouse.up()
+
+
+def removed_drawn(arrays: dict, c: int, loaded: int) -> int:
+    """A stage file's removed points of cloud c among the ``loaded`` first of its draw order."""
+    return int(np.count_nonzero(arrays.get(f"removed{c}", np.zeros(0)) < loaded))
+
+
+def test_the_slider_changes_the_vectors_and_removed_points_and_keeps_the_cameras(study, page):
     root, pairs, _ = study
     dirs = pairs["pair-00"]
     pair_dir = dirs[0].parent.parent
     open_explorer(page, (pair_dir / "report.html").as_uri())
     assert "2,000 of 6,000 points drawn" in page.inner_text(".budget-drawn")  # the budget's cut, stated
-    page.evaluate(
-        "() => Plotly.relayout(document.querySelector('.explorer-3d'), {'scene.camera.eye': {x: 0.3, y: -2.1, z: 0.9}})"
-    )
+    home = drawn(page)["cameras"]
+    drag(page, ".explorer-3d", 120, -40)  # orbit the 3-D view
+    drag(page, ".explorer-top", 60, 30)  # pan the top view
+    page.mouse.wheel(0, -300)  # and zoom it
+    cameras = drawn(page)["cameras"]
+    assert cameras["3d"]["azimuth"] == pytest.approx(home["3d"]["azimuth"] - 120 * 0.008)
+    assert cameras["top"]["centre"] != pytest.approx(home["top"]["centre"])
+    assert cameras["top"]["half"] < home["top"]["half"]
     removed_so_far = 0
     for level, d in enumerate(dirs):
         if level:
             move_slider(page, level)
         _, _, data = read_script(stage_script(pair_dir, d.name))
         field, _ = read_table(d / "field.parquet")
-        drawn = traces(page)
-        assert drawn["vector tips"]["n"] == int(np.count_nonzero(field["valid"]))
-        removed_so_far += len(data.get("removed1", [])) + len(data.get("removed2", []))
-        assert drawn["removed points"]["n"] == removed_so_far
-        assert drawn["cloud 1 (kept)"]["n"] + drawn["cloud 2 (kept)"]["n"] == 2 * BUDGET - removed_so_far
-        # the same vectors in the top view
-        assert traces(page, "top")["vector tips"]["n"] == drawn["vector tips"]["n"]
-        eye = page.evaluate("() => document.querySelector('.explorer-3d')._fullLayout.scene.camera.eye")
-        assert eye == pytest.approx({"x": 0.3, "y": -2.1, "z": 0.9})
+        now = drawn(page)
+        valid = field["valid"] & np.isfinite(field["magnitude"])
+        assert now["vectors"] == int(np.count_nonzero(valid))
+        # the tips drawn are the field's tails plus the magnified vectors
+        magnification = page.evaluate("document.querySelector('.explorer').explorer.magnification")
+        tails = np.column_stack([field[a][valid] for a in ("x1", "y1", "z1")])
+        vectors = np.column_stack([field[a][valid] for a in "uvw"])
+        assert np.allclose(np.reshape(now["tips"], (-1, 3)), tails + magnification * vectors, atol=1e-3)
+        removed_so_far += removed_drawn(data, 1, BUDGET) + removed_drawn(data, 2, BUDGET)
+        assert now["removed"] == removed_so_far
+        assert sum(now["kept"]) == 2 * BUDGET - removed_so_far
+        assert now["cameras"] == cameras  # both views as the analyst left them
     assert removed_so_far > 0
     assert page.evaluate("location.hash") == f"#stage={len(dirs) - 1}"
-    # a layer toggled off is drawn invisible, and stays so when the stage changes
+    # a layer toggled off stays off when the stage changes
     page.uncheck("input.layer[value='removed']")
     move_slider(page, 1)
-    assert traces(page)["removed points"]["visible"] is False
+    assert drawn(page)["layers"]["removed"] is False
     assert page.errors == []
 
 
@@ -120,51 +150,83 @@ def test_hover_on_a_vector_shows_its_voxels_counts_and_length(study, page):
     d = pairs["pair-01"][1]
     open_explorer(page, f"{(d.parent.parent / 'report.html').as_uri()}#stage=1")
     field, _ = read_table(d / "field.parquet")
-    # the largest vector's tip in the top view, in the page's pixels
-    box = page.evaluate(
-        """() => {
-          const gd = document.querySelector('.explorer-top'), L = gd._fullLayout;
-          const tips = gd.data.find(t => t.name === 'vector tips'), r = gd.getBoundingClientRect();
-          const mags = tips.hovertext.map(h => parseFloat(/\\|d\\| ([0-9.]+)/.exec(h)[1]));
-          const best = mags.indexOf(Math.max(...mags));
-          return {x: r.left + L._size.l + L.xaxis.l2p(tips.x[best]), y: r.top + L._size.t + L.yaxis.l2p(tips.y[best]),
-                  voxel: tips.customdata[best]};
-        }"""
-    )
-    page.mouse.move(box["x"], box["y"])
-    label = page.wait_for_selector(".explorer-top .hoverlayer .hovertext", state="attached", timeout=10_000)
-    # the label's lines (SVG tspans), one per line
-    text = label.evaluate("g => [...g.querySelectorAll('tspan.line')].map(t => t.textContent).join('\\n')")
-    voxel = int(re.search(r"voxel (\d+)", text).group(1))
-    assert voxel == box["voxel"]
-    row = int(np.flatnonzero(field["voxel"] == voxel)[0])
-    assert int(re.search(r"n1 (\d+)", text).group(1)) == field["n1"][row]
-    assert int(re.search(r"n2 (\d+)", text).group(1)) == field["n2"][row]
-    assert float(re.search(r"\|d\| ([0-9.]+) m", text).group(1)) == pytest.approx(field["magnitude"][row], abs=5e-5)
-    assert f"az {field['az_bin'][row]}, el {field['el_bin'][row]}" in text
-    # the 3-D view's tips carry the same hover texts as the top view's
-    hovers = page.evaluate(
-        "() => ['3d', 'top'].map(v => document.querySelector(`.explorer-${v}`).data.find(t => t.name === 'vector tips')"
-        ".hovertext)"
-    )
-    assert hovers[0] == hovers[1] and len(hovers[0]) == int(np.count_nonzero(field["valid"]))
+    valid = field["valid"] & np.isfinite(field["magnitude"])
+    for view in ("top", "3d"):
+        # the largest vector's tip, where the view draws it on the page
+        best = int(np.argmax(field["magnitude"][valid]))
+        x, y = page.evaluate(f"() => document.querySelector('.explorer').explorer.tipOnPage('{view}', {best})")
+        page.mouse.move(x, y)
+        tooltip = page.wait_for_selector(f".explorer-{view} .explorer-tooltip:not([hidden])", timeout=10_000)
+        text = tooltip.inner_text()
+        voxel = int(re.search(r"voxel (\d+)", text).group(1))
+        row = int(np.flatnonzero(field["voxel"] == voxel)[0])
+        assert voxel == field["voxel"][valid][best]
+        assert int(re.search(r"n1 (\d+)", text).group(1)) == field["n1"][row]
+        assert int(re.search(r"n2 (\d+)", text).group(1)) == field["n2"][row]
+        assert float(re.search(r"\|d\| ([0-9.]+) m", text).group(1)) == pytest.approx(field["magnitude"][row], abs=5e-5)
+        assert float(re.search(r"se ([0-9.]+) m", text).group(1)) == pytest.approx(field["se"][row], abs=5e-5)
+        assert f"az {field['az_bin'][row]}, el {field['el_bin'][row]}, r {field['r_bin'][row]}" in text
+    # away from every vector: no label
+    box = page.locator(".explorer-top canvas.gl").bounding_box()
+    page.mouse.move(box["x"] + 3, box["y"] + 3)
+    page.wait_for_selector(".explorer-top .explorer-tooltip[hidden]", state="attached", timeout=10_000)
     # clicking selects the voxel; the selection stays when the stage changes
-    page.mouse.click(box["x"], box["y"])
+    page.mouse.click(x, y)
     page.wait_for_function("() => document.querySelector('.explorer').explorer.selected !== null")
     move_slider(page, 0)
     assert f"voxel {voxel}" in page.inner_text(".selected-voxel")
     assert page.errors == []
 
 
+def test_show_all_draws_every_point_and_every_removed_one(study, page):
+    root, pairs, _ = study
+    dirs = pairs["pair-00"]
+    pair_dir = dirs[0].parent.parent
+    open_explorer(page, f"{(pair_dir / 'report.html').as_uri()}#stage=2")
+    assert not any(url.endswith("/rest.js") for url in page.requests)  # only on demand
+    page.click("button.show-all")
+    page.wait_for_selector(".explorer[data-all-points='1']", state="attached", timeout=30_000)
+    assert "6,000 of 6,000 points drawn" in page.inner_text(".budget-drawn")
+    totals = sum(
+        c["removed"]["total"] for d in dirs[1:] for c in read_script(stage_script(pair_dir, d.name))[1]["clouds"]
+    )
+    now = drawn(page)
+    assert now["removed"] == totals and sum(now["kept"]) + totals == 12_000
+    assert page.locator("button.show-all").is_hidden()
+    assert page.errors == []
+
+
+def test_a_view_exports_what_it_shows_as_png(study, page):
+    from PIL import Image
+
+    root, pairs, _ = study
+    open_explorer(page, (pairs["pair-00"][0].parent.parent / "report.html").as_uri())
+    for view in ("3d", "top"):
+        url = page.evaluate(f"() => document.querySelector('.explorer').explorer.png('{view}')")
+        assert url.startswith("data:image/png;base64,")
+        image = Image.open(io.BytesIO(base64.b64decode(url.split(",", 1)[1]))).convert("L")
+        width = page.eval_on_selector(f".explorer-{view} canvas.gl", "c => c.width")
+        assert image.size[0] == width
+        # the points and vectors, not a blank canvas (preserveDrawingBuffer keeps the frame)
+        assert np.count_nonzero(np.asarray(image) < 200) > 500
+    with page.expect_download() as download:
+        page.click("button.png-top")
+    assert download.value.suggested_filename == f"pair-00-{pairs['pair-00'][0].name}-top.png"
+    assert page.errors == []
+
+
 def test_the_report_requests_nothing_off_the_machine(study, page):
     root, pairs, _ = study
     open_explorer(page, (pairs["pair-00"][0].parent.parent / "report.html").as_uri())
+    page.click("button.show-all")
+    page.wait_for_selector(".explorer[data-all-points='1']", state="attached", timeout=30_000)
     page.goto((root / "report.html").as_uri())
     page.wait_for_load_state("load")
     assert page.requests and all(url.startswith(("file://", "data:")) for url in page.requests), page.requests
     loaded = {url.rsplit("/", 1)[-1] for url in page.requests}
-    assert {"plotly.min.js", "explorer.js", "points.js"} <= loaded
-    assert points_script(pairs["pair-00"][0].parent.parent).is_file()
+    assert {"explorer.js", "points.js", "rest.js", "overview.js"} <= loaded
+    assert "plotly.min.js" not in loaded  # the explorer draws with WebGL itself
+    assert rest_script(pairs["pair-00"][0].parent.parent).is_file()
     assert page.errors == []
 
 
@@ -179,6 +241,7 @@ def test_a_heat_map_cell_opens_that_pair_at_that_stage(study, page):
     assert page.url.endswith("/pair-01/report.html#stage=2")
     assert page.evaluate("document.querySelector('.stage-slider').value") == "2"
     assert page.inner_text(".stage-label") == "02 field_of_view"
+    assert drawn(page)["stage"] == 2
     assert page.errors == []
 
 
@@ -212,21 +275,18 @@ def test_the_ranked_table_sorts_and_filters(study, page):
     assert page.errors == []
 
 
-def test_compare_shows_a_pair_of_both_studies_with_the_camera_and_stage_linked(study, page, tmp_path):
+def test_compare_shows_a_pair_of_both_studies_with_the_cameras_and_stage_linked(study, page, tmp_path):
     root, _, _ = study
     out = compare_studies(root, root, tmp_path / "compare.html")
     page.goto(out.as_uri())
     page.wait_for_selector(".explorer[data-linked='1']", state="attached", timeout=60_000)
     assert page.locator(".explorer").count() == 4  # two pairs, A beside B
-    eye = {"x": 0.2, "y": -1.9, "z": 1.1}
-    page.evaluate(
-        "eye => Plotly.relayout(document.querySelectorAll('.explorer-3d')[0], {'scene.camera.eye': eye})", eye
-    )
-    page.wait_for_timeout(500)
-    cameras = page.evaluate(
-        "() => [...document.querySelectorAll('.explorer-3d')].map(v => v._fullLayout.scene.camera.eye)"
-    )
-    assert cameras[1] == pytest.approx(eye) and cameras[2] != pytest.approx(eye)  # B's view of pair-00 only
+    drag(page, ".explorer-3d", 100, 50, index=0)
+    drag(page, ".explorer-top", -40, 20, index=0)
+    cameras = [drawn(page, i)["cameras"] for i in range(4)]
+    assert cameras[1] == cameras[0]  # B's view of pair-00 as A's
+    for view in ("3d", "top"):
+        assert cameras[2][view] != cameras[0][view]  # pair-01's views kept theirs
     move_slider(page, 2)  # the first explorer's slider moves its partner's
     stages = page.evaluate("() => [...document.querySelectorAll('.explorer')].map(e => e.explorer.stage)")
     assert stages == [2, 2, 0, 0]
@@ -252,20 +312,19 @@ def test_a_correcting_stage_draws_its_moves_from_before_to_after(study, page, tm
     header["clouds"][1]["moved"] = {"total": 3, "drawn": 3}
     stage2.write_text(wrap_script(key, encode(header, arrays)))
     open_explorer(page, f"{(pair_dir / 'report.html').as_uri()}#stage=2")
-    segments = page.evaluate(
-        "() => { const t = document.querySelector('.explorer-3d').data.find(t => t.name === 'corrections');"
-        " return [Array.from(t.x), Array.from(t.y), Array.from(t.z)]; }"
-    )
-    drawn = np.array(segments, dtype=float).T.reshape(3, 3, 3)  # a segment: before, after, NaN
-    assert np.allclose(drawn[:, 0], points["xyz2"][moved], atol=1e-5)
-    assert np.allclose(drawn[:, 1], to, atol=1e-5)
+    moves = np.array(drawn(page)["moves"], dtype=float)  # a move: before, after
+    assert np.allclose(moves[:, 0], points["xyz2"][moved], atol=1e-5)
+    assert np.allclose(moves[:, 1], to, atol=1e-5)
     assert "moved 3 of 3" in page.inner_text(".budget-drawn")
     kept2 = page.evaluate(
-        "() => { const t = document.querySelector('.explorer-3d').data.find(t => t.name === 'cloud 2 (kept)');"
-        " return [Array.from(t.x), Array.from(t.y), Array.from(t.z)]; }"
+        "m => { const f = document.querySelector('.explorer').explorer.frame;"
+        " return m.map(i => [f.removedBy[1][i], ...Array.from(f.clouds[1].subarray(3 * i, 3 * i + 3))]); }",
+        moved.tolist(),
     )
-    kept2 = np.array(kept2, dtype=float).T
-    assert all(np.min(np.linalg.norm(kept2 - p, axis=1)) < 1e-5 for p in to)  # drawn where they were moved to
+    kept2 = np.array(kept2, dtype=float)
+    assert np.all(kept2[:, 0] == 0) and np.allclose(kept2[:, 1:], to, atol=1e-5)  # kept, drawn where moved to
+    # the arrows: a shaft and a two-stroke head each
+    assert page.evaluate("document.querySelector('.explorer').explorer.frame.arrows.length") == 3 * 3 * 6
     move_slider(page, 1)  # stage 1 moved nothing
-    assert traces(page)["corrections"]["n"] == 0
+    assert drawn(page)["moves"] == []
     assert page.errors == []

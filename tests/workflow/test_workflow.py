@@ -115,10 +115,10 @@ def test_full_run_writes_the_study_level_and_a_page_per_pair(study_dir):
         page = (results / pair / "report.html").read_text()
         assert "field_3d.html" not in page or "interactive 3-D view" in page
         assert page.count("field from above</figcaption>") == 3 and 'class="missing"' not in page
-        # the explorer: the pair's points and one data file per stage, loaded by the page
+        # the explorer: the pair's points (the sample, the rest) and one data file per stage, loaded by the page
         stages = sorted(p.name for p in (results / pair / "stages").iterdir())
         explorer = sorted(p.name for p in (results / pair / "explorer").iterdir())
-        assert explorer == sorted(["points.js", *(f"{s}.js" for s in stages)])
+        assert explorer == sorted(["points.js", "rest.js", *(f"{s}.js" for s in stages)])
         assert all(f'"explorer/{name}"' in page for name in explorer)  # the explorer's spec lists them
 
 

@@ -356,5 +356,9 @@ def pair_page_explorer(wildcards):
         return []
     folder = f"{RESULTS}/{wildcards.pair}/explorer"
     stages = [f"{folder}/{stage}.js" for stage in STAGES[wildcards.pair]]
-    assets = [f"{RESULTS}/assets/explorer.js", f"{RESULTS}/assets/plotly.min.js"]
-    return [f"{folder}/points.js", *stages, *assets]
+    return [
+        f"{folder}/points.js",
+        f"{folder}/rest.js",
+        *stages,
+        f"{RESULTS}/assets/explorer.js",
+    ]

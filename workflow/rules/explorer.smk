@@ -1,5 +1,5 @@
-# The pair explorer's data (lidarfield.report.explorer_data): the pair's sampled points once,
-# then one file per stage, so that appending a hypothesis writes only its stage's file. Written
+# The pair explorer's data (lidarfield.report.explorer_data): the pair's sampled points (and the
+# rest, loaded on the page's "show all") once, then one file per stage, so that appending a hypothesis writes only its stage's file. Written
 # for the pairs whose page shows the figures (plots.pairs, or a stages.html asked for).
 
 
@@ -7,7 +7,8 @@ rule explorer_points:
     input:
         registered=f"{RESULTS}/{{pair}}/registered.parquet",
     output:
-        f"{RESULTS}/{{pair}}/explorer/points.js",
+        points=f"{RESULTS}/{{pair}}/explorer/points.js",
+        rest=f"{RESULTS}/{{pair}}/explorer/rest.js",
     log:
         f"{RESULTS}/logs/explorer_points/{{pair}}.log",
     benchmark:
@@ -21,7 +22,7 @@ rule explorer_points:
         budget=EXPLORER_POINTS,
     shell:
         "lidarfield job explorer-points --registered {input.registered:q} --budget {params.budget}"
-        " --out {output:q} > {log:q} 2>&1"
+        " --out {output.points:q} --rest {output.rest:q} > {log:q} 2>&1"
 
 
 rule explorer_stage:
@@ -47,7 +48,7 @@ rule explorer_stage:
         " --changes {input.changes:q} --budget {params.budget} --out {output:q} > {log:q} 2>&1"
 
 
-# The report's own scripts, one copy for the study (beside plotly.min.js): the explorer's and
+# The report's own scripts, one copy for the study: the explorer's and
 # the overview's, copied from the package.
 rule report_js:
     output:

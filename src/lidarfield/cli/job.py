@@ -98,7 +98,8 @@ def add_parser(subparsers) -> None:
     p = jobs.add_parser("explorer-points")
     p.add_argument("--registered", required=True, help="the pair's registered.parquet")
     p.add_argument("--budget", type=int, required=True, help="the most points drawn of each cloud (0: all)")
-    p.add_argument("--out", required=True)
+    p.add_argument("--out", required=True, help="the sampled points' script (points.js)")
+    p.add_argument("--rest", required=True, help="the other points' script (rest.js), loaded on the page's 'show all'")
     p.set_defaults(func=_explorer_points)
 
     p = jobs.add_parser("explorer-stage")
@@ -256,9 +257,9 @@ def _plotly_js(args: argparse.Namespace) -> None:
 
 
 def _explorer_points(args: argparse.Namespace) -> None:
-    from ..report.explorer_data import write_points_script
+    from ..report.explorer_data import write_points_scripts
 
-    write_points_script(args.registered, args.budget, args.out)
+    write_points_scripts(args.registered, args.budget, args.out, args.rest)
 
 
 def _explorer_stage(args: argparse.Namespace) -> None:

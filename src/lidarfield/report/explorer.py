@@ -1,9 +1,10 @@
 """The pair explorer on a pair's page: its stages in one interactive 3-D view and a top view.
 
-The page loads, by relative path, the viewer (``assets/explorer.js`` and ``assets/plotly.min.js``
-of the results folder, one copy for the study) and the pair's data (``{pair}/explorer/points.js``
-and one ``{stage}.js`` per stage, see :mod:`.explorer_data`): no server, no network, and the
-page itself stays small whatever the point budget.
+The page loads, by relative path, the viewer (``assets/explorer.js`` of the results folder, one
+copy for the study: a WebGL viewer of its own, no library) and the pair's data
+(``{pair}/explorer/points.js`` and one ``{stage}.js`` per stage, and ``rest.js`` when the analyst
+asks for every point, see :mod:`.explorer_data`): no server, no network, and the page itself
+stays small whatever the point budget.
 """
 
 from __future__ import annotations
@@ -14,22 +15,29 @@ from pathlib import Path
 
 from ..errors import InputError
 from ..io.atomic import write_text
-from ..plots.interactive import write_plotly_js
 from ..storage.layout import level_of
-from .explorer_data import FOLDER, POINTS, write_points_script, write_stage_script
+from .explorer_data import FOLDER, POINTS, REST, write_points_scripts, write_stage_script
 from .page import esc, relative_href
 
 ASSETS = "assets"  # the results folder's shared scripts
 VIEWER = "explorer.js"
 OVERVIEW = "overview.js"  # the overview's table sorting and filter (lidarfield.report.study_view)
-PLOTLY = "plotly.min.js"
 STYLE = """<style>
 .explorer { margin: 0.6em 0; }
 .explorer-controls { display: flex; flex-wrap: wrap; gap: 0.3em 0.8em; align-items: center; margin: 0.3em 0; }
 .stage-slider { width: 16em; }
 .explorer-views { display: flex; gap: 10px; }
 .explorer-view { flex: 1 1 0; min-width: 0; border: 1px solid #ddd; }
-.explorer-plot { height: 620px; }
+.explorer-title { font-size: 0.85em; margin: 0.2em 0.4em; }
+.explorer-canvas { position: relative; height: 620px; }
+.explorer-canvas canvas { position: absolute; left: 0; top: 0; width: 100%; height: 100%; }
+.explorer-canvas canvas.gl { cursor: grab; touch-action: none; }
+.explorer-tooltip { position: absolute; pointer-events: none; background: rgba(255,255,255,0.95);
+  border: 1px solid #888; padding: 2px 5px; font-size: 12px; white-space: nowrap; z-index: 2; }
+.explorer-legend { display: flex; flex-wrap: wrap; gap: 0.2em 1em; align-items: center; font-size: 0.85em; }
+.explorer-legend .bar { display: inline-block; width: 10em; height: 0.8em; vertical-align: middle; margin: 0 0.3em; }
+.explorer-legend .swatch { display: inline-block; width: 0.8em; height: 0.8em; margin-right: 0.25em;
+  vertical-align: middle; }
 .selected-voxel { font-size: 0.9em; }
 </style>"""
 
@@ -60,6 +68,10 @@ def points_script(pair_dir: Path) -> Path:
     return explorer_dir(pair_dir) / f"{POINTS}.js"
 
 
+def rest_script(pair_dir: Path) -> Path:
+    return explorer_dir(pair_dir) / f"{REST}.js"
+
+
 def stage_label(stage_id: str) -> str:
     """``02 field_of_view`` for ``02-field_of_view-1a2b3c4d``."""
     level, _, rest = stage_id.partition("-")
@@ -68,7 +80,7 @@ def stage_label(stage_id: str) -> str:
 
 def explorer_scripts(assets: Path, out_dir: Path) -> list[str]:
     """The viewer's scripts (in ``assets``), loaded once by a page in ``out_dir``, and its style."""
-    return [STYLE, *(f'<script src="{esc(relative_href(assets / s, out_dir))}"></script>' for s in (PLOTLY, VIEWER))]
+    return [STYLE, f'<script src="{esc(relative_href(assets / VIEWER, out_dir))}"></script>']
 
 
 def explorer_div(name: str, stage_dirs: list[Path], out_dir: Path, how: str, link: str = "") -> str:
@@ -81,6 +93,7 @@ def explorer_div(name: str, stage_dirs: list[Path], out_dir: Path, how: str, lin
         "pair": name,
         "stages": [{"id": d.name, "label": stage_label(d.name)} for d in stage_dirs],
         "scripts": [relative_href(path, out_dir) for path in data],
+        "rest": relative_href(rest_script(pair_dir), out_dir),
         "how": how,
     }
     # "</" would end the JSON's script element early: JSON allows "<\/" for it
@@ -90,11 +103,12 @@ def explorer_div(name: str, stage_dirs: list[Path], out_dir: Path, how: str, lin
 
 
 EXPLAINER = (
-    '<p class="note">The pair at every stage: drag the slider to step through the hypotheses; the camera and '
+    '<p class="note">The pair at every stage: drag the slider to step through the hypotheses; the cameras and '
     "the selected voxel stay. Points are grey (cloud 1) and blue-grey (cloud 2); the points a stage removed are "
-    "in that stage's colour, where they were when it removed them; a correcting stage's moves are segments from "
-    "before to after. Hover a vector's tip for its voxel; click it to select it. Each view's camera icon, or "
-    "its PNG button, saves what it shows.</p>"
+    "in that stage's colour, where they were when it removed them; a correcting stage's moves are arrows from "
+    "before to after. 3-D view: drag to turn, shift-drag (or the right button) to pan, the wheel to zoom; top "
+    "view: drag to pan, the wheel to zoom; double-click resets a view. Hover a vector for its voxel; click it to "
+    "select it. Each view's PNG button saves what it shows.</p>"
 )
 
 
@@ -111,7 +125,7 @@ def explorer_parts(name: str, stage_dirs: list[Path], out_dir: Path, assets: Pat
 def write_explorer_data(pair_dir: Path, stage_dirs: list[Path], budget: int) -> list[Path]:
     """A pair's explorer files, as the workflow's jobs write them (``lidarfield report`` and the tests)."""
     registered = pair_dir / "registered.parquet"
-    written = [write_points_script(registered, budget, points_script(pair_dir))]
+    written = write_points_scripts(registered, budget, points_script(pair_dir), rest_script(pair_dir))
     for d in stage_dirs:
         changes = d / "changes.parquet"
         written.append(
@@ -126,10 +140,6 @@ def write_explorer_data(pair_dir: Path, stage_dirs: list[Path], budget: int) -> 
     return written
 
 
-def write_assets(assets: Path, explorer: bool = True) -> list[Path]:
-    """The report's scripts in ``assets``; with ``explorer``, plotly.js too (when absent: 4.8 MB
-    that a report without an explorer does not need)."""
-    written = [write_script(assets / name) for name in (VIEWER, OVERVIEW)]
-    if explorer and not (assets / PLOTLY).is_file():
-        written.append(write_plotly_js(assets / PLOTLY))
-    return written
+def write_assets(assets: Path) -> list[Path]:
+    """The report's scripts in ``assets``."""
+    return [write_script(assets / name) for name in (VIEWER, OVERVIEW)]

@@ -2,12 +2,15 @@
 
 A pair's explorer (``{pair}/explorer/``) reads ``points.js`` (a sample of both clouds of the
 registered pair, at most ``budget`` points of each) and one ``{stage}.js`` per stage (its
-field's valid vectors, and which of the sampled points it removed or moved). A stage's file
-depends only on the registered pair's point counts, its own ``changes.parquet`` and its own
-``field.parquet``: appending a hypothesis writes its stage's file and rewrites no other.
+field's valid vectors, and which points it removed or moved). ``rest.js`` holds the points
+left out of the sample; the page loads it only when the analyst asks for every point. A
+stage's file depends only on the registered pair's point counts, its own ``changes.parquet``
+and its own ``field.parquet``: appending a hypothesis writes its stage's file and rewrites no other.
 
-The sample is a pure function of a cloud's point count and the budget (:func:`sample_rows`),
-so a stage's job finds its removed rows among the sampled ones without reading ``points.js``.
+The page holds a cloud's points in its draw order (:func:`draw_order`): the sample, then the
+rest. A stage's file names its points by their position in that order, so those below the
+sample's size are in ``points.js``. The order is a pure function of a cloud's point count and
+the budget, so a stage's job finds its rows' positions without reading ``points.js``.
 
 Each file is one binary blob (:func:`encode`): ``LFX1``, a little-endian uint32 header length,
 a JSON header, then little-endian typed arrays, each starting at a multiple of 8 bytes. A page
@@ -38,7 +41,8 @@ ALIGN = 8
 # The dtypes a blob may hold, by the name its header gives them (the page's typed arrays).
 DTYPES = {"f8": "<f8", "f4": "<f4", "i4": "<i4", "u4": "<u4", "u1": "u1"}
 SAMPLE_SEED = 0
-POINTS = "points"  # the key and file stem of the pair's points
+POINTS = "points"  # the key and file stem of the pair's sampled points
+REST = "rest"  # the key and file stem of the points left out of the sample
 FOLDER = "explorer"  # a pair's explorer files: {pair}/explorer/
 SCRIPT_PREFIX = "lidarfieldExplorer.add("
 
@@ -98,6 +102,16 @@ def sample_rows(count: int, budget: int) -> np.ndarray:
     return np.sort(np.random.default_rng(SAMPLE_SEED).choice(count, size=budget, replace=False))
 
 
+def draw_order(count: int, budget: int) -> np.ndarray:
+    """A cloud's rows in the page's order: the sample (``points.js``), then the rest, ascending."""
+    sample = sample_rows(count, budget)
+    if len(sample) == count:
+        return sample
+    left = np.ones(count, bool)
+    left[sample] = False
+    return np.concatenate([sample, np.flatnonzero(left)])
+
+
 def _cloud_counts(cloud: np.ndarray) -> tuple[int, int]:
     return int(np.count_nonzero(cloud == 1)), int(np.count_nonzero(cloud == 2))
 
@@ -108,45 +122,42 @@ def registered_counts(registered: str | Path) -> tuple[int, int]:
     return _cloud_counts(np.asarray(columns["cloud"]))
 
 
-def points_blob(registered: str | Path, budget: int) -> bytes:
-    """The sampled points of both clouds (float32 xyz, in frame 1) and the sensor origins."""
+def points_blobs(registered: str | Path, budget: int) -> tuple[bytes, bytes]:
+    """The sampled points of both clouds (float32 xyz, in frame 1) and the sensor origins' pose,
+    and the rest of the points (the same, in draw order after the sample)."""
     columns, meta = read_table(registered, required=("cloud", "x", "y", "z"))
     cloud = np.asarray(columns["cloud"])
     xyz = np.column_stack([columns[a] for a in "xyz"])
-    arrays, clouds = {}, []
+    sampled, rest, clouds = {}, {}, []
     for c in (1, 2):
         mine = xyz[cloud == c]
-        rows = sample_rows(len(mine), budget)
-        arrays[f"xyz{c}"] = mine[rows].astype(np.float32)
-        clouds.append({"total": len(mine), "drawn": len(rows)})
-    header = {"kind": POINTS, "budget": budget, "clouds": clouds, "T_1_2": meta.get("T_1_2")}
-    return encode(header, arrays)
+        order = draw_order(len(mine), budget)
+        drawn = len(sample_rows(len(mine), budget))
+        sampled[f"xyz{c}"] = mine[order[:drawn]].astype(np.float32)
+        rest[f"xyz{c}"] = mine[order[drawn:]].astype(np.float32)
+        clouds.append({"total": len(mine), "drawn": drawn})
+    header = {"budget": budget, "clouds": clouds, "T_1_2": meta.get("T_1_2")}
+    return encode({"kind": POINTS, **header}, sampled), encode({"kind": REST, **header}, rest)
 
 
-def _sampled_positions(rows: np.ndarray, sample: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Where each of ``rows`` is in the sorted ``sample`` and which of them are sampled."""
-    at = np.searchsorted(sample, rows)
-    found = at < len(sample)
-    found[found] = sample[at[found]] == rows[found]
-    return at[found].astype(np.uint32), found
-
-
-def change_arrays(changes: dict[str, np.ndarray], samples: tuple[np.ndarray, np.ndarray]) -> tuple[dict, dict]:
-    """The stage's removed and moved sampled points (positions in each cloud's sample; a moved
-    one's new coordinates) and the counts, drawn and in all, per cloud."""
+def change_arrays(changes: dict[str, np.ndarray], orders: tuple[np.ndarray, np.ndarray], drawn: tuple[int, int]):
+    """The stage's removed and moved points (their positions in each cloud's draw order; a
+    moved one's new coordinates) and the counts, in the sample (``drawn``) and in all, per cloud."""
     arrays, counts = {}, []
     cloud, rows = np.asarray(changes["cloud"]), np.asarray(changes["row"], dtype=np.int64)
     removed = np.asarray(changes["removed"], dtype=bool)
     xyz = np.column_stack([changes[a] for a in "xyz"])
-    for c, sample in zip((1, 2), samples):
+    for c, order, sampled in zip((1, 2), orders, drawn):
+        position = np.empty(len(order), np.uint32)
+        position[order] = np.arange(len(order), dtype=np.uint32)
         count = {}
         for what, mine in (("removed", removed), ("moved", ~removed)):
             chosen = (cloud == c) & mine
-            at, found = _sampled_positions(rows[chosen], sample)
+            at = position[rows[chosen]]
             arrays[f"{what}{c}"] = at
             if what == "moved":
-                arrays[f"moved{c}_xyz"] = xyz[chosen][found].astype(np.float32)
-            count[what] = {"total": int(np.count_nonzero(chosen)), "drawn": len(at)}
+                arrays[f"moved{c}_xyz"] = xyz[chosen].astype(np.float32)
+            count[what] = {"total": len(at), "drawn": int(np.count_nonzero(at < sampled))}
         counts.append(count)
     return arrays, {"clouds": counts}
 
@@ -196,10 +207,11 @@ def stage_blob(
 ) -> bytes:
     """A stage's blob: its field's vectors and, after stage 0, what it did to the sampled points."""
     arrays, header = field_arrays(field_path)
-    samples = (sample_rows(counts[0], budget), sample_rows(counts[1], budget))
+    orders = tuple(draw_order(n, budget) for n in counts)
     if changes_path is not None:
         columns, meta = read_table(changes_path, required=("cloud", "row", "removed", "x", "y", "z"))
-        moves, change_header = change_arrays(columns, samples)
+        drawn = tuple(len(sample_rows(n, budget)) for n in counts)
+        moves, change_header = change_arrays(columns, orders, drawn)
         arrays |= moves
         header |= change_header
         T_1_2 = meta.get("T_1_2", T_1_2)
@@ -207,9 +219,11 @@ def stage_blob(
     return encode(header, arrays)
 
 
-def write_points_script(registered: str | Path, budget: int, out: str | Path) -> Path:
-    write_text(out, wrap_script(POINTS, points_blob(registered, budget)))
-    return Path(out)
+def write_points_scripts(registered: str | Path, budget: int, out: str | Path, rest: str | Path) -> list[Path]:
+    """The pair's sampled points at ``out`` and the rest at ``rest``."""
+    for path, key, blob in zip((out, rest), (POINTS, REST), points_blobs(registered, budget)):
+        write_text(path, wrap_script(key, blob))
+    return [Path(out), Path(rest)]
 
 
 def write_stage_script(

@@ -50,7 +50,7 @@ def write_report(
     plotted = {name for name, dirs in pairs.items() if has_stage_figures(dirs)}
     max_mb = max_mb if max_mb is not None else ((study or {}).get("report") or {}).get("max_mb")
     explorer_points = ((study or {}).get("report") or {}).get("explorer_points", default("report", "explorer_points"))
-    write_assets(out_html.parent / ASSETS, explorer=bool(plotted))
+    write_assets(out_html.parent / ASSETS)
     for name, dirs in pairs.items():
         if name in plotted:
             write_explorer_data(dirs[0].parent.parent, dirs, explorer_points)

@@ -96,3 +96,73 @@ def test_a_ranked_row_links_its_pair_and_its_last_stage(tables):
         level = int(r["level"])
         assert f'<a href="{r["pair"]}/report.html">{r["pair"]}</a>' in table
         assert f'<a href="{r["pair"]}/report.html#stage={level}">{level:02d} {r["hypothesis"]}</a>' in table
+
+
+def study_figure(tables, stem: str):
+    from lidarfield.plots.study import study_figures
+
+    figures = study_figures(tables.summary, tables.voxels, tables.hypotheses, tables.pairs, tables.grid)
+    return next(f for f in figures if f.stem == stem)
+
+
+def rendered(f) -> np.ndarray:
+    import io
+
+    from PIL import Image
+
+    return np.asarray(Image.open(io.BytesIO(f.png())).convert("RGB")).astype(int)
+
+
+def test_the_all_pairs_figure_hovers_each_pairs_point_on_its_drawn_marker(tables):
+    from lidarfield.report.overview import figure_html
+
+    f = study_figure(tables, "all_pairs")
+    spots = f.spots()
+    rows = tables.summary.to_dict("records")
+    assert len(spots) == len(rows) == 4 * 3
+    image = rendered(f)
+    height, width, _ = image.shape
+    for s in spots:
+        pair, level, value = re.fullmatch(r"(pair-\d+) · stage (\d+) \w+: max magnitude ([0-9.e-]+) m", s.text).groups()
+        row = next(r for r in rows if r["pair"] == pair and int(r["level"]) == int(level))
+        assert float(value) == pytest.approx(row["max_magnitude"], rel=1e-3)
+        # the spot's centre is on the pair's marker: coloured pixels (not white, not a grey grid line)
+        x, y = (s.box[0] + s.box[2]) / 2 * width, (s.box[1] + s.box[3]) / 2 * height
+        patch = image[round(y) - 1 : round(y) + 2, round(x) - 1 : round(x) + 2]
+        assert (patch.max(axis=2) - patch.min(axis=2)).min() > 40, s.text
+    # on the page: one span a spot over the image, in % of it
+    page = figure_html(f, None)
+    assert page.count("<span style=") == len(spots) and 'class="hover-spots"' in page
+
+
+def test_the_hypotheses_figure_hovers_each_box_with_its_quartiles(tables):
+    f = study_figure(tables, "hypotheses")
+    spots = f.spots()
+    levels = sorted(tables.hypotheses["level"].unique())
+    assert len(spots) == 3 * len(levels)
+    image = rendered(f)
+    height, width, _ = image.shape
+    for s, level in zip(spots, levels):  # the first panel's: the change of p95
+        rows = tables.hypotheses[tables.hypotheses["level"] == level]
+        change = (rows["p95_magnitude_after"] - rows["p95_magnitude_before"]).to_numpy(dtype=float)
+        median = float(re.search(r"median ([0-9.e-]+),", s.text).group(1))
+        assert s.text.startswith(f"{int(level):02d} ") and median == pytest.approx(
+            np.median(change), rel=1e-3, abs=1e-9
+        )
+        # the box's black median line crosses the spot's centre column between its top and bottom
+        x = round((s.box[0] + s.box[2]) / 2 * width)
+        column = image[round(s.box[1] * height) : round(s.box[3] * height) + 1, x]
+        assert (column.max(axis=1) < 60).any(), s.text
+
+
+def test_beyond_a_dozen_pairs_the_all_pairs_figure_hovers_the_medians(tmp_path):
+    write_field_study(tmp_path, 13, levels=2, n=1500)
+    pairs, rows = discover(tmp_path)
+    tables = compute_study_tables(pairs, rows)
+    spots = study_figure(tables, "all_pairs").spots()
+    assert len(spots) == 2
+    for s, (level, mine) in zip(spots, tables.summary.groupby("level")):
+        median = float(re.search(r"median of 13 pairs ([0-9.e-]+) m", s.text).group(1))
+        assert median == pytest.approx(mine["max_magnitude"].median(), rel=1e-3)
+        top = mine.loc[mine["max_magnitude"].idxmax()]
+        assert f"largest {top['pair']} " in s.text

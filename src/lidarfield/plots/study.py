@@ -18,6 +18,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
+import matplotlib.pyplot as plt
 import numpy as np
 from matplotlib.colors import Normalize
 
@@ -35,13 +36,51 @@ NO_DATA = "0.85"
 
 
 @dataclass(frozen=True)
+class HoverSpot:
+    """A region of a figure and the numbers it shows: the page lays it over the PNG, where the
+    pointer shows ``text``. ``box``: left, top, right, bottom, as fractions of the figure from
+    its top-left corner (they scale with the image)."""
+
+    box: tuple[float, float, float, float]
+    text: str
+
+
+@dataclass(frozen=True)
 class StudyFigure:
     stem: str
     caption: str
     draw: Callable[[], object]  # returns a matplotlib figure
+    hover: Callable[[object], list[HoverSpot]] | None = None  # the drawn figure's spots
 
     def png(self, dpi: int = DPI) -> bytes:
         return png_bytes(self.draw(), dpi)
+
+    def spots(self) -> list[HoverSpot]:
+        """The hover spots of the figure as drawn (none without ``hover``); nothing rendered."""
+        if self.hover is None:
+            return []
+        fig = self.draw()
+        try:
+            return self.hover(fig)
+        finally:
+            plt.close(fig)
+
+
+MIN_SPOT_PX = 12  # a spot's least width and height in the figure's pixels (a marker's, at least)
+
+
+def spot(ax, x: tuple[float, float], y: tuple[float, float], text: str) -> HoverSpot:
+    """The spot of the data rectangle ``x`` by ``y`` on ``ax``, at least MIN_SPOT_PX each way."""
+    ax.viewLim  # noqa: B018 (applies a pending autoscale, so the transform is the drawn one's)
+    corners = ax.transData.transform([(x[0], y[0]), (x[1], y[1])])
+    width, height = ax.figure.bbox.width, ax.figure.bbox.height
+    box = []
+    for k, size in ((0, width), (1, height)):
+        lo, hi = sorted(corners[:, k])
+        grow = max(0.0, MIN_SPOT_PX - (hi - lo)) / 2
+        box.append(((lo - grow) / size, (hi + grow) / size))
+    (left, right), (bottom, top) = box
+    return HoverSpot((left, 1 - top, right, 1 - bottom), text)
 
 
 def level_label(level: int, hypothesis: str) -> str:
@@ -150,6 +189,14 @@ def _distribution(ax, groups: list[tuple[str, np.ndarray]], ylabel: str, zero_li
     ax.grid(True, axis="y", lw=0.3, alpha=0.6)
 
 
+# The hypotheses figure's panels: the value per pair, its axis label, a line at zero.
+HYPOTHESIS_PANELS = (
+    (lambda r: r["p95_magnitude_after"] - r["p95_magnitude_before"], "change of p95 magnitude (m)", True),
+    (lambda r: r["max_magnitude_after"] - r["max_magnitude_before"], "change of max magnitude (m)", True),
+    (lambda r: 100.0 * r["removed_share"], "points removed (% of the stage's input)", False),
+)
+
+
 def hypotheses_figure(hypotheses):
     """Per hypothesis, over pairs: the change of p95 and max magnitude, and the points removed."""
     groups = _by_level(hypotheses)
@@ -157,12 +204,7 @@ def hypotheses_figure(hypotheses):
     fig = figure(
         max(9.0, 1.6 * len(groups) * 3), 4.6, DPI, Margins(left=0.8, right=0.3, bottom=0.85, top=0.75, wspace=0.45)
     )
-    panels = (
-        (lambda r: r["p95_magnitude_after"] - r["p95_magnitude_before"], "change of p95 magnitude (m)", True),
-        (lambda r: r["max_magnitude_after"] - r["max_magnitude_before"], "change of max magnitude (m)", True),
-        (lambda r: 100.0 * r["removed_share"], "points removed (% of the stage's input)", False),
-    )
-    for i, (value, ylabel, zero) in enumerate(panels):
+    for i, (value, ylabel, zero) in enumerate(HYPOTHESIS_PANELS):
         ax = fig.add_subplot(1, 3, i + 1)
         _distribution(ax, [(label, value(rows).to_numpy(dtype=float)) for label, rows in groups], ylabel, zero)
     fig.suptitle(
@@ -171,6 +213,28 @@ def hypotheses_figure(hypotheses):
         fontsize=10,
     )
     return fig
+
+
+def hypotheses_hover(fig, hypotheses) -> list[HoverSpot]:
+    """Per panel and hypothesis of ``hypotheses_figure``: its box and whiskers, giving the
+    quartiles, the 5-95 % range and the pairs at either end."""
+    spots = []
+    for ax, (value, ylabel, _) in zip(fig.axes, HYPOTHESIS_PANELS):
+        for x, (label, rows) in enumerate(_by_level(hypotheses), start=1):
+            values = value(rows).to_numpy(dtype=float)
+            ok = np.isfinite(values)
+            if not ok.any():
+                continue
+            pairs, values = rows["pair"].to_numpy()[ok], values[ok]
+            p5, q1, median, q3, p95 = np.percentile(values, [5, 25, 50, 75, 95])
+            low, high = int(np.argmin(values)), int(np.argmax(values))
+            text = (
+                f"{label}: {ylabel}, {len(values)} pairs: median {median:.4g}, quartiles {q1:.4g} to {q3:.4g}, "
+                f"5-95 % {p5:.4g} to {p95:.4g}; least {pairs[low]} {values[low]:.4g}, most {pairs[high]} "
+                f"{values[high]:.4g}"
+            )
+            spots.append(spot(ax, (x - 0.25, x + 0.25), (p5, p95), text))
+    return spots
 
 
 # --- pairs x stages -----------------------------------------------------------------------------
@@ -245,6 +309,35 @@ def all_pairs_figure(summary, key: str = "max_magnitude", title: str = "largest 
     return fig
 
 
+def all_pairs_hover(fig, summary, key: str = "max_magnitude") -> list[HoverSpot]:
+    """The points of ``all_pairs_figure``: each pair's at each stage; beyond a dozen pairs, the
+    medians', giving the largest and smallest pair too."""
+    ax = fig.axes[0]
+    names = summary.sort_values("level").groupby("level")["hypothesis"].first()
+    what = key.replace("_", " ")
+    by_pair = list(summary.sort_values("level").groupby("pair", sort=True))
+    spots = []
+    if len(by_pair) <= MAX_LEGEND_PAIRS:
+        for name, rows in by_pair:
+            for level, v in zip(rows["level"].astype(int), rows[key].astype(float)):
+                text = f"{name} · stage {level_label(level, names[level])}: {what} {v:.4g} m"
+                spots.append(spot(ax, (level, level), (v, v), text))
+        return spots
+    for level, rows in summary.groupby("level", sort=True):
+        values, pairs = rows[key].to_numpy(dtype=float), rows["pair"].to_numpy()
+        ok = np.isfinite(values)
+        if not ok.any():
+            continue
+        values, pairs = values[ok], pairs[ok]
+        median, low, high = float(np.median(values)), int(np.argmin(values)), int(np.argmax(values))
+        text = (
+            f"stage {level_label(int(level), names[level])}: {what}, median of {len(values)} pairs {median:.4g} m; "
+            f"largest {pairs[high]} {values[high]:.4g} m, smallest {pairs[low]} {values[low]:.4g} m"
+        )
+        spots.append(spot(ax, (level, level), (median, median), text))
+    return spots
+
+
 # --- all of them ----------------------------------------------------------------------------------
 
 
@@ -260,11 +353,19 @@ def study_figures(summary, voxels, hypotheses, ranking, grid: dict) -> list[Stud
     if len(hypotheses):
         figures.append(
             StudyFigure(
-                "hypotheses", "what each hypothesis changed, over the pairs", lambda: hypotheses_figure(hypotheses)
+                "hypotheses",
+                "what each hypothesis changed, over the pairs",
+                lambda: hypotheses_figure(hypotheses),
+                lambda fig: hypotheses_hover(fig, hypotheses),
             )
         )
     figures.append(
-        StudyFigure("all_pairs", "largest vector, stage by stage, all pairs", lambda: all_pairs_figure(summary))
+        StudyFigure(
+            "all_pairs",
+            "largest vector, stage by stage, all pairs",
+            lambda: all_pairs_figure(summary),
+            lambda fig: all_pairs_hover(fig, summary),
+        )
     )
     if grid.get("kind", "spherical") == "spherical" and voxels is not None and len(voxels):
         for level in sorted(voxels["level"].unique()):

@@ -84,11 +84,12 @@ def hypotheses_table(hypotheses) -> str:
 
 
 def figure_html(f: StudyFigure, figures_dir: Path | None) -> str:
-    """A study figure embedded: its PNG file when the workflow drew it, else drawn now."""
+    """A study figure embedded: its PNG file when the workflow drew it, else drawn now; its hover
+    spots over it (the figure made again for their places, not rendered)."""
     path = figures_dir / f"{f.stem}.png" if figures_dir is not None else None
     if path is not None and path.is_file():
-        return image_file(path, f.caption)
-    return image(f.png(), f.caption)
+        return image_file(path, f.caption, f.spots())
+    return image(f.png(), f.caption, f.spots())
 
 
 def study_level_parts(tables: StudyTables, figures_dir: Path | None) -> list[str]:
@@ -99,6 +100,9 @@ def study_level_parts(tables: StudyTables, figures_dir: Path | None) -> list[str
     parts = [
         "<h2>The study level</h2>",
         *heatmap_parts(tables.summary, tables.pairs),
+        '<p class="note">Hover a box of what each hypothesis changed for its quartiles, its 5-95 % range and '
+        "the pairs at either end; hover a point of the largest vector's lines for its pair and value (beyond a "
+        "dozen pairs: the median's, with the largest and smallest pair).</p>",
         '<div class="figures">',
         *(figure_html(f, figures_dir) for f in others),
         "</div>",

@@ -30,6 +30,8 @@ pre { background: #f7f7f7; border: 1px solid #ddd; padding: 0.8em; overflow-x: a
 figure { margin: 0; width: 100%; }
 figure img { display: block; width: 100%; height: auto; border: 1px solid #ddd; box-sizing: border-box; }
 figcaption { font-size: 0.8em; color: #555; }
+.hover-spots { position: relative; } .hover-spots > span { position: absolute; }
+.hover-spots > span:hover { outline: 2px solid #e00; }
 figure.linked { width: auto; border: 1px dashed #bbb; padding: 4px 8px; font-size: 0.9em; }
 details > summary { cursor: pointer; font-size: 1.15em; font-weight: 600; margin: 0.6em 0; }
 nav { font-size: 0.9em; margin-bottom: 0.5em; }
@@ -82,18 +84,32 @@ def display_width(pixels: int) -> int:
     return min(max(pixels, FIGURE_MIN_PX), round(pixels * MAX_UPSCALE))
 
 
-def embedded_image(compact: bytes, caption: str) -> str:
+def hover_spans(spots) -> str:
+    """Spans laid over a figure's image, one per hover spot (``plots.study.HoverSpot``): the
+    pointer on one shows its numbers (its title). In % of the image, so they scale with it."""
+    spans = []
+    for spot in spots:
+        left, top, right, bottom = (100 * v for v in spot.box)
+        spans.append(
+            f'<span style="left:{left:.2f}%;top:{top:.2f}%;width:{right - left:.2f}%;height:{bottom - top:.2f}%" '
+            f'title="{esc(spot.text)}"></span>'
+        )
+    return "".join(spans)
+
+
+def embedded_image(compact: bytes, caption: str, spots=()) -> str:
     """A figure element holding an already compacted PNG (see ``plots.png.compact_image``): as wide
-    as the page up to its ``display_width``; its size in the img tag gives its box before it decodes."""
+    as the page up to its ``display_width``; its size in the img tag gives its box before it
+    decodes. ``spots``: the figure's hover spots, laid over the image."""
     width, height = png_size(compact)
-    return (
-        f'<figure style="max-width:{display_width(width)}px"><img src="{data_uri(compact)}" alt="{esc(caption)}" '
-        f'width="{width}" height="{height}"><figcaption>{esc(caption)}</figcaption></figure>'
-    )
+    img = f'<img src="{data_uri(compact)}" alt="{esc(caption)}" width="{width}" height="{height}">'
+    if spots:
+        img = f'<div class="hover-spots">{img}{hover_spans(spots)}</div>'
+    return f'<figure style="max-width:{display_width(width)}px">{img}<figcaption>{esc(caption)}</figcaption></figure>'
 
 
-def image(png: bytes, caption: str) -> str:
-    return embedded_image(compact_png(png), caption)
+def image(png: bytes, caption: str, spots=()) -> str:
+    return embedded_image(compact_png(png), caption, spots)
 
 
 def linked_image(href: str, caption: str) -> str:
@@ -108,11 +124,11 @@ def missing_image(caption: str, path: Path) -> str:
     return f'<p class="missing">{esc(caption)}: not drawn ({esc(path.name)} missing)</p>'
 
 
-def image_file(path: Path, caption: str) -> str:
+def image_file(path: Path, caption: str, spots=()) -> str:
     """An embedded PNG file (its page copy), or a visible note when the figure was not drawn."""
     if not path.is_file():
         return missing_image(caption, path)
-    return embedded_image(compact_file(path), caption)
+    return embedded_image(compact_file(path), caption, spots)
 
 
 def format_cell(value) -> str:

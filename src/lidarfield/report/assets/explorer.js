@@ -54,6 +54,11 @@
   ];
   const fmt = (x, digits) => (Number.isFinite(x) ? x.toFixed(digits) : "–");
   const count = n => n.toLocaleString("en-US");
+  // a round step (1, 2 or 5 times a power of ten) of at least span / n
+  function niceStep(span, n) {
+    const raw = span / n, power = 10 ** Math.floor(Math.log10(raw));
+    return [1, 2, 5, 10].map(s => s * power).find(s => s >= raw);
+  }
 
   // ---- 4 x 4 matrices, column-major as WebGL takes them ----
   function multiply(a, b) {
@@ -317,6 +322,16 @@
     };
   }
 
+  // The 3-D view's ground: a grid of round steps under the points (at their lowest z).
+  function groundGrid(bounds) {
+    const [bx, by, bz] = bounds, step = niceStep(Math.max(bx[1] - bx[0], by[1] - by[0]), 10), z = bz[0], lines = [];
+    const x0 = Math.floor(bx[0] / step) * step, y0 = Math.floor(by[0] / step) * step;
+    const x1 = Math.ceil(bx[1] / step) * step, y1 = Math.ceil(by[1] / step) * step;
+    for (let x = x0; x <= x1 + 1e-9; x += step) lines.push(x, y0, z, x, y1, z);
+    for (let y = y0; y <= y1 + 1e-9; y += step) lines.push(x0, y, z, x1, y, z);
+    return { step, lines: new Float32Array(lines), colours: new Float32Array(lines.length).fill(0.85) };
+  }
+
   function uploadFrame(v, f) {
     for (const c of [0, 1]) { upload(v, `xyz${c}`, f.clouds[c]); upload(v, `by${c}`, f.removedBy[c]); }
     for (const name of ["segments", "segmentColours", "tips", "colours", "arrows", "arrowColours", "origins", "originColours"]) upload(v, name, f[name]);
@@ -331,6 +346,21 @@
     const three = v.view === "3d";
     // the top view draws in layer order (vectors over points), the 3-D view by depth
     if (three) gl.enable(gl.DEPTH_TEST); else gl.disable(gl.DEPTH_TEST);
+    const C = v.coloured;
+    gl.useProgram(C.p);
+    gl.uniformMatrix4fv(C.loc.mvp, false, v.mvp);
+    const draw = (mode, xyz, colours, size, round) => {
+      const n = v.buffers[xyz].length / 3;
+      if (!n) return;
+      gl.useProgram(C.p);
+      gl.uniform1f(C.loc.size, size * dpr);
+      gl.uniform1f(C.loc.round, round ? 1 : 0);
+      attribute(v, C.loc.position, xyz, 3);
+      attribute(v, C.loc.rgb, colours, 3);
+      gl.drawArrays(mode, 0, n);
+      gl.disableVertexAttribArray(C.loc.rgb);
+    };
+    if (three) draw(gl.LINES, "grid", "gridColours", 1, false);
     const P = v.points;
     gl.useProgram(P.p);
     gl.uniformMatrix4fv(P.loc.mvp, false, v.mvp);
@@ -347,19 +377,6 @@
       gl.drawArrays(gl.POINTS, 0, f.removedBy[c].length);
       gl.disableVertexAttribArray(P.loc.by); // the other program's attribute at this location has no such buffer
     }
-    const C = v.coloured;
-    gl.useProgram(C.p);
-    gl.uniformMatrix4fv(C.loc.mvp, false, v.mvp);
-    const draw = (mode, xyz, colours, size, round) => {
-      const n = v.buffers[xyz].length / 3;
-      if (!n) return;
-      gl.uniform1f(C.loc.size, size * dpr);
-      gl.uniform1f(C.loc.round, round ? 1 : 0);
-      attribute(v, C.loc.position, xyz, 3);
-      attribute(v, C.loc.rgb, colours, 3);
-      gl.drawArrays(mode, 0, n);
-      gl.disableVertexAttribArray(C.loc.rgb);
-    };
     if (L.corrections) draw(gl.LINES, "arrows", "arrowColours", 1, false);
     if (L.vectors) { draw(gl.LINES, "segments", "segmentColours", 1, false); draw(gl.POINTS, "tips", "colours", three ? 4 : 5, true); }
     if (L.origins) draw(gl.POINTS, "origins", "originColours", 11, true);
@@ -382,8 +399,10 @@
     if (ctx.layers.origins)
       for (let c = 0; c < 2; c++) {
         const p = screenOf(v, f.origins[3 * c], f.origins[3 * c + 1], f.origins[3 * c + 2]);
-        if (p) { g.fillStyle = ORIGIN_COLOURS[c]; g.fillText(`sensor ${c + 1}`, p[0] + 7, p[1] - 7 + 14 * c); }
+        // sensor 1's label to the left, sensor 2's to the right: the two are often close
+        if (p) { g.fillStyle = ORIGIN_COLOURS[c]; g.textAlign = c ? "left" : "right"; g.fillText(`sensor ${c + 1}`, p[0] + (c ? 8 : -8), p[1] - 6); }
       }
+    g.textAlign = "left";
     const ring = (i, colour) => {
       const p = i >= 0 && screenOf(v, f.tips[3 * i], f.tips[3 * i + 1], f.tips[3 * i + 2]);
       if (!p) return;
@@ -393,6 +412,20 @@
     if (ctx.layers.vectors) { ring(selectedIndex(ctx), "#e00"); if (ctx.hovered && ctx.hovered.view === v.view) ring(ctx.hovered.index, "#000"); }
     const r = v.box.getBoundingClientRect();
     if (v.view === "top") {
+      // the grid and its labels (x along the bottom, y up the left), in metres
+      const c = ctx.cameras.top, s = r.height / (2 * c.half), step = niceStep(2 * c.half, 8);
+      const toX = x => r.width / 2 + (x - c.centre[0]) * s, toY = y => r.height / 2 - (y - c.centre[1]) * s;
+      const wx = r.width / (2 * s);
+      g.strokeStyle = "rgba(0, 0, 0, 0.1)"; g.fillStyle = "#555"; g.lineWidth = 1;
+      const label = x => String(+x.toFixed(6));
+      for (let x = Math.ceil((c.centre[0] - wx) / step) * step; x <= c.centre[0] + wx; x += step) {
+        g.beginPath(); g.moveTo(toX(x), 0); g.lineTo(toX(x), r.height); g.stroke();
+        g.fillText(label(x), toX(x) + 2, 12);
+      }
+      for (let y = Math.ceil((c.centre[1] - c.half) / step) * step; y <= c.centre[1] + c.half; y += step) {
+        g.beginPath(); g.moveTo(0, toY(y)); g.lineTo(r.width, toY(y)); g.stroke();
+        g.fillText(label(y), 3, toY(y) - 2);
+      }
       // a scale bar: a round length about a fifth of the width
       const metres = 2 * ctx.cameras.top.half * (r.width / r.height) / 5, p10 = 10 ** Math.floor(Math.log10(metres));
       const len = [5, 2, 1].map(s => s * p10).find(x => x <= metres), px = len / (2 * ctx.cameras.top.half) * r.height;
@@ -401,6 +434,8 @@
       g.fillText(`${len} m`, 12, r.height - 20);
       g.fillText("x →, y ↑", r.width - 60, r.height - 10);
     } else {
+      g.fillStyle = "#555";
+      g.fillText(`ground grid: ${ctx.grid.step} m`, 12, 16);
       // the axes' directions, from the corner
       const c = ctx.cameras["3d"], e = unit(sub(eyeOf(c), c.target)), right = unit(cross([0, 0, 1], e)), up = cross(e, right);
       const o = [40, r.height - 40];
@@ -737,7 +772,10 @@
         a.click();
       });
     }
+    ctx.grid = groundGrid(ctx.bounds);
     for (const v of ctx.views) {
+      upload(v, "grid", ctx.grid.lines);
+      upload(v, "gridColours", ctx.grid.colours);
       const r = v.box.getBoundingClientRect();
       ctx.cameras[v.view] = homeCamera(v.view, ctx.bounds, r.width / Math.max(r.height, 1));
       interact(ctx, v);

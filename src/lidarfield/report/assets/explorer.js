@@ -132,6 +132,20 @@
     uniform mat4 mvp; uniform float size;
     varying vec3 colour;
     void main() { colour = rgb; gl_Position = mvp * vec4(position, 1.0); gl_PointSize = size; }`;
+  // Lines of a width in pixels: each segment two triangles, its ends pushed apart across the
+  // segment's direction on the screen (WebGL draws gl.LINES one pixel wide).
+  const WIDE_VS = `
+    attribute vec3 position; attribute vec3 other; attribute float side; attribute vec3 rgb;
+    uniform mat4 mvp; uniform vec2 halfViewport; uniform float halfWidth;
+    varying vec3 colour;
+    void main() {
+      vec4 a = mvp * vec4(position, 1.0), b = mvp * vec4(other, 1.0);
+      vec2 d = b.xy / b.w * halfViewport - a.xy / a.w * halfViewport;
+      d = length(d) > 1e-6 ? normalize(d) : vec2(1.0, 0.0);
+      a.xy += vec2(-d.y, d.x) * side * halfWidth / halfViewport * a.w;
+      gl_Position = a;
+      colour = rgb;
+    }`;
   const FS = `
     precision mediump float;
     varying vec3 colour; uniform float round;
@@ -154,7 +168,7 @@
     const loc = {};
     const n = gl.getProgramParameter(p, gl.ACTIVE_UNIFORMS);
     for (let i = 0; i < n; i++) { const name = gl.getActiveUniform(p, i).name.replace("[0]", ""); loc[name] = gl.getUniformLocation(p, name); }
-    for (const a of ["position", "by", "rgb"]) loc[a] = gl.getAttribLocation(p, a);
+    for (const a of ["position", "by", "rgb", "other", "side"]) loc[a] = gl.getAttribLocation(p, a);
     return { p, loc };
   }
 
@@ -171,6 +185,7 @@
     const v = { view, box, canvas, overlay, tooltip, gl, buffers: {}, camera: null, mvp: null };
     v.points = program(gl, POINTS_VS, FS);
     v.coloured = program(gl, COLOURED_VS, FS);
+    v.wide = program(gl, WIDE_VS, FS);
     return v;
   }
 
@@ -289,6 +304,26 @@
     }
   }
 
+  // The triangles of wide segments (6 numbers a segment, a colour at each end): for each, its
+  // four corners as two triangles, each vertex with its end, the other end and its side.
+  function wideLines(segments, colours) {
+    const n = segments.length / 6, position = new Float32Array(18 * n), other = new Float32Array(18 * n);
+    const side = new Float32Array(6 * n), rgb = new Float32Array(18 * n);
+    // the corners: [end, side]: A+, A-, B+ and A-, B-, B+ (at B the direction is reversed, so is the side)
+    const corners = [[0, 1], [0, -1], [1, -1], [0, -1], [1, 1], [1, -1]];
+    for (let i = 0; i < n; i++)
+      corners.forEach(([end, sign], k) => {
+        const v = 6 * i + k, at = 6 * i + 3 * end, to = 6 * i + 3 * (1 - end);
+        for (let q = 0; q < 3; q++) {
+          position[3 * v + q] = segments[at + q];
+          other[3 * v + q] = segments[to + q];
+          rgb[3 * v + q] = colours[at + q];
+        }
+        side[v] = sign;
+      });
+    return { position, other, side, rgb };
+  }
+
   // Everything drawn at the current stage: the GL buffers' contents and what the tests read.
   function frame(ctx) {
     const k = ctx.stage, s = ctx.stages[k], st = ctx.states[k], m = ctx.magnification;
@@ -334,7 +369,9 @@
 
   function uploadFrame(v, f) {
     for (const c of [0, 1]) { upload(v, `xyz${c}`, f.clouds[c]); upload(v, `by${c}`, f.removedBy[c]); }
-    for (const name of ["segments", "segmentColours", "tips", "colours", "arrows", "arrowColours", "origins", "originColours"]) upload(v, name, f[name]);
+    for (const name of ["tips", "colours", "origins", "originColours"]) upload(v, name, f[name]);
+    for (const [name, wide] of [["segments", wideLines(f.segments, f.segmentColours)], ["arrows", wideLines(f.arrows, f.arrowColours)]])
+      for (const part of ["position", "other", "side", "rgb"]) upload(v, `${name}-${part}`, wide[part]);
   }
 
   function render(ctx, v) {
@@ -377,8 +414,24 @@
       gl.drawArrays(gl.POINTS, 0, f.removedBy[c].length);
       gl.disableVertexAttribArray(P.loc.by); // the other program's attribute at this location has no such buffer
     }
-    if (L.corrections) draw(gl.LINES, "arrows", "arrowColours", 1, false);
-    if (L.vectors) { draw(gl.LINES, "segments", "segmentColours", 1, false); draw(gl.POINTS, "tips", "colours", three ? 4 : 5, true); }
+    const W = v.wide;
+    const drawWide = (name, width) => {
+      const n = v.buffers[`${name}-side`].length;
+      if (!n) return;
+      gl.useProgram(W.p);
+      gl.uniformMatrix4fv(W.loc.mvp, false, v.mvp);
+      gl.uniform2f(W.loc.halfViewport, v.canvas.width / 2, v.canvas.height / 2);
+      gl.uniform1f(W.loc.halfWidth, (width / 2) * dpr);
+      gl.uniform1f(W.loc.round, 0);
+      attribute(v, W.loc.position, `${name}-position`, 3);
+      attribute(v, W.loc.other, `${name}-other`, 3);
+      attribute(v, W.loc.side, `${name}-side`, 1);
+      attribute(v, W.loc.rgb, `${name}-rgb`, 3);
+      gl.drawArrays(gl.TRIANGLES, 0, n);
+      for (const a of ["other", "side", "rgb"]) gl.disableVertexAttribArray(W.loc[a]);
+    };
+    if (L.corrections) drawWide("arrows", 1.5);
+    if (L.vectors) { drawWide("segments", 2); draw(gl.POINTS, "tips", "colours", three ? 5 : 6, true); }
     if (L.origins) draw(gl.POINTS, "origins", "originColours", 11, true);
     drawOverlay(ctx, v, dpr);
   }
@@ -420,11 +473,11 @@
       const label = x => String(+x.toFixed(6));
       for (let x = Math.ceil((c.centre[0] - wx) / step) * step; x <= c.centre[0] + wx; x += step) {
         g.beginPath(); g.moveTo(toX(x), 0); g.lineTo(toX(x), r.height); g.stroke();
-        g.fillText(label(x), toX(x) + 2, 12);
+        if (toX(x) > 30) g.fillText(label(x), toX(x) + 2, 12); // clear of the y labels
       }
       for (let y = Math.ceil((c.centre[1] - c.half) / step) * step; y <= c.centre[1] + c.half; y += step) {
         g.beginPath(); g.moveTo(0, toY(y)); g.lineTo(r.width, toY(y)); g.stroke();
-        g.fillText(label(y), 3, toY(y) - 2);
+        if (toY(y) > 20 && toY(y) < r.height - 40) g.fillText(label(y), 3, toY(y) - 2); // clear of the x labels and the scale bar
       }
       // a scale bar: a round length about a fifth of the width
       const metres = 2 * ctx.cameras.top.half * (r.width / r.height) / 5, p10 = 10 ** Math.floor(Math.log10(metres));

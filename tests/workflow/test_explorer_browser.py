@@ -328,3 +328,58 @@ def test_a_correcting_stage_draws_its_moves_from_before_to_after(study, page, tm
     move_slider(page, 1)  # stage 1 moved nothing
     assert drawn(page)["moves"] == []
     assert page.errors == []
+
+
+def test_the_vectors_take_their_colour_from_the_chosen_scale(study, page):
+    """|d|: the largest vector at the scale's top (viridis' last colour, the scale over every
+    stage); |z|: the most significant at plasma's; tag: one colour per first tag, named in the legend."""
+    root, pairs, _ = study
+    d = pairs["pair-00"][0]  # stage 0 holds the largest vector of the stack
+    open_explorer(page, (d.parent.parent / "report.html").as_uri())
+    field, _ = read_table(d / "field.parquet")
+    valid = field["valid"] & np.isfinite(field["magnitude"])
+
+    def colours() -> np.ndarray:
+        return np.reshape(
+            page.evaluate("Array.from(document.querySelector('.explorer').explorer.frame.colours)"), (-1, 3)
+        )
+
+    def choose(mode: str) -> None:
+        page.select_option("select.colour-by", mode)
+        page.wait_for_function("m => document.querySelector('.explorer').explorer.scale.kind === m", arg=mode)
+
+    top = np.array([0xFD, 0xE7, 0x25]) / 255  # viridis at 1
+    drawn = colours()
+    assert np.allclose(drawn[np.argmax(field["magnitude"][valid])], top, atol=1e-3)
+    assert f"{field['magnitude'][valid].max():.3f}" in page.inner_text(".explorer-legend")
+    choose("z")
+    assert np.allclose(colours()[np.argmax(np.abs(field["z"][valid]))], np.array([0xF0, 0xF9, 0x21]) / 255, atol=1e-3)
+    choose("tag")
+    _, header, arrays = read_script(stage_script(d.parent.parent, d.name))
+    bits = arrays["tags"]
+    first = np.zeros(len(bits), int)  # a vector's first tag, 1-based; 0: none
+    for bit in reversed(range(len(header["tags"]))):
+        first[(bits >> bit) & 1 == 1] = bit + 1
+    drawn = colours()
+    for tag in np.unique(first):
+        mine = drawn[first == tag]
+        assert np.allclose(mine, mine[0])  # one colour a first tag
+        others = drawn[first != tag]
+        assert not np.any(np.all(np.isclose(others, mine[0]), axis=1))  # and not another's
+    legend = page.inner_text(".explorer-legend")
+    assert "no tag" in legend and all(name in legend for name in header["tags"])
+    assert page.errors == []
+
+
+def test_a_stage_whose_data_is_not_written_is_said_so(study, page, tmp_path):
+    root, pairs, _ = study
+    copy = tmp_path / "results"
+    shutil.copytree(root, copy)
+    stage2 = pairs["pair-00"][2].name
+    stage_script(copy / "pair-00", stage2).unlink()
+    open_explorer(page, (copy / "pair-00" / "report.html").as_uri())
+    assert f"Not written yet: the explorer data of {stage2}" in page.inner_text(".explorer")
+    page.eval_on_selector(".stage-slider", "s => { s.value = 2; s.dispatchEvent(new Event('input')); }")
+    assert "not written" in page.inner_text(".stage-label")
+    assert drawn(page)["stage"] == 0  # the views keep the stage they can draw
+    assert page.errors == ["Failed to load resource: net::ERR_FILE_NOT_FOUND"]  # the missing file's, only

@@ -383,3 +383,16 @@ def test_a_stage_whose_data_is_not_written_is_said_so(study, page, tmp_path):
     assert "not written" in page.inner_text(".stage-label")
     assert drawn(page)["stage"] == 0  # the views keep the stage they can draw
     assert page.errors == ["Failed to load resource: net::ERR_FILE_NOT_FOUND"]  # the missing file's, only
+
+
+def test_a_browser_without_webgl_is_told_so_not_shown_a_blank_view(study, page):
+    root, pairs, _ = study
+    page.add_init_script(
+        "const get = HTMLCanvasElement.prototype.getContext;"
+        "HTMLCanvasElement.prototype.getContext = function (kind, o) {"
+        " return kind === 'webgl' ? null : get.call(this, kind, o); };"
+    )
+    page.goto((pairs["pair-00"][0].parent.parent / "report.html").as_uri())
+    page.wait_for_selector(".explorer .note:has-text('no WebGL')", timeout=30_000)
+    assert page.locator(".explorer canvas").count() == 0
+    assert page.errors == []

@@ -166,6 +166,21 @@ def test_hover_on_a_vector_shows_its_voxels_counts_and_length(study, page):
         assert float(re.search(r"\|d\| ([0-9.]+) m", text).group(1)) == pytest.approx(field["magnitude"][row], abs=5e-5)
         assert float(re.search(r"se ([0-9.]+) m", text).group(1)) == pytest.approx(field["se"][row], abs=5e-5)
         assert f"az {field['az_bin'][row]}, el {field['el_bin'][row]}, r {field['r_bin'][row]}" in text
+        # halfway along the vector: its label too (its line is picked, not only its tip)
+        magnification = page.evaluate("document.querySelector('.explorer').explorer.magnification")
+        middle = [float(field[t][row] + magnification * field[c][row] / 2) for t, c in zip(("x1", "y1", "z1"), "uvw")]
+        hx, hy = page.evaluate(
+            "([v, m]) => document.querySelector('.explorer').explorer.onPage(v, ...m)", [view, middle]
+        )
+        assert np.hypot(hx - x, hy - y) > 10  # away from the tip
+        page.mouse.move(hx, hy)
+        page.wait_for_function(
+            "([view, v]) => { const t = document.querySelector(`.explorer-${view} .explorer-tooltip`);"
+            " return !t.hidden && t.textContent.startsWith(`voxel ${v} `); }",
+            arg=[view, voxel],
+            timeout=10_000,
+        )
+        page.mouse.move(x, y)  # back on the tip
     # away from every vector: no label
     box = page.locator(".explorer-top canvas.gl").bounding_box()
     page.mouse.move(box["x"] + 3, box["y"] + 3)

@@ -501,15 +501,22 @@
     }
   }
 
-  // The nearest vector tip to a point of the view's box (CSS pixels), within 8 px: its index or -1.
+  // The vector drawn nearest a point of the view's box (CSS pixels), within 8 px of its line
+  // from tail to tip on the screen: its index, or -1.
   function pick(ctx, v, x, y) {
-    const f = ctx.frame, r = v.box.getBoundingClientRect(), m = v.mvp;
+    const f = ctx.frame, r = v.box.getBoundingClientRect(), m = v.mvp, g = f.segments;
+    const screen = (k) => {
+      const [px, py, w] = project(m, g[k], g[k + 1], g[k + 2]);
+      return [(px + 1) / 2 * r.width, (1 - py) / 2 * r.height, w];
+    };
     let best = -1, bestD = 64, bestW = Infinity;
     for (let i = 0; i < f.vectors; i++) {
-      const [px, py, w] = project(m, f.tips[3 * i], f.tips[3 * i + 1], f.tips[3 * i + 2]);
-      if (w <= 0) continue;
-      const dx = (px + 1) / 2 * r.width - x, dy = (1 - py) / 2 * r.height - y, d = dx * dx + dy * dy;
-      // of tips drawn on one another, the nearest the camera
+      const [ax, ay, aw] = screen(6 * i), [bx, by, bw] = screen(6 * i + 3);
+      if (aw <= 0 || bw <= 0) continue;
+      const dx = bx - ax, dy = by - ay, len2 = dx * dx + dy * dy;
+      const t = len2 > 0 ? Math.max(0, Math.min(1, ((x - ax) * dx + (y - ay) * dy) / len2)) : 0;
+      const ex = ax + t * dx - x, ey = ay + t * dy - y, d = ex * ex + ey * ey, w = aw + t * (bw - aw);
+      // of vectors drawn on one another, the nearest the camera
       if (d < bestD - 1e-9 || (Math.abs(d - bestD) < 1e-9 && w < bestW)) { best = i; bestD = d; bestW = w; }
     }
     return best;
@@ -845,12 +852,12 @@
     mag.addEventListener("change", () => { if (+mag.value > 0) { ctx.magnification = +mag.value; update(ctx); } });
     new ResizeObserver(() => request(ctx)).observe(views);
     ctx.png = view => png(ctx, ctx.views.find(v => v.view === view));
-    // where a vector's tip is drawn in a view, in the page's pixels (the tests hover it)
-    ctx.tipOnPage = (view, i) => {
-      const v = ctx.views.find(w => w.view === view), f = ctx.frame, p = screenOf(v, f.tips[3 * i], f.tips[3 * i + 1], f.tips[3 * i + 2]);
-      const r = v.box.getBoundingClientRect();
+    // where a point, or a vector's tip, is drawn in a view, in the page's pixels (the tests hover there)
+    ctx.onPage = (view, x, y, z) => {
+      const v = ctx.views.find(w => w.view === view), p = screenOf(v, x, y, z), r = v.box.getBoundingClientRect();
       return p && [r.left + p[0], r.top + p[1]];
     };
+    ctx.tipOnPage = (view, i) => ctx.onPage(view, ...ctx.frame.tips.subarray(3 * i, 3 * i + 3));
     ctx.update = () => update(ctx);
     ctx.request = () => request(ctx);
     ctx.ready = update(ctx).then(() => {

@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import copy
 import re
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -14,6 +13,7 @@ import pandas as pd
 import pytest
 import yaml
 
+from helpers.workflow import workflow_command
 from lidarfield.cli import main
 from lidarfield.commands.jobs import scan_job
 from lidarfield.io import read_scan
@@ -122,28 +122,13 @@ def test_run_on_a_bag_equals_the_sequence_study_of_files_and_kitti_poses(tmp_pat
 def test_workflow_sequence_from_a_bag_equals_files_with_kitti_poses(tmp_path, recording):
     import subprocess
 
-    from conftest import ROOT
-
     config = study_config(tmp_path, recording)
     study, results = load_config(config, base_dir=tmp_path), tmp_path / "results"
     targets = [
         f"results/{pair}/stages/{stage}/field.parquet" for pair in study.pairs for stage in study.stage_ids(pair)
     ]
     proc = subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "snakemake",
-            "--snakefile",
-            str(ROOT / "Snakefile"),
-            "--directory",
-            str(tmp_path),
-            "--configfile",
-            str(config),
-            "--cores",
-            "2",
-            *targets,
-        ],
+        [*workflow_command(tmp_path, config), "--cores", "2", *targets],
         capture_output=True,
         text=True,
     )

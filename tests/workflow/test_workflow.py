@@ -19,7 +19,7 @@ import pandas as pd
 import pytest
 
 from conftest import ROOT
-from helpers.workflow import SNAKEMAKE, snakemake, tiny_study, write_study
+from helpers.workflow import snakemake, tiny_study, workflow_command, write_study
 
 pytestmark = pytest.mark.slow
 
@@ -367,7 +367,7 @@ def test_two_runs_of_a_study_write_byte_identical_files(uninterrupted, tmp_path)
 
 def test_a_rerun_after_a_killed_run_and_unlock_gives_the_same_files(uninterrupted, tmp_path):
     write_study(tmp_path, tiny_study())
-    command = [*SNAKEMAKE, "--directory", str(tmp_path), "--configfile", str(tmp_path / "study.yaml")]
+    command = workflow_command(tmp_path, tmp_path / "study.yaml")
     run = subprocess.Popen(
         [*command, "--cores", "1", SUMMARY_TARGET],
         stdout=subprocess.DEVNULL,

@@ -94,8 +94,16 @@ def run(tmp_path: Path, config: Path, name: str, scans, *options) -> Path:
     return out
 
 
-def test_run_on_a_bag_equals_the_sequence_study_of_files_and_kitti_poses(tmp_path, recording):
+@pytest.fixture(scope="module")
+def bag_run(recording, tmp_path_factory) -> Path:
+    """``lidarfield run`` on the bag's two scans with its odometry: both tests compare it (with
+    the run on the files, with the workflow's sequence from the bag)."""
+    folder = tmp_path_factory.mktemp("bag-run")
     bag = recording[0]
+    return run(folder, study_config(folder, recording), "bag-run", [f"{bag}#0", f"{bag}#1"], "--poses", "/odom")
+
+
+def test_run_on_a_bag_equals_the_sequence_study_of_files_and_kitti_poses(tmp_path, recording, bag_run):
     config = study_config(tmp_path, recording)
     study = load_config(config)
     # The study's ingest jobs: each sequence's scans with their poses, as the workflow writes them.
@@ -110,16 +118,15 @@ def test_run_on_a_bag_equals_the_sequence_study_of_files_and_kitti_poses(tmp_pat
         np.testing.assert_allclose(from_bag.pose, from_files.pose, atol=1e-12)
     assert ingested["bag"][1].stamp_s == pytest.approx(STAMPS[1])
 
-    from_bag = run(tmp_path, config, "bag-run", [f"{bag}#0", f"{bag}#1"], "--poses", "/odom")
     from_files = run(tmp_path, config, "files-run", [tmp_path / "files" / f"scan{k}.parquet" for k in range(2)])
-    assert_same_fields(fields(from_bag), fields(from_files))
+    assert_same_fields(fields(bag_run), fields(from_files))
     # And the poses did matter: without them the pair is registered by identity.
     translation = np.linalg.norm(ingested["files"][1].pose[:3, 3] - ingested["files"][0].pose[:3, 3])
     assert translation > 0.1
 
 
 @pytest.mark.slow
-def test_workflow_sequence_from_a_bag_equals_files_with_kitti_poses(tmp_path, recording):
+def test_workflow_sequence_from_a_bag_equals_files_with_kitti_poses(tmp_path, recording, bag_run):
     import subprocess
 
     config = study_config(tmp_path, recording)
@@ -135,8 +142,7 @@ def test_workflow_sequence_from_a_bag_equals_files_with_kitti_poses(tmp_path, re
     assert proc.returncode == 0, proc.stderr[-3000:]
     from_bag = fields(results / "bag-000", study.stage_ids("bag-000"))
     assert_same_fields(from_bag, fields(results / "files-000", study.stage_ids("files-000")))
-    bag = recording[0]
-    assert_same_fields(fields(run(tmp_path, config, "bag-run", [f"{bag}#0", f"{bag}#1"], "--poses", "/odom")), from_bag)
+    assert_same_fields(fields(bag_run), from_bag)
 
 
 @pytest.mark.parametrize(

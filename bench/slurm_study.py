@@ -30,7 +30,9 @@ from study_scale import study_config  # bench/study_scale.py
 from timing import machine  # bench/timing.py
 
 ROOT = Path(__file__).resolve().parents[1]
-SNAKEMAKE = [sys.executable, "-m", "snakemake", "--snakefile", str(ROOT / "Snakefile")]
+sys.path.insert(0, str(ROOT / "tests"))
+from helpers.workflow import workflow_command  # noqa: E402 (the workflow's command, as the tests run it)
+
 STUDIES = {"smoke": ROOT / "config" / "smoke.yaml", "drive-100": ROOT / "config" / "drive-100.yaml"}
 PARTITION_LINE = 'slurm_partition: "your_partition"'
 
@@ -88,7 +90,7 @@ def timed_run(workdir: Path, config: Path, *args: str, env=None) -> float:
     start = time.perf_counter()
     with open(workdir / "snakemake.log", "w") as log:
         proc = subprocess.run(
-            [*SNAKEMAKE, "--directory", str(workdir), "--configfile", str(workdir / "study.yaml"), *args],
+            [*workflow_command(workdir, workdir / "study.yaml"), *args],
             stdout=log,
             stderr=subprocess.STDOUT,
             env=env,

@@ -30,6 +30,9 @@ from study_time import job_seconds  # bench/study_time.py
 from timing import machine  # bench/timing.py
 
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "tests"))
+from helpers.workflow import workflow_command  # noqa: E402 (the workflow's command, as the tests run it)
+
 APPENDED = {"ego_vehicle": {"radius_m": 4.1}}
 
 
@@ -51,18 +54,7 @@ def snakemake(workdir: Path, worker: str, extra: list[str]) -> tuple[float, floa
         if worker == "off"
         else {k: v for k, v in os.environ.items() if k != "LIDARFIELD_WORKER"}
     )
-    command = [
-        sys.executable,
-        "-m",
-        "snakemake",
-        "--snakefile",
-        str(ROOT / "Snakefile"),
-        "--directory",
-        str(workdir),
-        "--configfile",
-        str(workdir / "study.yaml"),
-        *extra,
-    ]
+    command = [*workflow_command(workdir, workdir / "study.yaml"), *extra]
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     start = time.perf_counter()
     with open(workdir / "snakemake.log", "a") as log:

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from lidarfield.analysis.field_stats import analyse_field, field_statistics, summary_json_safe
+from lidarfield.analysis.field_stats import analyse_field, summary_json_safe
 from lidarfield.analysis.suggest import suggestions, write_suggestions
 from lidarfield.field.file import field_meta, write_field
 from lidarfield.field.grid import FieldSettings, SphericalGrid
@@ -75,8 +75,10 @@ def stats_row(
     hypothesis: str,
     pair: RegisteredPair,
     removed: tuple[int, int],
-    field: dict,
+    statistics: dict,
 ) -> dict:
+    """A stage's stats.json row, with its field's ``statistics`` as analyse_field gave them
+    (not computed again: the randomness tests are most of a small field's time)."""
     return {
         "pair": pair_name,
         "stage": stage_id,
@@ -86,7 +88,7 @@ def stats_row(
         "n2": len(pair.xyz2),
         "removed1": removed[0],
         "removed2": removed[1],
-        **summary_json_safe(field_statistics(field, SETTINGS)),
+        **summary_json_safe(statistics),
         "registration_method": pair.registration.get("method"),
         "registration_fitness": pair.registration.get("fitness"),
     }
@@ -138,7 +140,7 @@ def write_synthetic_pair(
         grid = SETTINGS.to_config()
         table = suggestions(pair, SETTINGS, SUGGEST, ".", grid)
         write_suggestions(stage_dir / "suggestions.parquet", table, stage_id, SUGGEST, grid)
-        row = stats_row(pair_name, stage_id, level, hypothesis, pair, (len(gone.xyz1), len(gone.xyz2)), field)
+        row = stats_row(pair_name, stage_id, level, hypothesis, pair, (len(gone.xyz1), len(gone.xyz2)), statistics)
         write_text(stage_dir / "stats.json", json.dumps(row))
         rows.append(row)
         stage_dirs.append(stage_dir)
@@ -203,7 +205,7 @@ def write_field_study(results_dir: str | Path, n_pairs: int, levels: int = 3, n:
             write_field(
                 stage_dir / "field.parquet", field, field_meta(SETTINGS, summary_json_safe(statistics), stage=stage_id)
             )
-            row = stats_row(name, stage_id, level, hypothesis, pair, (level * 10, level * 12), field)
+            row = stats_row(name, stage_id, level, hypothesis, pair, (level * 10, level * 12), statistics)
             write_text(stage_dir / "stats.json", json.dumps(row))
             rows.append(row)
             dirs.append(stage_dir)

@@ -1,5 +1,6 @@
 """The tiny study and the Snakemake command of the workflow tests (tests/workflow/test_workflow.py,
-tests/workflow/test_worker.py)."""
+tests/workflow/test_worker.py) and of the workflow benchmarks (bench/study_scale.py,
+bench/slurm_study.py)."""
 
 from __future__ import annotations
 
@@ -11,7 +12,7 @@ import yaml
 
 from conftest import ROOT
 
-SNAKEMAKE = [sys.executable, "-m", "snakemake", "--snakefile", str(ROOT / "Snakefile")]
+SNAKEMAKE = [sys.executable, "-m", "snakemake"]  # this environment's
 
 # A small sensor keeps the tiny study fast: 16 channels, 1 deg azimuth steps.
 TINY_SENSOR = {"name": "tiny-16", "elevation_deg": [-22 + 2 * i for i in range(16)], "azimuth_resolution_deg": 1.0}
@@ -35,9 +36,18 @@ def tiny_study() -> dict:
     }
 
 
+def workflow_command(
+    workdir: Path, configfile: Path | None = None, program: list[str] = SNAKEMAKE, snakefile: Path = ROOT / "Snakefile"
+) -> list[str]:
+    """``program`` (Snakemake) running ``snakefile`` (this repository's) in ``workdir`` on
+    ``configfile`` (None: Snakemake's own default, config/config.yaml in ``workdir``)."""
+    command = [*program, "--snakefile", str(snakefile), "--directory", str(workdir)]
+    return command if configfile is None else [*command, "--configfile", str(configfile)]
+
+
 def snakemake(workdir: Path, *args: str, check: bool = True) -> subprocess.CompletedProcess:
     proc = subprocess.run(
-        [*SNAKEMAKE, "--directory", str(workdir), "--configfile", str(workdir / "study.yaml"), *args],
+        [*workflow_command(workdir, workdir / "study.yaml"), *args],
         capture_output=True,
         text=True,
     )

@@ -158,3 +158,26 @@ def test_a_ring_that_is_no_channel_is_read_as_the_nearest_channel():
     assert np.array_equal(fs.channel_rows(elevation, channels, true.astype(float)), true)
     reversed_ids = (len(channels) - 1 - true).astype(float)  # another numbering: matched by elevation
     assert np.array_equal(fs.channel_rows(elevation, channels, reversed_ids), true)
+
+
+def test_a_ring_with_mixed_returns_is_matched_by_its_median_elevation():
+    """A ring a third of whose returns lie two gaps above its beam (mixed returns at depth
+    edges; the real HDL-32E capture's lowest rings reach 5 deg above theirs near the sensor):
+    its median elevation is its beam's, so it keeps its channel where its mean (over half a gap
+    up) would be matched to the next one; channel-aware binning measures the same elevation."""
+    from lidarfield.field.channels import measured_rings, ring_elevations
+
+    channels = np.radians(np.arange(-15.0, 16.0, 2.0))
+    rng = np.random.default_rng(3)
+    true = rng.integers(1, len(channels), 6000)  # ring 0 has no returns: rings matched by nearness
+    true[:900] = 3
+    elevation = channels[true] + rng.normal(0.0, np.radians(0.02), len(true))
+    elevation[:400] += 2 * np.radians(2.0)
+    rings = measured_rings(elevation, true.astype(float))
+    assert np.degrees(rings.elevation[rings.names == 3][0]) == pytest.approx(-9.0, abs=0.05)
+    mean = np.degrees(elevation[true == 3].mean())
+    assert abs(mean + 9.0) > 1.0  # nearer the channel above than its own
+    assert np.array_equal(fs.channel_rows(elevation, channels, true.astype(float)), true)
+    xyz = _directions_at(20.0, np.degrees(elevation), rng.uniform(-180, 180, len(true)))
+    measured = ring_elevations(xyz, true, np.eye(4))
+    np.testing.assert_allclose(measured, np.degrees(channels[1:]), atol=0.05)

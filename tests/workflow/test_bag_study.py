@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import copy
 import re
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -14,6 +13,7 @@ import pandas as pd
 import pytest
 import yaml
 
+from helpers.workflow import workflow_command
 from lidarfield.cli import main
 from lidarfield.commands.jobs import scan_job
 from lidarfield.io import read_scan
@@ -94,8 +94,16 @@ def run(tmp_path: Path, config: Path, name: str, scans, *options) -> Path:
     return out
 
 
-def test_run_on_a_bag_equals_the_sequence_study_of_files_and_kitti_poses(tmp_path, recording):
+@pytest.fixture(scope="module")
+def bag_run(recording, tmp_path_factory) -> Path:
+    """``lidarfield run`` on the bag's two scans with its odometry: both tests compare it (with
+    the run on the files, with the workflow's sequence from the bag)."""
+    folder = tmp_path_factory.mktemp("bag-run")
     bag = recording[0]
+    return run(folder, study_config(folder, recording), "bag-run", [f"{bag}#0", f"{bag}#1"], "--poses", "/odom")
+
+
+def test_run_on_a_bag_equals_the_sequence_study_of_files_and_kitti_poses(tmp_path, recording, bag_run):
     config = study_config(tmp_path, recording)
     study = load_config(config)
     # The study's ingest jobs: each sequence's scans with their poses, as the workflow writes them.
@@ -110,19 +118,16 @@ def test_run_on_a_bag_equals_the_sequence_study_of_files_and_kitti_poses(tmp_pat
         np.testing.assert_allclose(from_bag.pose, from_files.pose, atol=1e-12)
     assert ingested["bag"][1].stamp_s == pytest.approx(STAMPS[1])
 
-    from_bag = run(tmp_path, config, "bag-run", [f"{bag}#0", f"{bag}#1"], "--poses", "/odom")
     from_files = run(tmp_path, config, "files-run", [tmp_path / "files" / f"scan{k}.parquet" for k in range(2)])
-    assert_same_fields(fields(from_bag), fields(from_files))
+    assert_same_fields(fields(bag_run), fields(from_files))
     # And the poses did matter: without them the pair is registered by identity.
     translation = np.linalg.norm(ingested["files"][1].pose[:3, 3] - ingested["files"][0].pose[:3, 3])
     assert translation > 0.1
 
 
 @pytest.mark.slow
-def test_workflow_sequence_from_a_bag_equals_files_with_kitti_poses(tmp_path, recording):
+def test_workflow_sequence_from_a_bag_equals_files_with_kitti_poses(tmp_path, recording, bag_run):
     import subprocess
-
-    from conftest import ROOT
 
     config = study_config(tmp_path, recording)
     study, results = load_config(config, base_dir=tmp_path), tmp_path / "results"
@@ -130,28 +135,14 @@ def test_workflow_sequence_from_a_bag_equals_files_with_kitti_poses(tmp_path, re
         f"results/{pair}/stages/{stage}/field.parquet" for pair in study.pairs for stage in study.stage_ids(pair)
     ]
     proc = subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "snakemake",
-            "--snakefile",
-            str(ROOT / "Snakefile"),
-            "--directory",
-            str(tmp_path),
-            "--configfile",
-            str(config),
-            "--cores",
-            "2",
-            *targets,
-        ],
+        [*workflow_command(tmp_path, config), "--cores", "2", *targets],
         capture_output=True,
         text=True,
     )
     assert proc.returncode == 0, proc.stderr[-3000:]
     from_bag = fields(results / "bag-000", study.stage_ids("bag-000"))
     assert_same_fields(from_bag, fields(results / "files-000", study.stage_ids("files-000")))
-    bag = recording[0]
-    assert_same_fields(fields(run(tmp_path, config, "bag-run", [f"{bag}#0", f"{bag}#1"], "--poses", "/odom")), from_bag)
+    assert_same_fields(fields(bag_run), from_bag)
 
 
 @pytest.mark.parametrize(

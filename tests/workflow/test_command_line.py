@@ -15,7 +15,7 @@ import pytest
 import yaml
 
 from conftest import ROOT
-from helpers.workflow import SNAKEMAKE, tiny_study, write_study
+from helpers.workflow import tiny_study, workflow_command, write_study
 
 pytestmark = pytest.mark.slow
 
@@ -42,7 +42,7 @@ def with_default_study(workdir: Path) -> Path:
 def dry_run(workdir: Path, *args: str) -> str:
     """A dry run's output with the shell commands of the jobs it plans."""
     proc = subprocess.run(
-        [*SNAKEMAKE, "--directory", str(workdir), "--dry-run", "--printshellcmds", *args],
+        [*workflow_command(workdir), "--dry-run", "--printshellcmds", *args],
         capture_output=True,
         text=True,
     )
@@ -90,18 +90,7 @@ def test_reading_or_printing_the_workflow_writes_nothing_and_starts_no_process(t
     workdir.mkdir()
     write_study(workdir, tiny_study())
     proc = subprocess.run(
-        [
-            sys.executable,
-            "-c",
-            AUDITED_SNAKEMAKE,
-            "--snakefile",
-            str(ROOT / "Snakefile"),
-            "--directory",
-            str(workdir),
-            "--configfile",
-            str(workdir / "study.yaml"),
-            *command,
-        ],
+        [*workflow_command(workdir, workdir / "study.yaml", [sys.executable, "-c", AUDITED_SNAKEMAKE]), *command],
         capture_output=True,
         text=True,
     )

@@ -21,12 +21,12 @@ import pytest
 import yaml
 
 from conftest import ROOT
+from helpers.workflow import workflow_command
 
 pytestmark = pytest.mark.slow
 
 CLUSTER_SCRIPT = ROOT / "scripts" / "slurm-cluster.sh"
 SMOKE = ROOT / "config" / "smoke.yaml"
-SNAKEMAKE = [sys.executable, "-m", "snakemake", "--snakefile", str(ROOT / "Snakefile")]
 PROFILE = ROOT / "profiles" / "slurm" / "config.yaml"
 # The profile's partition line, and what the test cluster's partition makes it.
 PARTITION_LINE = 'slurm_partition: "your_partition"'
@@ -93,7 +93,7 @@ def slurm_profile(tmp_path) -> list[str]:
 
 def run_study(workdir: Path, config: Path, *args: str, env=None) -> subprocess.CompletedProcess:
     return subprocess.run(
-        [*SNAKEMAKE, "--directory", str(workdir), "--configfile", str(config), *args],
+        [*workflow_command(workdir, config), *args],
         capture_output=True,
         text=True,
         env=env,

@@ -146,22 +146,48 @@ def pair_channels(pair: RegisteredPair) -> tuple[np.ndarray | None, str]:
     return channels, f"{len(merged_channels(channels))} channels measured from the scans' rings"
 
 
+@dataclass(frozen=True)
+class Rings:
+    """A scan's rings as its returns measure them. A ring's returns lie on its beam's cone, so
+    their elevation about the sensor is the beam's but for noise and mixed returns (a footprint
+    split across a depth edge, a return of the next beam's target): the median is the beam's,
+    where the mean moves towards those."""
+
+    names: np.ndarray  # the ring numbers present, ascending
+    counts: np.ndarray  # each ring's number of returns
+    elevation: np.ndarray  # the median elevation of each ring's returns (the unit given)
+    spread: np.ndarray  # the median distance of its returns from that elevation
+    index: np.ndarray  # each return's ring as an index into ``names``; -1: no ring
+
+
+def measured_rings(elevation: np.ndarray, ring: np.ndarray) -> Rings:
+    """The rings of returns at ``elevation`` (about their sensor) carrying ``ring``; returns
+    without a ring (NaN, negative) or without a finite elevation belong to none."""
+    elevation = np.asarray(elevation, dtype=np.float64)
+    ring = np.asarray(ring, dtype=np.float64)
+    known = np.flatnonzero(np.isfinite(ring) & (ring >= 0) & np.isfinite(elevation))
+    which = ring[known].astype(np.int64)  # rings are small whole numbers: counted, not sorted
+    present = np.bincount(which) > 0
+    names = np.flatnonzero(present)
+    index = (np.cumsum(present) - 1)[which]
+    counts = np.bincount(index, minlength=len(names))
+    # grouped by ring: a stable sort of 16-bit keys is a radix sort
+    order = np.argsort(index.astype(np.uint16 if len(names) <= 1 << 16 else np.int64), kind="stable")
+    groups = np.split(elevation[known[order]], np.cumsum(counts)[:-1]) if len(names) else []
+    median = np.array([np.median(g) for g in groups])
+    spread = np.array([np.median(np.abs(g - m)) for g, m in zip(groups, median)])
+    every = np.full(len(ring), -1, dtype=np.int64)
+    every[known] = index
+    return Rings(names, counts, median, spread, every)
+
+
 def ring_elevations(xyz: np.ndarray, ring: np.ndarray, pose: np.ndarray) -> np.ndarray:
-    """The median elevation (deg) of each ring's points about the sensor at ``pose`` (the
-    sensor's pose in the points' frame), rings of at least MIN_RING_POINTS points whose points
-    lie within RING_SPREAD_DEG of it (half of them at least)."""
+    """The elevation (deg) of each ring about the sensor at ``pose`` (the sensor's pose in the
+    points' frame; :func:`measured_rings`), rings of at least MIN_RING_POINTS points whose
+    points lie within RING_SPREAD_DEG of it (half of them at least)."""
     local = in_sensor_frame(np.asarray(xyz, dtype=np.float64), pose)
-    elevation = np.degrees(np.arctan2(local[:, 2], np.hypot(local[:, 0], local[:, 1])))
-    ring = np.asarray(ring)
-    order = np.argsort(ring, kind="stable")
-    rings, starts, counts = np.unique(ring[order], return_index=True, return_counts=True)
-    groups = np.split(elevation[order], starts[1:])
-    medians = [
-        np.median(g) if n >= MIN_RING_POINTS and np.isfinite(g).all() else np.nan for g, n in zip(groups, counts)
-    ]
-    return np.array(
-        [m for m, g in zip(medians, groups) if np.isfinite(m) and np.median(np.abs(g - m)) <= RING_SPREAD_DEG]
-    )
+    rings = measured_rings(np.degrees(np.arctan2(local[:, 2], np.hypot(local[:, 0], local[:, 1]))), ring)
+    return rings.elevation[(rings.counts >= MIN_RING_POINTS) & (rings.spread <= RING_SPREAD_DEG)]
 
 
 def merged_channels(channels: np.ndarray) -> np.ndarray:

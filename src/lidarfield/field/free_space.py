@@ -45,6 +45,7 @@ from ..pair import RegisteredPair
 from ..poses import in_sensor_frame
 from ..sensors.models import SensorModel
 from ..sensors.rig import LidarView
+from .channels import measured_rings
 
 # The margin across the ray is rounded up to a step of this ratio, so that few windows are filtered.
 _WINDOW_RATIO = 1.25
@@ -174,31 +175,30 @@ def nearest_channel(elevation: np.ndarray, channels: np.ndarray) -> np.ndarray:
 def channel_rows(elevation: np.ndarray, channels: np.ndarray, ring: np.ndarray | None = None) -> np.ndarray:
     """The channel (row) of each return: its ring's where the scan carries one, else the one
     nearest its elevation. Drivers number rings differently (a VLP-32C's by laser ID in
-    Argoverse 2, by elevation in ROS), so a ring is matched to a channel by the mean elevation
-    of its returns: in the same order when there are as many rings as channels, else the
-    nearest; returns without a ring (NaN, negative) take the channel nearest their own, and so do
-    the returns of a ring that is no channel: one whose returns lie on average farther from its
-    channel than the layout's usual gap (a driver that writes ring 0 for every point, or rings
-    of another layout)."""
+    Argoverse 2, by elevation in ROS), so a ring is matched to a channel by the elevation of its
+    returns (:func:`~lidarfield.field.channels.measured_rings`): in the same order when there
+    are as many rings as channels, else the nearest; returns without a ring (NaN, negative)
+    take the channel nearest their own, and so do the returns of a ring that is no channel: one
+    whose returns lie on average farther from its channel than the layout's usual gap (a driver
+    that writes ring 0 for every point, or rings of another layout)."""
     rows = nearest_channel(elevation, channels)
     if ring is None:
         return rows
-    ring = np.asarray(ring, dtype=np.float64)
-    known = np.isfinite(ring) & (ring >= 0)
+    rings = measured_rings(elevation, ring)
+    known = rings.index >= 0
     if not known.any():
         return rows
-    which = ring[known].astype(np.int64)  # rings are small whole numbers: counted, not sorted
-    count = np.bincount(which)
-    names = np.flatnonzero(count)
-    mean = np.bincount(which, weights=elevation[known])[names] / count[names]
-    row_of_ring = np.zeros(len(count), dtype=np.int64)
-    if len(names) == len(channels):
-        row_of_ring[names[np.argsort(mean, kind="stable")]] = np.arange(len(names))
+    which = rings.index[known]
+    if len(rings.names) == len(channels):
+        row_of_ring = np.empty(len(rings.names), dtype=np.int64)
+        row_of_ring[np.argsort(rings.elevation, kind="stable")] = np.arange(len(rings.names))
     else:
-        row_of_ring[names] = nearest_channel(mean, channels)
+        row_of_ring = nearest_channel(rings.elevation, channels)
     gap = float(np.median(np.diff(channels))) if len(channels) > 1 else np.inf
-    off = np.bincount(which, weights=np.abs(elevation[known] - channels[row_of_ring[which]]), minlength=len(count))
-    is_channel = off <= gap * np.maximum(count, 1)  # mean distance from its channel within one gap
+    off = np.bincount(
+        which, weights=np.abs(elevation[known] - channels[row_of_ring[which]]), minlength=len(rings.names)
+    )
+    is_channel = off <= gap * rings.counts  # mean distance from its channel within one gap
     rows[known] = np.where(is_channel[which], row_of_ring[which], rows[known])
     return rows
 

@@ -258,6 +258,8 @@ def test_a_suggested_correction_shows_its_displacement_and_fit(tmp_path):
         "p95_after": 0.02,
         "energy_after": 1.0,
         "energy_reduction": 0.95,
+        "whitened_reduction": 0.97,
+        "removal_null": 0.0,
     }
     table = {name: np.asarray([row[name]]) for name in SUGGESTION_COLUMNS}
     stage = tmp_path / "stages" / "00-none"

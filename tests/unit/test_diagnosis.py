@@ -188,3 +188,43 @@ def test_a_moving_object_is_placed_where_it_hides_returns_in_both_scans():
     for xyz, true_xyz, shift in ((pair.xyz1, truth.xyz1, 0.0), (pair.xyz2, truth.xyz2, 3.0)):
         on_box = apply_pose(zoo.box_frame(center + shift * along, heading), xyz[np.any(xyz != true_xyz, axis=1)])
         assert np.all(np.abs(on_box) <= np.asarray(size) / 2 + 1e-6)  # where the car is in that scan
+
+
+@pytest.mark.parametrize("base", ["sim-canyon-drive-hdl64", "sim-intersection-drive-hdl32"])
+def test_moving_objects_leaves_the_truck_that_carries_the_sensor(base):
+    """A box truck's cargo body behind the sensor, on a drive: in frame 1 it is where the other
+    sensor's rays passed (it moved with them), but it stays put in each sensor's own frame, so it
+    is the own vehicle, not an object that moved (without that test all 566 and 126 of its
+    points in scan 2 went). Nothing in the scene moves: nothing else goes either."""
+    from lidarfield.hypotheses.geometry import inside_box, own_frame_points
+
+    pair = zoo.faulted_pair(zoo.load_base(base, POINTS), zoo.Case(base, "ego_body", "obvious"))
+    center, size = zoo.EGO_BODIES["truck"]
+    box = [v for c, s in zip(center, size) for v in (c - s / 2 - 0.01, c + s / 2 + 0.01)]
+    on_truck = [inside_box(xyz, box) for xyz in own_frame_points(pair)]
+    assert on_truck[0].sum() > 300 and on_truck[1].sum() > 300
+    keep1, keep2 = apply_step(pair, {"moving_objects": {}})
+    assert keep1.all() and keep2.all()
+
+
+def test_a_rig_s_faults_are_about_each_lidar_s_own_origin():
+    """On a two-lidar rig a range fault scales each point's range from its own lidar, and a cut
+    field of view is each lidar's sector about its own origin, its model's limits set."""
+    from lidarfield.sensors.rig import LIDAR
+
+    lidars = zoo._rig_lidars()
+    rng = np.random.default_rng(8)
+    xyz = rng.normal(size=(600, 3)) * 10
+    which = rng.integers(0, 2, size=600).astype(np.uint8)
+    scan = Scan(xyz, {LIDAR: which}, lidars[0].sensor, lidars=lidars)
+    faulty = zoo.in_each_lidar(scan, lambda k, own, mask, model: zoo.range_fault(own, 1.01, 0.0))
+    for k, lidar in enumerate(lidars):
+        origin = lidar.pose[:3, 3]
+        r, r_faulty = (np.linalg.norm(p[which == k] - origin, axis=1) for p in (xyz, faulty))
+        np.testing.assert_allclose(r_faulty, 1.01 * r, rtol=1e-9)
+    cut = zoo.fov_fault(scan, 90.0)
+    assert all(lidar.sensor.azimuth_limits_deg == (-135.0, 135.0) for lidar in cut.lidars)
+    for k, lidar in enumerate(cut.lidars):
+        own = apply_pose(np.linalg.inv(lidar.pose), cut.xyz[cut.attributes[LIDAR] == k])
+        assert np.abs(np.degrees(np.arctan2(own[:, 1], own[:, 0]))).max() <= 135.0
+    assert len(cut) == pytest.approx(0.75 * len(scan), rel=0.1)

@@ -5,7 +5,10 @@ Everything stays in memory: each step is a :class:`~.stack.Stage` (the same ``ne
 study's mitigate job) with its field and statistics (``analyse_field``, as the field job), and
 the candidates of each step are the suggestions of that stage (``analysis.suggest``: the
 config's ``suggest`` list, or every built-in the stack has not applied). The stopping rule is
-:mod:`lidarfield.analysis.stopping_rule`. What it found is a stack (normalised entries, as a config's
+:mod:`lidarfield.analysis.stopping_rule`. Before it stops, it looks at what the field cannot
+show: a scan that returned nothing in a sector the other fills (``analysis.coverage``) is a
+finding, and a step of ``field_of_view`` when that removes the sector's points (whatever the
+verdict: the cut sector has no vector). What it found is a stack (normalised entries, as a config's
 ``hypotheses:``), one row per step with the numbers behind the choice, and every stage's field.
 """
 
@@ -166,10 +169,10 @@ def explain_pair(
         ]
         if verdict != "patterned":
             result.stop = STOP_VERDICT.format(verdict=verdict)
-            table = room and blind_sector_step(
-                current.stage.pair, settings, candidates, base_dir, grid_section, suggest, result
-            )
-            if not table:
+            if not room:
+                break
+            table = blind_sector_step(current.stage.pair, settings, candidates, base_dir, grid_section, suggest, result)
+            if table is None:
                 break
             take(table, 0)
             continue

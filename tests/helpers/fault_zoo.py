@@ -33,10 +33,11 @@ from lidarfield.commands.scans import explain_with_study
 from lidarfield.io import read_scan
 from lidarfield.io.pose_files import read_kitti_poses, read_pose
 from lidarfield.pair import RegisteredPair
-from lidarfield.poses import apply_pose, invert_pose, pose_from_xyzrpy
+from lidarfield.poses import apply_pose, in_sensor_frame, invert_pose, pose_from_xyzrpy
 from lidarfield.registration import register_pair
 from lidarfield.scan import Scan, still_sweep
 from lidarfield.sensors.models import PRESETS
+from lidarfield.sensors.rig import LIDAR, Lidar
 from lidarfield.study.config import validate_config
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -203,6 +204,30 @@ def _sim_scan(scene, model, pose, t, seed) -> Scan:
     return _posed(simulate_scan(scene, model, pose, time_s=t, seed=seed, range_noise_m=SIM_NOISE_M), pose)
 
 
+# A two-lidar rig (Argoverse 2's layout, tests/helpers/av2_layout.py): two VLP-32C stacked
+# 0.3 m apart, the lower one upside down; the scan's frame is the upper lidar's.
+RIG = "rig"
+
+
+def _rig_lidars() -> tuple[Lidar, Lidar]:
+    from helpers.av2_layout import DOWN_IN_VEHICLE, UP_IN_VEHICLE
+
+    model = PRESETS["vlp32c"]
+    return Lidar("up_lidar", np.eye(4), model), Lidar("down_lidar", invert_pose(UP_IN_VEHICLE) @ DOWN_IN_VEHICLE, model)
+
+
+def _sim_rig_scan(scene, pose, t, seed) -> Scan:
+    """The rig's scan with its upper lidar at ``pose``: each lidar cast from its own place, the
+    points in the upper lidar's frame with their ``lidar``."""
+    lidars = _rig_lidars()
+    parts = [_sim_scan(scene, lidar.sensor, pose @ lidar.pose, t, seed + 10 * k) for k, lidar in enumerate(lidars)]
+    xyz = np.vstack([apply_pose(lidar.pose, part.xyz) for lidar, part in zip(lidars, parts)])
+    names = sorted(set.intersection(*(set(part.attributes) for part in parts)))
+    attributes = {name: np.concatenate([part.attributes[name] for part in parts]) for name in names}
+    attributes[LIDAR] = np.repeat(np.arange(len(parts), dtype=np.uint8), [len(part) for part in parts])
+    return _posed(Scan(xyz, attributes, lidars[0].sensor, lidars=lidars), pose)
+
+
 def _intersection_drive(frames: int) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
     """Issue 27's drive (tests/helpers/drive.py), 2 m up: 3 m/s round the crossing's centre,
     10 Hz; per scan its pose and the sensor's velocities in its own frame."""
@@ -230,7 +255,8 @@ SIM_FAULTS = {"still": STILL_FAULTS, "drive": ("translation", "time_offset", "eg
 def sim_bases() -> dict[str, BaseSpec]:
     """The simulated base pairs, by name (``sim-{scene}-{kind}-{preset}``): per preset, the
     paper's intersection and the street canyon from one place (two samplings 0.1 s apart,
-    their own range noise), consecutive scans of a drive, and scans 3 m apart along it."""
+    their own range noise), consecutive scans of a drive, and scans 3 m apart along it; and the
+    intersection seen by the two-lidar rig (``RIG``)."""
 
     def loader(scene_key, kind, preset):
         def load():
@@ -239,19 +265,23 @@ def sim_bases() -> dict[str, BaseSpec]:
             scene_name, drive = SIM_SCENES[scene_key]
             scene, k2 = load_scene(scene_name), SIM_SECOND[scene_key][kind]
             frames = drive(k2 + 1)
-            s1 = _sim_scan(scene, PRESETS[preset], frames[0][0], 0.0, 1)
-            s2 = _sim_scan(scene, PRESETS[preset], frames[k2][0], 0.1 * max(k2, 1), 2)
+            if preset == RIG:
+                s1 = _sim_rig_scan(scene, frames[0][0], 0.0, 1)
+                s2 = _sim_rig_scan(scene, frames[k2][0], 0.1 * max(k2, 1), 2)
+            else:
+                s1 = _sim_scan(scene, PRESETS[preset], frames[0][0], 0.0, 1)
+                s2 = _sim_scan(scene, PRESETS[preset], frames[k2][0], 0.1 * max(k2, 1), 2)
             velocity = frames[k2][1:] if kind == "drive" else None
             return BasePair(f"sim-{scene_key}-{kind}-{preset}", s1, s2, velocity)
 
         return load
 
+    chosen = [(preset, scene) for preset in SIM_PRESETS for scene in SIM_SCENES] + [(RIG, "intersection")]
     return {
         f"sim-{scene}-{kind}-{preset}": BaseSpec(
             "simulated", preset, kind, SIM_FAULTS[kind], loader(scene, kind, preset)
         )
-        for preset in SIM_PRESETS
-        for scene in SIM_SCENES
+        for preset, scene in chosen
         for kind in SIM_FAULTS
     }
 
@@ -295,6 +325,24 @@ def from_spherical(r, azimuth, elevation) -> np.ndarray:
     return np.column_stack([r * c * np.cos(azimuth), r * c * np.sin(azimuth), r * np.sin(elevation)])
 
 
+def lidar_parts(scan: Scan) -> list[tuple[np.ndarray, np.ndarray, object]]:
+    """Each lidar of the scan: the mask of its points, its pose in the scan's frame and its
+    model (one lidar at the frame's origin for a scan without a rig)."""
+    if not scan.lidars:
+        return [(np.ones(len(scan), dtype=bool), np.eye(4), scan.sensor)]
+    ids = np.asarray(scan.attributes[LIDAR])
+    return [(ids == k, lidar.pose, lidar.sensor or scan.sensor) for k, lidar in enumerate(scan.lidars)]
+
+
+def in_each_lidar(scan: Scan, move) -> np.ndarray:
+    """The scan's points, each lidar's moved by ``move(k, its points in its own frame, their
+    mask, its model)`` (points in its frame): a fault of a lidar is about its own origin."""
+    out = scan.xyz.copy()
+    for k, (mask, pose, model) in enumerate(lidar_parts(scan)):
+        out[mask] = apply_pose(pose, move(k, in_sensor_frame(scan.xyz[mask], pose), mask, model))
+    return out
+
+
 def range_fault(xyz: np.ndarray, scale: float, offset_m: float) -> np.ndarray:
     """Every range r reported as ``scale * r + offset_m`` along its ray."""
     r = np.linalg.norm(xyz, axis=1, keepdims=True)
@@ -310,10 +358,10 @@ def channels(scan: Scan) -> np.ndarray:
     return np.argmin(np.abs(elevation[:, None] - table[None, :]), axis=1)
 
 
-def faulty_channel(scan: Scan) -> int:
+def faulty_channel(model) -> int:
     """The channel whose elevation is faulted: the one nearest -5 deg (it sees the ground and
     walls at every sensor's typical mount)."""
-    return int(np.argmin(np.abs(np.asarray(scan.sensor.elevation_deg) + 5.0)))
+    return int(np.argmin(np.abs(np.asarray(model.elevation_deg) + 5.0)))
 
 
 def elevation_fault(xyz: np.ndarray, channel: np.ndarray, which: int, offset_deg: float) -> np.ndarray:
@@ -340,7 +388,14 @@ def motion_fault(scan: Scan, speed_mps: float) -> Scan:
     further, ``p - v t``; the scan records its times and that motion (as the simulator does)."""
     t = sweep_times(scan)
     v = np.array([speed_mps, 0.0, 0.0])
-    moved = Scan(scan.xyz - t[:, None] * v, {**scan.attributes, "time": t}, scan.sensor, scan.pose, scan.source)
+    moved = Scan(
+        scan.xyz - t[:, None] * v,
+        {**scan.attributes, "time": t},
+        scan.sensor,
+        scan.pose,
+        scan.source,
+        lidars=scan.lidars,
+    )
     moved.sweep_motion = {"velocity_mps": v.tolist(), "angular_velocity_rps": [0.0, 0.0, 0.0]}
     return moved
 
@@ -362,15 +417,20 @@ def ray_box_distance(xyz: np.ndarray, T_box_sensor: np.ndarray, size) -> np.ndar
 
 
 def with_box(scan: Scan, T_box_sensor: np.ndarray, size) -> Scan:
-    """The scan with a box in front of its returns: a ray meeting the box before its return
-    reports the box (dropped when nearer than the sensor's minimum range)."""
-    distance = ray_box_distance(scan.xyz, T_box_sensor, size)
-    r = np.linalg.norm(scan.xyz, axis=1)
-    blocked = distance < r
-    xyz = scan.xyz.copy()
-    xyz[blocked] *= (distance[blocked] / r[blocked])[:, None]
-    out = _with_xyz(scan, xyz)
-    keep = ~blocked | (distance >= scan.sensor.min_range_m)
+    """The scan with a box in front of its returns: a ray (from its own lidar) meeting the box
+    before its return reports the box (dropped when nearer than the lidar's minimum range)."""
+    keep = np.ones(len(scan), dtype=bool)
+
+    def blocked_by_box(k, own, mask, model):
+        distance = ray_box_distance(own, T_box_sensor @ lidar_parts(scan)[k][1], size)
+        r = np.linalg.norm(own, axis=1)
+        blocked = distance < r
+        own = own.copy()
+        own[blocked] *= (distance[blocked] / r[blocked])[:, None]
+        keep[mask] = ~blocked | (distance >= model.min_range_m)
+        return own
+
+    out = _with_xyz(scan, in_each_lidar(scan, blocked_by_box))
     return out if keep.all() else out.subset(keep)
 
 
@@ -413,12 +473,19 @@ def object_place(scan: Scan, displacement_m: float) -> tuple[np.ndarray, float, 
 
 def fov_fault(scan: Scan, cut_deg: float) -> Scan:
     """Scan 2 sees ``cut_deg`` of azimuth less, centred behind it (a sensor mounted against a
-    part of its vehicle, or configured to a sector): its points there dropped, its model's
-    azimuth limits set."""
+    part of its vehicle, or configured to a sector): each lidar's points there dropped (about its
+    own origin), its model's azimuth limits set."""
     half = 180.0 - cut_deg / 2
-    azimuth = np.degrees(np.arctan2(scan.xyz[:, 1], scan.xyz[:, 0]))
-    out = scan.subset(np.abs(azimuth) <= half)
+    keep = np.ones(len(scan), dtype=bool)
+    for mask, pose, _ in lidar_parts(scan):
+        own = in_sensor_frame(scan.xyz[mask], pose)
+        keep[mask] = np.abs(np.degrees(np.arctan2(own[:, 1], own[:, 0]))) <= half
+    out = scan.subset(keep)
     out.sensor = dataclasses.replace(scan.sensor, azimuth_limits_deg=(-half, half))
+    out.lidars = tuple(
+        dataclasses.replace(lidar, sensor=dataclasses.replace(lidar.sensor, azimuth_limits_deg=(-half, half)))
+        for lidar in scan.lidars
+    )
     return out
 
 
@@ -446,9 +513,14 @@ def faulted_pair(base: BasePair, case: Case) -> RegisteredPair:
     m = case.magnitude
     if case.fault in ("range_scale", "range_offset"):
         scale, offset = (1.0 + m, 0.0) if case.fault == "range_scale" else (1.0, m)
-        s2 = _with_xyz(s2, range_fault(s2.xyz, scale, offset))
-    elif case.fault == "channel_elevation":
-        s2 = _with_xyz(s2, elevation_fault(s2.xyz, channels(s2), faulty_channel(s2), m))
+        s2 = _with_xyz(s2, in_each_lidar(s2, lambda k, own, mask, model: range_fault(own, scale, offset)))
+    elif case.fault == "channel_elevation":  # of the first lidar
+        channel = channels(s2)
+
+        def one_channel(k, own, mask, model):
+            return elevation_fault(own, channel[mask], faulty_channel(model), m) if k == 0 else own
+
+        s2 = _with_xyz(s2, in_each_lidar(s2, one_channel))
     elif case.fault == "motion_distortion":
         s2 = motion_fault(s2, m)
     elif case.fault == "moving_object":
@@ -483,7 +555,7 @@ def faulted_pair(base: BasePair, case: Case) -> RegisteredPair:
 
 def _with_xyz(scan: Scan, xyz: np.ndarray) -> Scan:
     """The scan with its points moved, everything else kept."""
-    out = Scan(xyz, dict(scan.attributes), scan.sensor, scan.pose, scan.source)
+    out = Scan(xyz, dict(scan.attributes), scan.sensor, scan.pose, scan.source, lidars=scan.lidars)
     out.sweep_motion, out.stamp_s = scan.sweep_motion, scan.stamp_s
     return out
 

@@ -258,6 +258,8 @@ def test_a_suggested_correction_shows_its_displacement_and_fit(tmp_path):
         "p95_after": 0.02,
         "energy_after": 1.0,
         "energy_reduction": 0.95,
+        "whitened_reduction": 0.97,
+        "removal_null": 0.0,
     }
     table = {name: np.asarray([row[name]]) for name in SUGGESTION_COLUMNS}
     stage = tmp_path / "stages" / "00-none"
@@ -269,4 +271,7 @@ def test_a_suggested_correction_shows_its_displacement_and_fit(tmp_path):
     assert "moves 0.300 / 0.310 m" in html and "t = (-0.300, 0.000, 0.000) m" in html
     assert "suggested by the rigid tag (63% of the energy)" in html
     line = format_next_steps([{"stage": "00-none", "verdict": "patterned"}], tmp_path)
-    assert "realign reduces the energy by 95.0% (fitted t = (-0.300, 0.000, 0.000) m, rotation 0.010°)" in line
+    assert (
+        "realign reduces the energy by 97.0% in units of its noise (95.0% raw) (fitted t = (-0.300, 0.000, 0.000) m"
+        in line
+    )

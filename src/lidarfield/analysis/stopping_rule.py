@@ -1,13 +1,20 @@
 """The stopping rule of ``lidarfield explain``: which candidate of a suggestion table is worth
 applying, and when the loop ends.
 
-A candidate is *worth it* when its energy reduction (``suggest``: over the voxels valid before
-and after) is more than 0 and at least ``min_energy_reduction``, it removes at most
-``max_removed_share`` of the points left, and its reduction is at least
-``min_reduction_per_removed`` times that share (a correction removes nothing: only the first
-test applies). The loop (``study.explain_loop``) applies the best-ranked candidate that is worth it,
-and stops when the field's verdict is no longer ``patterned`` (``random``, or ``undetermined``
-with too few valid voxels to judge), when no candidate is worth it, or after ``max_steps``.
+A candidate is *worth it* when its reduction of the field's energy in units of its noise
+(``suggest``'s ``whitened_reduction``: over the voxels valid before and after) is more than 0
+and at least ``min_energy_reduction``, it removes at most ``max_removed_share`` of the points
+left, and its reduction is at least ``min_reduction_per_removed`` times ``removal_null``, what
+removing as many points of each voxel at random would give (a correction removes nothing:
+only the first test applies). The last test is the null of a removal: it is worth it only for
+what it explains beyond thinning the field. The whitened energy, not the raw one, because the
+verdict reads the field in units of its noise: a correction that finds the fault can leave the
+raw energy unchanged (a turn moves whole rings between voxels at the band edges) while it
+takes the field's pattern away. The loop (``study.explain_loop``) applies the best-ranked
+candidate that is worth it, and stops when the field's verdict is no longer ``patterned``
+(``random``, or ``undetermined`` with too few valid voxels to judge), when no candidate is
+worth it, or after ``max_steps``; before it stops, a scan that returned nothing in a sector
+the other fills (``coverage``) has ``field_of_view`` applied when its model says so.
 The defaults are the config's ``explain`` section (the schema).
 """
 
@@ -50,12 +57,13 @@ def explain_settings(section: dict | None) -> ExplainSettings:
 
 def worth_it(row: dict, settings: ExplainSettings) -> bool:
     """Whether one suggestion row (``SUGGESTION_COLUMNS``) is worth applying."""
-    reduction, share = float(row["energy_reduction"]), float(row["removed_share"])
+    reduction, share = float(row["whitened_reduction"]), float(row["removed_share"])
     if not (math.isfinite(reduction) and reduction > 0 and reduction >= settings.min_energy_reduction):
         return False
     if not math.isfinite(share):  # no points at all: nothing to remove, nothing to explain
         return False
-    return share <= settings.max_removed_share and reduction >= settings.min_reduction_per_removed * share
+    null = float(row["removal_null"]) if math.isfinite(row["removal_null"]) else 0.0
+    return share <= settings.max_removed_share and reduction >= settings.min_reduction_per_removed * null
 
 
 def best_worth_it(table: dict[str, np.ndarray], settings: ExplainSettings) -> int | None:

@@ -18,9 +18,27 @@ binned once) and compared with the stage's field:
 - ``suggested_by`` and ``tag_share``: the tag that points to the candidate (``TAG_CORRECTIONS``:
   ``rigid`` -> ``realign``, ``radial`` -> ``range_calibration``) and that tag's share of the
   stage's field energy (``tags``); ``""`` and NaN for a candidate no tag points to.
+- ``whitened_reduction``: the same over the field in units of its noise: 1 - whitened energy
+  after / before (``tags.whitened_energy``: |C^-1/2 d|^2 per voxel, C each vector's sampling
+  covariance with the scan patterns, as the verdict reads it), over the same voxels. Raw energy
+  is dominated by the few voxels of edges and clutter, where a point more or less moves a mean
+  by decimetres: removing a few per cent of the points there (``outliers``) lowers it more than
+  the right correction, which moves every voxel's vector by millimetres to centimetres. In
+  units of its noise every voxel counts by how far its vector is from what sampling explains,
+  so a correction that explains a pattern across the field lowers the whitened energy most,
+  and a removal lowers it only where what it removes was the pattern. Removing a share s of
+  the points at random lowers it by about s (each voxel's whitened energy beyond noise grows
+  with its count).
+- ``removal_null``: the whitened reduction a removal of as many points at random would give,
+  voxel by voxel: sum of s E / sum of E over those voxels, E a voxel's whitened energy before
+  and s the share of its points the candidate removed (0 for a correction that removes
+  nothing; a voxel's energy beyond its noise grows with its count, so a random share s of its
+  points takes about s of it). ``stopping_rule`` asks a removal to explain more than that:
+  a removal concentrated where the pattern is (a moving object, the own body) beats it, one
+  that thins the whole field (statistical outliers of every surface's edges) does not.
 - ``max_after``, ``p95_after`` (m) and ``energy_after``: the field it leaves, all valid voxels.
 
-``rank`` 1 is the largest energy reduction (ties: fewer points removed, then the larger share
+``rank`` 1 is the largest whitened reduction (ties: fewer points removed, then the larger share
 of the energy in the tag that points to it; undefined reductions last). Candidates are the
 config's ``suggest`` list, or by default every built-in hypothesis the stack has not applied up
 to that stage, with its defaults: the removing ones and every correcting one (``CORRECTING``: a
@@ -32,6 +50,7 @@ configured one is an error naming it.
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 import time
@@ -49,7 +68,8 @@ from ..hypotheses.steps import step_name
 from ..io.parquet_table import write_table
 from ..pair import RegisteredPair
 from ..storage.stage_ids import canonical_json
-from .tags import vector_tags, voxel_energy
+from .field_stats import scan_patterns
+from .tags import vector_tags, voxel_energy, whitened_energy
 
 log = logging.getLogger(__name__)
 
@@ -72,6 +92,8 @@ SUGGESTION_COLUMNS = (
     "p95_after",
     "energy_after",
     "energy_reduction",
+    "whitened_reduction",
+    "removal_null",
 )
 
 # The tag whose voxels each correcting built-in would explain: a field whose energy sits in
@@ -117,7 +139,8 @@ def suggestions(
     """
     settings = pair_binning(settings, pair).settings  # the grid of the stage's own field
     ids1, ids2 = settings.grid.assign(pair.xyz1), settings.grid.assign(pair.xyz2)
-    before = field_from_voxel_ids(ids1, pair.xyz1, ids2, pair.xyz2, settings)
+    patterns = scan_patterns(pair)
+    before = field_from_voxel_ids(ids1, pair.xyz1, ids2, pair.xyz2, settings, patterns=patterns)
     shares = tag_energy_shares(before)
     total = len(pair.xyz1) + len(pair.xyz2)
     rows = []
@@ -139,9 +162,19 @@ def suggestions(
             xyz1 = pair.xyz1 if outcome.xyz1 is None else outcome.xyz1
             xyz2 = pair.xyz2 if outcome.xyz2 is None else outcome.xyz2
             xyz1, xyz2 = xyz1[keep1], xyz2[keep2]
-            after = field_from_voxel_ids(settings.grid.assign(xyz1), xyz1, settings.grid.assign(xyz2), xyz2, settings)
+            corrected = pair if outcome.T_1_2 is None else dataclasses.replace(pair, T_1_2=outcome.T_1_2)
+            after = field_from_voxel_ids(
+                settings.grid.assign(xyz1),
+                xyz1,
+                settings.grid.assign(xyz2),
+                xyz2,
+                settings,
+                patterns=scan_patterns(corrected),
+            )
         elif removed1 or removed2:
-            after = field_from_voxel_ids(ids1[keep1], pair.xyz1[keep1], ids2[keep2], pair.xyz2[keep2], settings)
+            after = field_from_voxel_ids(
+                ids1[keep1], pair.xyz1[keep1], ids2[keep2], pair.xyz2[keep2], settings, patterns=patterns
+            )
         else:  # the same points: the same field (as a no-op ego_vehicle or crop often is)
             after = before
         row = {
@@ -158,11 +191,15 @@ def suggestions(
             "tag_share": shares.get(tag, math.nan),
             **compare_fields(before, after),
         }
+        if not (removed1 or removed2):  # a correction moves points between voxels, it removes none
+            row["removal_null"] = 0.0
         log.info(
-            "candidate %s %s: energy reduction %.3f, %d + %d points removed, moved up to %.3f m (%.2f s)",
+            "candidate %s %s: energy reduction %.3f (whitened %.3f), %d + %d points removed, moved up to %.3f m "
+            "(%.2f s)",
             row["hypothesis"],
             row["params"],
             row["energy_reduction"],
+            row["whitened_reduction"],
             removed1,
             removed2,
             row["displacement_max_m"],
@@ -192,20 +229,29 @@ def suggestions(
 def compare_fields(before: dict[str, np.ndarray], after: dict[str, np.ndarray]) -> dict:
     """The field ``after`` a candidate, against ``before``. A removal's voxels are a subset of
     ``before``'s; a correction can move points into voxels that held none before: those count
-    in ``energy_after`` but not in the reduction, which is over the voxels valid before and after."""
+    in ``energy_after`` but not in the reductions, which are over the voxels valid before and after."""
     valid_before = np.asarray(before["valid"], dtype=bool)
     rows = np.searchsorted(before["voxel"], after["voxel"])
     found = rows < len(valid_before)
     found[found] = before["voxel"][rows[found]] == after["voxel"][found]
     valid_after = np.zeros(len(valid_before), dtype=bool)
     valid_after[rows[found]] = np.asarray(after["valid"], dtype=bool)[found]
-    energy_before = voxel_energy(before)
-    energy_after_voxels = voxel_energy(after)
-    energy_after = np.zeros(len(valid_before))
-    energy_after[rows[found]] = energy_after_voxels[found]
     common = valid_before & valid_after
-    common_before = float(energy_before[common].sum())
     invalidated = valid_before & ~valid_after
+
+    def reduction(energy) -> float:
+        """1 - ``energy`` after / before over the common voxels (NaN without energy before)."""
+        after_common = np.zeros(len(valid_before))
+        after_common[rows[found]] = energy(after)[found]
+        common_before = float(energy(before)[common].sum())
+        return 1.0 - float(after_common[common].sum()) / common_before if common_before > 0 else math.nan
+
+    counts_after = np.zeros(len(valid_before))
+    counts_after[rows[found]] = (after["n1"] + after["n2"])[found]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        removed = np.clip(1.0 - counts_after / (before["n1"] + before["n2"]), 0.0, 1.0)
+    whitened_before = whitened_energy(before)[common]
+    energy_before = voxel_energy(before)
     magnitude = np.asarray(after["magnitude"], dtype=np.float64)[np.asarray(after["valid"], dtype=bool)]
     total_before = float(energy_before.sum())
     return {
@@ -213,8 +259,12 @@ def compare_fields(before: dict[str, np.ndarray], after: dict[str, np.ndarray]) 
         "energy_invalidated": float(energy_before[invalidated].sum()) / total_before if total_before > 0 else math.nan,
         "max_after": float(magnitude.max()) if magnitude.size else math.nan,
         "p95_after": float(np.percentile(magnitude, 95)) if magnitude.size else math.nan,
-        "energy_after": float(energy_after_voxels.sum()),
-        "energy_reduction": 1.0 - float(energy_after[common].sum()) / common_before if common_before > 0 else math.nan,
+        "energy_after": float(voxel_energy(after).sum()),
+        "energy_reduction": reduction(voxel_energy),
+        "whitened_reduction": reduction(whitened_energy),
+        "removal_null": float(removed[common] @ whitened_before) / whitened_before.sum()
+        if whitened_before.sum() > 0
+        else math.nan,
     }
 
 
@@ -231,7 +281,7 @@ def tag_energy_shares(columns: dict[str, np.ndarray]) -> dict[str, float]:
 
 
 def _rank_key(row: dict) -> tuple:
-    reduction = row["energy_reduction"]
+    reduction = row["whitened_reduction"]
     defined = math.isfinite(reduction)
     share = row["tag_share"] if math.isfinite(row["tag_share"]) else 0.0
     return (not defined, -reduction if defined else 0.0, row["removed1"] + row["removed2"], -share)

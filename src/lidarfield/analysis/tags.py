@@ -37,6 +37,7 @@ import numpy as np
 
 from ..errors import HypothesisError
 from ..field.grid import FieldSettings, SphericalGrid
+from ..field.kernel import WHITENED_COLUMNS
 from ..pair import RegisteredPair
 from .rigid_fit import field_rigid_part
 
@@ -59,6 +60,15 @@ def voxel_energy(columns: dict[str, np.ndarray]) -> np.ndarray:
     weight = np.minimum(columns["n1"], columns["n2"]).astype(np.float64)
     with np.errstate(invalid="ignore"):
         energy = weight * np.asarray(columns["magnitude"], dtype=np.float64) ** 2
+    return np.where(np.asarray(columns["valid"], dtype=bool), energy, 0.0)
+
+
+def whitened_energy(columns: dict[str, np.ndarray]) -> np.ndarray:
+    """|C^-1/2 d|^2 per voxel: its vector's squared length in units of its sampling noise (the
+    whitened columns, ``significance``; about 3 for a vector sampling alone explains), 0 where
+    invalid or without whitened columns."""
+    whitened = np.column_stack([np.asarray(columns[c], dtype=np.float64) for c in WHITENED_COLUMNS])
+    energy = np.sum(np.nan_to_num(whitened) ** 2, axis=1)
     return np.where(np.asarray(columns["valid"], dtype=bool), energy, 0.0)
 
 

@@ -40,5 +40,7 @@ def _explain(args: argparse.Namespace) -> int:
     if explanation.steps:
         print(format_table(explanation.steps, PRINTED_COLUMNS))
     print(f"{len(explanation.steps)} step(s); stopped: {explanation.stop}; the field is {explanation.verdict}")
+    for finding in explanation.findings:
+        print(f"finding: {finding}")
     print(f"wrote {out}/stack.yaml, steps.csv, explain.json, explain.html and figures/")
     return 0

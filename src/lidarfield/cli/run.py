@@ -92,7 +92,7 @@ def format_next_steps(rows: list[dict], out_dir) -> str:
         field = (
             f"{row.get('verdict')}, {row.get('voxels_significant')} of {row.get('voxels_valid')} vectors significant"
         )
-        if best is None or not best["energy_reduction"] > 0:
+        if best is None or not best["whitened_reduction"] > 0:
             lines.append(f"  {row['stage']} ({field}): no candidate reduces the energy")
             continue
         if best.get("corrects"):
@@ -102,7 +102,8 @@ def format_next_steps(rows: list[dict], out_dir) -> str:
             cost = f"removing {100 * best['removed_share']:.1f}% of the points"
         lines.append(
             f"  {row['stage']} ({field}): {best['hypothesis']} reduces the energy by "
-            f"{100 * best['energy_reduction']:.1f}% {cost}"
+            f"{100 * best['whitened_reduction']:.1f}% in units of its noise ({100 * best['energy_reduction']:.1f}% "
+            f"raw) {cost}"
         )
     return "\n".join(lines)
 

@@ -13,6 +13,14 @@ range, a point behind what it measured (occluded), and a point in a wide gap bet
 that no ray passed near. A scan of several lidars (:mod:`lidarfield.sensors.rig`) has a range image
 per lidar, in its own frame: a point is evidence in the free space of any of them.
 
+What stays put in the sensor's frame is no moving object but the vehicle that carries the
+sensors (a truck's cargo body, a roof rack: between two poses of a drive it moves with them, so
+in frame 1 it is where the other sensor's rays passed): a point of one cloud that has a point of
+the other cloud within ``margin_m`` when both are taken in their own sensor's frame is no
+evidence (:func:`carried_points`; ``ego_vehicle`` is the hypothesis for it). From one place
+(sensor 2 within ``margin_m`` of sensor 1) the frames are one and that test says nothing new: a
+point with the other cloud's return beside it is not in its free space anyway.
+
 A moving object gives such evidence only on its leading and trailing parts, so evidence grows
 to objects: each cloud's points higher than ``ground_height_m`` above a plane fitted to its
 ground (and the lower ones in the same ``voxel_m`` column as such a point less than twice that
@@ -49,6 +57,7 @@ from ..field.free_space import (
 from ..pair import RegisteredPair
 from ..sensors.models import SensorModel
 from ..sensors.rig import LidarView
+from .geometry import own_frame_points
 from .outcome import Outcome
 from .params import doc
 from .voxel_objects import connected_voxels, off_ground, overlapping_objects, packed, voxel_grid
@@ -177,12 +186,31 @@ def pair_evidence(pair: RegisteredPair, params: Params) -> tuple[np.ndarray, np.
     return any_lidar(pair.xyz1, images[1], evidence), any_lidar(pair.xyz2, images[0], evidence)
 
 
+def carried_points(pair: RegisteredPair, candidates: tuple[np.ndarray, np.ndarray], radius_m: float):
+    """Per cloud, which of its ``candidates`` (masks) have a point of the other cloud within
+    ``radius_m`` once each cloud is in its own sensor's frame: what the vehicle carries."""
+    from scipy.spatial import cKDTree
+
+    own = own_frame_points(pair)
+    carried = []
+    for k in (0, 1):
+        mask = np.zeros(len(own[k]), dtype=bool)
+        other = own[1 - k]
+        if candidates[k].any() and len(other):
+            distance, _ = cKDTree(other).query(own[k][candidates[k]], distance_upper_bound=radius_m)
+            mask[candidates[k]] = np.isfinite(distance)
+        carried.append(mask)
+    return carried[0], carried[1]
+
+
 def moving_objects(pair: RegisteredPair, params: Params) -> Outcome:
     """Keep-masks without the evidenced objects of each cloud (and the objects of the other
     cloud that overlap them), and why each removed point went."""
     check_origins(pair)
     clouds = (pair.xyz1, pair.xyz2)
     evidence = pair_evidence(pair, params)
+    carried = carried_points(pair, evidence, params.margin_m)
+    evidence = (evidence[0] & ~carried[0], evidence[1] & ~carried[1])
     voxels = voxel_grid(list(clouds), params.voxel_m)
     size = (
         np.max([v.max(axis=0) for v in voxels if len(v)], axis=0) + 2 if any(map(len, voxels)) else np.ones(3, np.int64)

@@ -115,7 +115,9 @@ def explain_page(explanation: Explanation, stack: str, figures: list[list[Path]]
         "candidate of “what to try next” worth it (the config's <code>explain</code> settings), recomputed the "
         f"field and repeated. {len(explanation.steps)} step(s); stopped: {esc(explanation.stop)}; the field's verdict "
         f"at the end: <b>{esc(explanation.verdict)}</b>. Energy = Σ min(n1, n2)·|v|² over the valid voxels "
-        "(m² × points); its reduction is over the voxels valid before and after the step.</p>",
+        "(m² × points); the whitened reduction, which ranks and stops the candidates, is that of Σ |C^-1/2 v|², "
+        "each vector in units of its noise; both are over the voxels valid before and after the step.</p>",
+        *(f'<p class="note">Finding: {esc(finding)}</p>' for finding in explanation.findings),
         "<h2>Steps</h2>",
         table(list(TABLE_COLUMNS), [[row[c] for c in TABLE_COLUMNS] for row in explanation.steps], text_columns=2)
         if explanation.steps

@@ -5,7 +5,10 @@ Everything stays in memory: each step is a :class:`~.stack.Stage` (the same ``ne
 study's mitigate job) with its field and statistics (``analyse_field``, as the field job), and
 the candidates of each step are the suggestions of that stage (``analysis.suggest``: the
 config's ``suggest`` list, or every built-in the stack has not applied). The stopping rule is
-:mod:`lidarfield.analysis.stopping_rule`. What it found is a stack (normalised entries, as a config's
+:mod:`lidarfield.analysis.stopping_rule`. Before it stops, it looks at what the field cannot
+show: a scan that returned nothing in a sector the other fills (``analysis.coverage``) is a
+finding, and a step of ``field_of_view`` when that removes the sector's points (whatever the
+verdict: the cut sector has no vector). What it found is a stack (normalised entries, as a config's
 ``hypotheses:``), one row per step with the numbers behind the choice, and every stage's field.
 """
 
@@ -13,13 +16,13 @@ from __future__ import annotations
 
 import json
 import logging
-import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 import yaml
 
+from ..analysis.coverage import blind_sectors
 from ..analysis.field_stats import analyse_field
 from ..analysis.stopping_rule import (
     STOP_MAX_STEPS,
@@ -33,6 +36,8 @@ from ..analysis.stopping_rule import (
 )
 from ..analysis.suggest import candidate_steps, suggestions
 from ..field.grid import FieldSettings
+from ..hypotheses import apply_step
+from ..hypotheses.steps import step_name
 from ..pair import RegisteredPair
 from ..storage.stage_ids import canonical_json
 from .stack import Stage, initial_stage, next_stage
@@ -45,6 +50,7 @@ log = logging.getLogger(__name__)
 STEP_COLUMNS = (
     "step",
     "hypothesis",
+    "whitened_reduction",
     "energy_reduction",
     "removed1",
     "removed2",
@@ -62,7 +68,7 @@ STEP_COLUMNS = (
     "params",
     "fitted",
 )
-PRINTED_COLUMNS = STEP_COLUMNS[:12]
+PRINTED_COLUMNS = STEP_COLUMNS[:13]
 TABLE_COLUMNS = STEP_COLUMNS[:-2]
 
 
@@ -88,6 +94,7 @@ class Explanation:
     stages: list[ExplainedStage]
     steps: list[dict] = field(default_factory=list)
     stop: str = ""
+    findings: list[str] = field(default_factory=list)  # what the loop saw beside the field (``coverage``)
 
     @property
     def stack(self) -> list[dict]:
@@ -107,6 +114,7 @@ class Explanation:
             "pair": self.pair_name,
             "stack": self.stack,
             "stop": self.stop,
+            "findings": self.findings,
             "verdict": self.verdict,
             "steps": self.steps,
         }
@@ -141,36 +149,82 @@ def explain_pair(
     """
     current = explained_stage(initial_stage(pair), settings)
     result = Explanation(pair_name, [current])
-    while True:
-        verdict = current.statistics["verdict"]
-        if verdict != "patterned":
-            result.stop = STOP_VERDICT.format(verdict=verdict)
-            break
-        if len(result.steps) >= explain.max_steps:
-            result.stop = STOP_MAX_STEPS
-            break
-        applied = result.stack
-        candidates = [
-            step for step in candidate_steps(suggest, applied, base_dir, grid_section) if not repeats(step, applied)
-        ]
-        if not candidates:
-            result.stop = STOP_NO_CANDIDATES
-            break
-        start = time.perf_counter()
-        table = suggestions(current.stage.pair, settings, candidates, base_dir, grid_section, suggest is None)
-        chosen = best_worth_it(table, explain)
-        if chosen is None:
-            result.stop = STOP_NOTHING_HELPS
-            break
+
+    def take(table: dict[str, np.ndarray], chosen: int) -> None:
+        nonlocal current
         spec = {str(table["hypothesis"][chosen]): json.loads(table["params"][chosen])}
         level = len(result.steps) + 1
         following = explained_stage(next_stage(current.stage.pair, spec, level, base_dir, grid_section), settings)
         result.steps.append(step_row(level, table, chosen, current, following, explain))
         result.stages.append(following)
-        log.info("step %d: %s (%.2f s)", level, format_step(result.steps[-1]), time.perf_counter() - start)
+        log.info("step %d: %s", level, format_step(result.steps[-1]))
         current = following
+
+    while True:
+        verdict = current.statistics["verdict"]
+        room = len(result.steps) < explain.max_steps
+        applied = result.stack
+        candidates = [
+            step for step in candidate_steps(suggest, applied, base_dir, grid_section) if not repeats(step, applied)
+        ]
+        if verdict != "patterned":
+            result.stop = STOP_VERDICT.format(verdict=verdict)
+            if not room:
+                break
+            table = blind_sector_step(current.stage.pair, settings, candidates, base_dir, grid_section, suggest, result)
+            if table is None:
+                break
+            take(table, 0)
+            continue
+        if not room:
+            result.stop = STOP_MAX_STEPS
+            break
+        if not candidates:
+            result.stop = STOP_NO_CANDIDATES
+            break
+        table = suggestions(current.stage.pair, settings, candidates, base_dir, grid_section, suggest is None)
+        chosen = best_worth_it(table, explain)
+        if chosen is None:
+            result.stop = STOP_NOTHING_HELPS
+            table = blind_sector_step(current.stage.pair, settings, candidates, base_dir, grid_section, suggest, result)
+            if table is None:
+                break
+            chosen = 0
+        take(table, chosen)
     log.info("explain %s: %d step(s), stopped: %s", pair_name, len(result.steps), result.stop)
     return result
+
+
+def blind_sector_step(
+    pair: RegisteredPair,
+    settings: FieldSettings,
+    candidates: list[dict],
+    base_dir: str | Path,
+    grid_section: dict,
+    suggest: list[dict] | None,
+    result: Explanation,
+) -> dict[str, np.ndarray] | None:
+    """When the loop would stop: a scan that returned nothing in a sector the other fills
+    (``coverage.blind_sectors``) is a field of view the field cannot show (it has no vector
+    there). Each is a finding of ``result``; the suggestion table of ``field_of_view`` alone
+    when it is a candidate and removes most of the other cloud's points in the sector (the
+    blind scan's model says so), else None (the finding says the model does not)."""
+    sectors = blind_sectors(pair)
+    for sector in sectors:
+        if sector.statement() not in result.findings:
+            result.findings.append(sector.statement())
+    view = [step for step in candidates if step_name(step) == "field_of_view"]
+    if not sectors or not view:
+        return None
+    table = suggestions(pair, settings, view, base_dir, grid_section, suggest is None)
+    if not len(table["rank"]):
+        return None
+    keep1, keep2 = apply_step(pair, view[0], base_dir, grid_section)
+    for sector in sectors:
+        kept = keep2 if sector.blind == 1 else keep1
+        if np.count_nonzero(sector.points & ~kept) >= 0.5 * np.count_nonzero(sector.points):
+            return table
+    return None
 
 
 def step_row(
@@ -184,11 +238,12 @@ def step_row(
     """The numbers behind step ``level``'s choice (``STEP_COLUMNS``)."""
     rows = [{name: column[i] for name, column in table.items()} for i in range(len(table["rank"]))]
     others = [r for i, r in enumerate(rows) if i != chosen]
-    runner_up = f"{others[0]['hypothesis']} {float(others[0]['energy_reduction']):.3f}" if others else ""
+    runner_up = f"{others[0]['hypothesis']} {float(others[0]['whitened_reduction']):.3f}" if others else ""
     row = rows[chosen]
     values = {
         "step": level,
         "hypothesis": str(row["hypothesis"]),
+        "whitened_reduction": float(row["whitened_reduction"]),
         "energy_reduction": float(row["energy_reduction"]),
         "removed1": int(row["removed1"]),
         "removed2": int(row["removed2"]),
@@ -217,7 +272,8 @@ def format_step(row: dict) -> str:
         else f"removed {row['removed1']} + {row['removed2']} points ({100 * row['removed_share']:.1f}%)"
     )
     return (
-        f"{row['hypothesis']}: energy reduction {100 * row['energy_reduction']:.1f}%, {cost}, "
+        f"{row['hypothesis']}: energy reduction {100 * row['whitened_reduction']:.1f}% in noise units "
+        f"({100 * row['energy_reduction']:.1f}% raw), {cost}, "
         f"verdict {row['verdict_before']} -> {row['verdict_after']}, "
         f"field energy {row['field_energy_before']:.4g} -> {row['field_energy_after']:.4g}"
         + (f" (runner-up {row['runner_up']})" if row["runner_up"] else "")
@@ -236,7 +292,10 @@ def stack_config(explanation: Explanation, grid_section: dict) -> str:
     ]
     for spec, row in zip(explanation.stack, explanation.steps):
         fitted = json.loads(row["fitted"] or "{}")
-        note = f"energy reduction {row['energy_reduction']:.3f}, removed {row['removed1']} + {row['removed2']}"
+        note = (
+            f"energy reduction {row['whitened_reduction']:.3f} in noise units ({row['energy_reduction']:.3f} raw), "
+            f"removed {row['removed1']} + {row['removed2']}"
+        )
         note += f", fitted {canonical_json(fitted)}" if fitted else ""
         lines.append(f"  - {_flow(spec)}  # step {row['step']}: {note}")
     return "\n".join(lines) + "\n"

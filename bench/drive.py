@@ -106,7 +106,10 @@ def job_time(results: Path, since: float = 0.0) -> str:
     by_rule = job_seconds(results, since)
     total = sum(sum(t) for t in by_rule.values())
     parts = sorted(((sum(t), rule, len(t)) for rule, t in by_rule.items()), reverse=True)
-    return f"{total:.0f} s of job time: " + ", ".join(f"{rule} {s / total:.0%} ({n})" for s, rule, n in parts[:6])
+    # every rule: seconds, share, jobs and seconds a job (the per-rule figures of bench/RESULTS.md)
+    return f"{total:.0f} s of job time: " + ", ".join(
+        f"{rule} {s:.1f} s {s / total:.0%} ({n}, {s / n:.2f} s)" for s, rule, n in parts
+    )
 
 
 def bench(code: Path, pairs: int, workdir: Path, plan_only: bool) -> list[str]:

@@ -212,6 +212,24 @@ def test_run_writes_every_stage_and_prints_the_table(tmp_path, paper_scans, caps
     assert list(pd.read_parquet(out / "summary.parquet")["stage"]) == ids
 
 
+def test_run_reuses_the_suggestions_of_a_stage_whose_hypothesis_changed_no_point(tmp_path, paper_scans, caplog):
+    """A crop past every point appended: its stage has the points of the one before, and its
+    suggestions are that stage's rows without crop's, ranked as before, none run again."""
+    config = _study(tmp_path, paper_scans, [{"field_of_view": {}}, {"crop": {"max_range_m": 10_000}}])
+    out = tmp_path / "out"
+    argv = ["run", *map(str, paper_scans), "--config", str(config), "--out", str(out), "--register", "truth"]
+    with caplog.at_level("INFO", logger="lidarfield.analysis.suggest"):
+        assert main(argv) == 0
+    assert "all 7 candidates reused" in caplog.text
+    ids = list(pd.read_parquet(out / "summary.parquet")["stage"])
+    files = [out / "stages" / stage_id / "suggestions.parquet" for stage_id in ids[1:]]
+    before, after = (pd.read_parquet(path) for path in files)
+    expected = before[before["hypothesis"] != "crop"].drop(columns="rank").reset_index(drop=True)
+    pd.testing.assert_frame_equal(after.drop(columns="rank"), expected)
+    assert list(after["rank"]) == list(range(1, len(after) + 1))
+    assert read_metadata(files[0])["points"] == read_metadata(files[1])["points"]
+
+
 def test_run_refuses_a_folder_it_did_not_write(tmp_path, paper_scans):
     out = tmp_path / "mine"
     out.mkdir()

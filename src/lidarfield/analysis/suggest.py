@@ -46,11 +46,20 @@ correction joins by being registered there). A default candidate that cannot app
 (``NotApplicableError``: ``field_of_view`` without sensor models; for a correcting one any
 ``HypothesisError``, e.g. ``realign`` with too few points) is skipped with a logged line; a
 configured one is an error naming it.
+
+A candidate's row depends only on its parameters, the stage's points (with their attributes and
+the pair's metadata) and the grid: ``points_digest`` digests the last two, and a row computed
+for the same digest (another stage of the pair whose points its hypothesis left unchanged, as a
+no-op ``crop`` appended to a stack does) is reused as it is (``known``) instead of running the
+candidate again. Plugin candidates are always run: their source can change under the same
+parameters.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import hashlib
+import json
 import logging
 import math
 import time
@@ -58,14 +67,14 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import HypothesisError, NotApplicableError
+from ..errors import HypothesisError, InputError, NotApplicableError
 from ..field.channels import pair_binning
 from ..field.grid import FieldSettings
 from ..field.kernel import field_from_voxel_ids
 from ..hypotheses import BUILTINS, CORRECTING, apply_step, validate_step
 from ..hypotheses.outcome import displacement
 from ..hypotheses.steps import step_name
-from ..io.parquet_table import write_table
+from ..io.parquet_table import read_metadata, read_table, write_table
 from ..pair import RegisteredPair
 from ..storage.stage_ids import canonical_json
 from .field_stats import scan_patterns
@@ -131,12 +140,19 @@ def suggestions(
     base_dir: str | Path = ".",
     study_grid: dict | None = None,
     defaults: bool = False,
+    known: dict[tuple[str, str], dict] | None = None,
 ) -> dict[str, np.ndarray]:
     """The suggestion table (``SUGGESTION_COLUMNS``, one row per candidate, sorted by rank).
 
     ``defaults``: the candidates are the default ones, so one that cannot apply to this pair is
-    skipped (and logged) rather than an error.
+    skipped (and logged) rather than an error. ``known``: rows already computed for the same
+    ``points_digest`` (``rows_by_candidate``), reused for the built-in candidates they hold.
     """
+    known = known or {}
+    reused = [known.get(candidate_key(spec)) for spec in candidates]
+    if all(row is not None for row in reused):  # nothing to run: not even the field before
+        log.info("all %d candidates reused: the same points and grid as a stage already suggested for", len(reused))
+        return rank_table(reused)
     settings = pair_binning(settings, pair).settings  # the grid of the stage's own field
     ids1, ids2 = settings.grid.assign(pair.xyz1), settings.grid.assign(pair.xyz2)
     patterns = scan_patterns(pair)
@@ -144,7 +160,11 @@ def suggestions(
     shares = tag_energy_shares(before)
     total = len(pair.xyz1) + len(pair.xyz2)
     rows = []
-    for k, spec in enumerate(candidates, start=1):
+    for k, (spec, row) in enumerate(zip(candidates, reused), start=1):
+        if row is not None:
+            log.info("candidate %s %s reused: the same points and grid", row["hypothesis"], row["params"])
+            rows.append(row)
+            continue
         start = time.perf_counter()
         try:
             outcome = apply_step(pair, spec, base_dir, study_grid)
@@ -206,11 +226,16 @@ def suggestions(
             time.perf_counter() - start,
         )
         rows.append(row)
+    return rank_table(rows)
+
+
+def rank_table(rows: list[dict]) -> dict[str, np.ndarray]:
+    """The suggestion table of candidate ``rows`` (``SUGGESTION_COLUMNS`` but ``rank``), ranked."""
     order = sorted(range(len(rows)), key=lambda i: _rank_key(rows[i]))
     columns = {name: [] for name in SUGGESTION_COLUMNS}
     for rank, i in enumerate(order, start=1):
-        rows[i]["rank"] = rank
-        for name in SUGGESTION_COLUMNS:
+        columns["rank"].append(rank)
+        for name in SUGGESTION_COLUMNS[1:]:
             columns[name].append(rows[i][name])
     types = {
         "rank": np.int64,
@@ -287,8 +312,64 @@ def _rank_key(row: dict) -> tuple:
     return (not defined, -reduction if defined else 0.0, row["removed1"] + row["removed2"], -share)
 
 
+def candidate_key(spec: dict) -> tuple[str, str]:
+    """What names a candidate's row among the rows of one ``points_digest``: its hypothesis and
+    parameters (canonical JSON); a plugin's never matches (its source is not in it)."""
+    name = step_name(spec)
+    return (name, canonical_json(spec[name])) if name in BUILTINS else ("", "")
+
+
+def points_digest(pair: RegisteredPair, grid_section: dict) -> str:
+    """A digest of all a candidate's row depends on but its parameters: both clouds' points with
+    their attributes, the pair's metadata (pose, sensors, sweeps, rigs) and the grid."""
+    digest = hashlib.blake2b(digest_size=16)
+    for xyz, attributes in ((pair.xyz1, pair.attributes1), (pair.xyz2, pair.attributes2)):
+        digest.update(np.ascontiguousarray(xyz).data)
+        for name in sorted(attributes):
+            values = np.ascontiguousarray(attributes[name])
+            digest.update(f"{name}:{values.dtype.str}:".encode())
+            digest.update(values.data)
+    digest.update(json.dumps([pair.metadata(), grid_section], sort_keys=True, default=repr).encode())
+    return digest.hexdigest()
+
+
+def rows_by_candidate(table: dict[str, np.ndarray]) -> dict[tuple[str, str], dict]:
+    """A suggestion table's rows (without ``rank``) by ``candidate_key``, to reuse them."""
+    names = SUGGESTION_COLUMNS[1:]
+    return {
+        (str(table["hypothesis"][i]), str(table["params"][i])): {name: _scalar(table[name][i]) for name in names}
+        for i in range(len(table["rank"]))
+    }
+
+
+def _scalar(value):
+    """A table cell as the Python value a computed row holds (strings are read as objects)."""
+    return value.item() if isinstance(value, np.generic) else value
+
+
+def stored_rows(paths: list[Path], digest: str) -> dict[tuple[str, str], dict]:
+    """The rows of the first of the ``suggestions.parquet`` files ``paths`` computed for the same
+    ``points_digest`` (a stage of the pair with the same points); {} when none was."""
+    for path in paths:
+        try:
+            if read_metadata(path).get("points") != digest:
+                continue
+            table, _ = read_table(path, required=SUGGESTION_COLUMNS)
+        except (InputError, OSError):  # one being replaced, or of another version: not reused
+            continue
+        log.info("reusing the rows of %s: the same points and grid", path)
+        return rows_by_candidate(table)
+    return {}
+
+
 def write_suggestions(
-    out: str | Path, table: dict[str, np.ndarray], stage_id: str | None, candidates: list[dict], grid_section: dict
+    out: str | Path,
+    table: dict[str, np.ndarray],
+    stage_id: str | None,
+    candidates: list[dict],
+    grid_section: dict,
+    points: str | None = None,
 ) -> None:
-    """Write a suggestion table (atomically) with the stage, candidates and grid as metadata."""
-    write_table(out, table, {"stage": stage_id, "candidates": candidates, "grid": grid_section})
+    """Write a suggestion table (atomically) with the stage, candidates, grid and ``points``
+    (its ``points_digest``, by which a stage with the same points reuses its rows) as metadata."""
+    write_table(out, table, {"stage": stage_id, "candidates": candidates, "grid": grid_section, "points": points})

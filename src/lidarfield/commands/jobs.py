@@ -203,12 +203,18 @@ def suggest_stage(
     defaults: bool = False,
 ) -> dict[str, np.ndarray]:
     """``suggestions.parquet`` of a stage (the registered pair with ``changes``, those of stages
-    1..k; stage 0 takes its keys from ``stage_id``); returns the table."""
-    from ..analysis.suggest import suggestions, write_suggestions
+    1..k; stage 0 takes its keys from ``stage_id``); returns the table. The rows of another stage
+    of the pair with the same points (``out``'s sibling stage folders) are reused."""
+    from ..analysis.suggest import points_digest, stored_rows, suggestions, write_suggestions
 
     pair, meta = read_stage_points(registered, changes, stage_id)
-    table = suggestions(pair, field_settings_from_config(grid_section), candidates, base_dir, grid_section, defaults)
-    write_suggestions(out, table, meta.get("stage"), candidates, grid_section)
+    digest = points_digest(pair, grid_section)
+    out = Path(out)
+    siblings = sorted(p for p in out.parent.parent.glob(f"*/{out.name}") if p != out)
+    known = stored_rows(siblings, digest)
+    settings = field_settings_from_config(grid_section)
+    table = suggestions(pair, settings, candidates, base_dir, grid_section, defaults, known)
+    write_suggestions(out, table, meta.get("stage"), candidates, grid_section, digest)
     return table
 
 

@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..analysis.stopping_rule import explain_settings
-from ..analysis.suggest import suggestions, write_suggestions
+from ..analysis.suggest import points_digest, rows_by_candidate, suggestions, write_suggestions
 from ..errors import ConfigError, InputError
 from ..io import read_scan, write_scan
 from ..io.atomic import write_text
@@ -113,10 +113,13 @@ def run_pair(
     settings = registration_settings(register, transform)
     scans, pair = read_and_register(scan1, scan2, settings, sensor, poses)
     candidates = [study.candidates(level) for level in range(len(study.hypotheses) + 1)]
-    stages, tables = [], []
+    stages, tables, digests = [], [], []
     for stage in apply_stack(pair, study.hypotheses, study.base_dir, study.grid_section):
         log.info("stage %d (%s): removed %d + %d points", stage.level, stage.name, stage.removed1, stage.removed2)
         stages.append(stage)
+        digests.append(points_digest(stage.pair, study.grid_section))
+        # a stage with the points of the one before (its hypothesis changed nothing) reuses its rows
+        known = rows_by_candidate(tables[-1]) if len(digests) > 1 and digests[-2] == digests[-1] else {}
         # Candidates run before any file is written too (a plugin candidate can fail).
         tables.append(
             suggestions(
@@ -126,6 +129,7 @@ def run_pair(
                 study.base_dir,
                 study.grid_section,
                 study.suggest is None,
+                known,
             )
         )
 
@@ -164,7 +168,9 @@ def run_pair(
             folder / "stats.json",
             stage_id,
         )
-        write_suggestions(folder / "suggestions.parquet", table, stage_id, candidates[level], study.grid_section)
+        write_suggestions(
+            folder / "suggestions.parquet", table, stage_id, candidates[level], study.grid_section, digests[level]
+        )
         if study.rematch:
             rematch_stage(
                 out_dir / "registered.parquet",

@@ -154,6 +154,9 @@ def test_hover_on_a_vector_shows_its_voxels_counts_and_length(study, page):
     for view in ("top", "3d"):
         # the largest vector's tip, where the view draws it on the page
         best = int(np.argmax(field["magnitude"][valid]))
+        page.locator(
+            f".explorer-{view} canvas.gl"
+        ).first.scroll_into_view_if_needed()  # the mouse moves in the viewport
         x, y = page.evaluate(f"() => document.querySelector('.explorer').explorer.tipOnPage('{view}', {best})")
         page.mouse.move(x, y)
         tooltip = page.wait_for_selector(f".explorer-{view} .explorer-tooltip:not([hidden])", timeout=10_000)

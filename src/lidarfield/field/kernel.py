@@ -20,6 +20,7 @@ from .significance import (
     Viewpoint,
     covariance_from_sums,
     pattern_covariance,
+    surface_axes,
     vector_covariance,
     vector_standard_error,
     viewpoint_covariance,
@@ -33,8 +34,8 @@ VALUE_COLUMNS = ("n1", "n2", "x1", "y1", "z1", "x2", "y2", "z2", "u", "v", "w", 
 # The local surface of each valid voxel (``surface``): written after VALUE_COLUMNS, optional
 # when a field file is read (files written before them lack them).
 SURFACE_COLUMNS = ("nx", "ny", "nz", "planarity")
-# Each valid vector in units of its own sampling noise, C^-1/2 d (``significance``): what the
-# randomness tests read. Optional when a field file is read, like the surface columns.
+# Each valid vector in units of its own sampling noise, C^-1/2 d, or on a surface its normal part
+# (``significance``): what the randomness tests read. Optional when a field file is read, like the surface columns.
 WHITENED_COLUMNS = ("wu", "wv", "ww")
 
 # A Cartesian bounding box with more cells than this (and than a few per point) falls back to
@@ -226,7 +227,7 @@ def assemble_field(
     columns["z"] = z_score(columns["magnitude"], columns["se"])
     columns["nx"], columns["ny"], columns["nz"] = normal
     columns["planarity"] = planarity
-    columns["wu"], columns["wv"], columns["ww"] = whitened_vectors(uvw, combined)
+    columns["wu"], columns["wv"], columns["ww"] = whitened_vectors(uvw, combined, surface_axes(normal, planarity))
     return {name: columns[name] for name in field_columns(grid)}
 
 

@@ -18,6 +18,7 @@ from .significance import (
     GRAZING_MIN,
     SPREAD_FLOOR_M,
     SPREAD_MIN_POINTS,
+    SURFACE_PLANARITY_MIN,
     VIEWPOINT_DENSITY_EXPONENT,
     VIEWPOINT_MAX_REWEIGHT,
     Viewpoint,
@@ -127,7 +128,10 @@ def field_from_voxel_ids_reference(
         columns[name] = table[name].to_numpy()
     for name in ("nx", "ny", "nz", "planarity"):
         columns[name] = table[name].to_numpy()
-    whitened = [_whitened(row, *covariances, viewpoints) if row.valid else (np.nan,) * 3 for row in table.itertuples()]
+    whitened = [
+        _whitened(row, *covariances, viewpoints, surfaces[k]) if row.valid else (np.nan,) * 3
+        for k, row in enumerate(table.itertuples())
+    ]
     columns["wu"], columns["wv"], columns["ww"] = np.array(whitened, dtype=np.float64).reshape(-1, 3).T
     return columns
 
@@ -222,11 +226,16 @@ def _standard_error(row, covariance1: dict, covariance2: dict, viewpoints) -> fl
     return float(np.sqrt(max(along, 0.0)))
 
 
-def _whitened(row, covariance1: dict, covariance2: dict, viewpoints) -> tuple[float, float, float]:
-    """C^-1/2 d of one voxel (the symmetric root)."""
+def _whitened(row, covariance1: dict, covariance2: dict, viewpoints, surface) -> tuple[float, float, float]:
+    """C^-1/2 d of one voxel (the symmetric root); on a surface (normal and planarity
+    ``surface``, planarity at least SURFACE_PLANARITY_MIN) its normal part over its own
+    standard error, along the normal."""
     d = np.array([row.u, row.v, row.w])
     combined = _vector_covariance(row, covariance1, covariance2, viewpoints)
     if not np.all(np.isfinite(d)) or combined is None:
         return (np.nan,) * 3
+    normal = np.asarray(surface[:3])
+    if np.all(np.isfinite(normal)) and surface[3] >= SURFACE_PLANARITY_MIN:
+        return tuple(normal * (normal @ d) / np.sqrt(normal @ combined @ normal))
     values, vectors = np.linalg.eigh(combined)
     return tuple(vectors @ ((vectors.T @ d) / np.sqrt(values)))

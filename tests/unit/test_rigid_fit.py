@@ -117,7 +117,7 @@ def test_fit_on_exact_planes_recovers_a_known_motion():
     motion = pose_from_xyzrpy([0.2, -0.1, 0.05, 0.01, -0.02, 0.03])  # maps scan 2 onto scan 1
     slide = 0.5 * np.cross(normal, rng.normal(size=(200, 3)))
     mean2 = apply_pose(np.linalg.inv(motion), mean1 + slide)
-    fit = point_to_plane_fit(mean1, mean2, normal, np.ones(200), np.full(200, 50))
+    fit = point_to_plane_fit(mean1, mean2, normal, np.full(200, 50.0))
     assert fit.unconstrained == []
     np.testing.assert_allclose(fit.rotation, motion[:3, :3], atol=1e-10)
     np.testing.assert_allclose(fit.translation, motion[:3, 3], atol=1e-10)

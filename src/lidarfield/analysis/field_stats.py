@@ -68,9 +68,17 @@ STATISTIC_KEYS = (
 
 
 def analyse_field(pair: RegisteredPair, settings: FieldSettings) -> tuple[dict[str, np.ndarray], dict]:
-    """The field of a pair (binned about sensor 1, on the grid of ``settings`` made
-    channel-aware for the pair: ``field.channels``) with its tag columns, and its statistics
-    (with the edges used and why)."""
+    """The field of a pair (``pair_field``) with its tag columns, and its statistics (with the
+    edges used and why)."""
+    columns, binning, ids = pair_field(pair, settings)
+    columns.update(voxel_tags(columns, pair, binning.settings, ids))
+    return columns, {**field_statistics(columns, binning.settings), **binning.statistics()}
+
+
+def pair_field(pair: RegisteredPair, settings: FieldSettings):
+    """The field's columns of a pair, binned about sensor 1 on the grid of ``settings`` made
+    channel-aware for the pair (``field.channels``), with each cloud's scan pattern and the
+    change of viewpoint in its vectors' covariance; the binning and both clouds' voxel ids."""
     binning = pair_binning(settings, pair)
     settings = binning.settings
     ids = settings.grid.assign(pair.xyz1), settings.grid.assign(pair.xyz2)  # binned once: the tags need them too
@@ -79,8 +87,7 @@ def analyse_field(pair: RegisteredPair, settings: FieldSettings) -> tuple[dict[s
     columns = field_from_voxel_ids(
         ids[0], pair.xyz1, ids[1], pair.xyz2, settings, patterns=scan_patterns(pair), viewpoint=viewpoint
     )
-    columns.update(voxel_tags(columns, pair, settings, ids))
-    return columns, {**field_statistics(columns, settings), **binning.statistics()}
+    return columns, binning, ids
 
 
 def scan_patterns(pair: RegisteredPair) -> tuple[ScanPattern | None, ScanPattern | None]:

@@ -19,6 +19,7 @@ from .significance import (
     ScanPattern,
     Viewpoint,
     covariance_from_sums,
+    normal_standard_error,
     pattern_covariance,
     surface_axes,
     vector_covariance,
@@ -37,6 +38,10 @@ SURFACE_COLUMNS = ("nx", "ny", "nz", "planarity")
 # Each valid vector in units of its own sampling noise, C^-1/2 d, or on a surface its normal part
 # (``significance``): what the randomness tests read. Optional when a field file is read, like the surface columns.
 WHITENED_COLUMNS = ("wu", "wv", "ww")
+# A surface voxel's standard error of its normal part n . d (``significance``; NaN elsewhere): the
+# weight of its normal part in the field's rigid fit (``analysis.rigid_fit.normal_part_fit``).
+# Optional when a field file is read.
+NORMAL_SE_COLUMN = "se_normal"
 
 # A Cartesian bounding box with more cells than this (and than a few per point) falls back to
 # np.unique for compaction: the dense bincount arrays would cost more than the sort.
@@ -45,7 +50,7 @@ _MAX_DENSE_CELLS = 1 << 24
 
 def field_columns(grid: Grid) -> tuple[str, ...]:
     """The column names of the field Parquet for ``grid``, in order."""
-    return ("voxel", *GRID_COLUMNS[grid.kind], *VALUE_COLUMNS, *SURFACE_COLUMNS, *WHITENED_COLUMNS)
+    return ("voxel", *GRID_COLUMNS[grid.kind], *VALUE_COLUMNS, *SURFACE_COLUMNS, *WHITENED_COLUMNS, NORMAL_SE_COLUMN)
 
 
 def discrepancy_field(
@@ -227,7 +232,9 @@ def assemble_field(
     columns["z"] = z_score(columns["magnitude"], columns["se"])
     columns["nx"], columns["ny"], columns["nz"] = normal
     columns["planarity"] = planarity
-    columns["wu"], columns["wv"], columns["ww"] = whitened_vectors(uvw, combined, surface_axes(normal, planarity))
+    axes = surface_axes(normal, planarity)
+    columns["wu"], columns["wv"], columns["ww"] = whitened_vectors(uvw, combined, axes)
+    columns[NORMAL_SE_COLUMN] = np.where(np.isfinite(axes[0]), normal_standard_error(axes, combined), np.nan)
     return {name: columns[name] for name in field_columns(grid)}
 
 

@@ -128,11 +128,13 @@ def field_from_voxel_ids_reference(
         columns[name] = table[name].to_numpy()
     for name in ("nx", "ny", "nz", "planarity"):
         columns[name] = table[name].to_numpy()
-    whitened = [
-        _whitened(row, *covariances, viewpoints, surfaces[k]) if row.valid else (np.nan,) * 3
+    read = [
+        _surface_reading(row, *covariances, viewpoints, surfaces[k]) if row.valid else (np.nan,) * 4
         for k, row in enumerate(table.itertuples())
     ]
-    columns["wu"], columns["wv"], columns["ww"] = np.array(whitened, dtype=np.float64).reshape(-1, 3).T
+    columns["wu"], columns["wv"], columns["ww"], columns["se_normal"] = (
+        np.array(read, dtype=np.float64).reshape(-1, 4).T
+    )
     return columns
 
 
@@ -226,16 +228,18 @@ def _standard_error(row, covariance1: dict, covariance2: dict, viewpoints) -> fl
     return float(np.sqrt(max(along, 0.0)))
 
 
-def _whitened(row, covariance1: dict, covariance2: dict, viewpoints, surface) -> tuple[float, float, float]:
-    """C^-1/2 d of one voxel (the symmetric root); on a surface (normal and planarity
-    ``surface``, planarity at least SURFACE_PLANARITY_MIN) its normal part over its own
-    standard error, along the normal."""
+def _surface_reading(row, covariance1: dict, covariance2: dict, viewpoints, surface) -> tuple[float, ...]:
+    """The whitened vector of one voxel and the standard error of its normal part: C^-1/2 d
+    (the symmetric root) and NaN; on a surface (normal and planarity ``surface``, planarity at
+    least SURFACE_PLANARITY_MIN) its normal part over sqrt(n^T C n), along the normal, and that
+    standard error."""
     d = np.array([row.u, row.v, row.w])
     combined = _vector_covariance(row, covariance1, covariance2, viewpoints)
     if not np.all(np.isfinite(d)) or combined is None:
-        return (np.nan,) * 3
+        return (np.nan,) * 4
     normal = np.asarray(surface[:3])
     if np.all(np.isfinite(normal)) and surface[3] >= SURFACE_PLANARITY_MIN:
-        return tuple(normal * (normal @ d) / np.sqrt(normal @ combined @ normal))
+        se_normal = np.sqrt(normal @ combined @ normal)
+        return (*(normal * (normal @ d) / se_normal), se_normal)
     values, vectors = np.linalg.eigh(combined)
-    return tuple(vectors @ ((vectors.T @ d) / np.sqrt(values)))
+    return (*(vectors @ ((vectors.T @ d) / np.sqrt(values))), np.nan)

@@ -248,14 +248,28 @@ def whitened_vectors(uvw: np.ndarray, combined: np.ndarray, axes: np.ndarray | N
         along = (vectors.transpose(0, 2, 1) @ uvw[:, good].T[:, :, None])[:, :, 0]
         along /= np.sqrt(np.maximum(values, 1e-30))
         out[:, good] = (vectors @ along[:, :, None])[:, :, 0].T
-        if axes is not None:
-            normal = axes[:, good]
-            surface = np.all(np.isfinite(normal), axis=0)
-            n = normal[:, surface].T
-            variance = np.einsum("vi,vij,vj->v", n, matrix[surface], n)
-            part = np.einsum("vi,iv->v", n, uvw[:, good[surface]]) / np.sqrt(np.maximum(variance, 1e-30))
-            out[:, good[surface]] = (n * part[:, None]).T
+    if axes is not None:
+        with np.errstate(invalid="ignore", divide="ignore"):
+            part = np.einsum("iv,iv->v", axes, uvw) / normal_standard_error(axes, combined)
+        surface = np.isfinite(part)
+        out[:, surface] = axes[:, surface] * part[surface]
     return out
+
+
+def normal_standard_error(axes: np.ndarray, combined: np.ndarray) -> np.ndarray:
+    """(V,) sqrt(n^T C n): the standard error of the normal part n . d of each vector with a
+    finite axis n (3, V, ``surface_axes``) and covariance C (6, V, ``vector_covariance``);
+    NaN elsewhere."""
+    return np.sqrt(np.maximum(quadratic_form(combined, axes), 1e-30))
+
+
+def quadratic_form(combined: np.ndarray, vectors: np.ndarray) -> np.ndarray:
+    """(V,) v^T C v of vectors (3, V) with covariances (6, V) in ``COVARIANCE_ENTRIES`` order
+    (the off-diagonal entries count twice)."""
+    quadratic = np.zeros(vectors.shape[1])
+    for row, (a, b) in enumerate(COVARIANCE_ENTRIES):
+        quadratic += (1.0 if a == b else 2.0) * combined[row] * vectors[a] * vectors[b]
+    return quadratic
 
 
 def vector_standard_error(uvw: np.ndarray, combined: np.ndarray) -> np.ndarray:
@@ -263,11 +277,7 @@ def vector_standard_error(uvw: np.ndarray, combined: np.ndarray) -> np.ndarray:
     ``vector_covariance``); NaN where it is undefined. See the module docstring."""
     with np.errstate(invalid="ignore", divide="ignore"):
         length2 = np.einsum("ij,ij->j", uvw, uvw)
-        # d^T C d / |d|^2 from the six distinct entries (off-diagonal ones count twice).
-        quadratic = np.zeros(uvw.shape[1])
-        for row, (a, b) in enumerate(COVARIANCE_ENTRIES):
-            quadratic += (1.0 if a == b else 2.0) * combined[row] * uvw[a] * uvw[b]
-        along = quadratic / length2
+        along = quadratic_form(combined, uvw) / length2
         # A zero vector has no direction: its se is the mean of the three axes' variances.
         along = np.where(length2 > 0, along, (combined[0] + combined[1] + combined[2]) / 3.0)
         se = np.sqrt(np.maximum(along, 0.0))

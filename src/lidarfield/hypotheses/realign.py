@@ -93,6 +93,12 @@ class Params:
         default=1.0, metadata=doc("cloud 1's normals from its points within this radius (m)")
     )
     normal_max_nn: int = field(default=30, metadata=doc("... and at most this many of them"))
+    field_refinement: bool = field(
+        default=True,
+        metadata=doc(
+            "follow ICP with the field's own rigid fit of its surfaces' normal parts (needs both sensor models)"
+        ),
+    )
 
     def __post_init__(self):
         if not self.max_correspondence_m > 0 or self.voxel_m < 0 or self.max_iterations < 1:
@@ -130,7 +136,7 @@ def realign(pair: RegisteredPair, params: Params) -> Outcome:
     pairs = pairs[np.argsort(pairs[:, 0], kind="stable")]  # source order: sums independent of Open3D's threads
     mapped = np.asarray(source.points)[pairs[:, 0]] @ T[:3, :3].T + T[:3, 3]
     refinement = np.eye(4)
-    if pair.sensor1 is not None and pair.sensor2 is not None:  # the field's noise model needs both scan patterns
+    if params.field_refinement and pair.sensor1 is not None and pair.sensor2 is not None:  # both scan patterns
         refinement = _field_refinement(replace(pair, xyz2=pair.xyz2 @ T[:3, :3].T + T[:3, 3], T_1_2=T @ pair.T_1_2))
         T = _rounded(refinement @ T)
     fitted = {

@@ -153,17 +153,23 @@ def test_kernel_matches_reference(name):
     assert_same_field(moved, discrepancy_field_reference(xyz1, xyz2, settings, origin, shared))
     assert_same_field(field_from_voxel_ids(ids1, xyz1, ids2, xyz2, settings, origin, viewpoint=shared), moved)
     assert_same_field(discrepancy_field(xyz1, xyz2, settings, origin, shared._replace(origin2=origin)), fast)
-    unseen = Viewpoint(shared.origin2, np.zeros(len(xyz1), bool), np.zeros(len(xyz2), bool))
-    assert_same_field(discrepancy_field(xyz1, xyz2, settings, origin, unseen), fast)
+    # No point shared: no viewpoint term, but two places, so a surface is read by its normal part.
+    unseen = discrepancy_field(
+        xyz1, xyz2, settings, origin, Viewpoint(shared.origin2, np.zeros(len(xyz1), bool), np.zeros(len(xyz2), bool))
+    )
+    read = ("wu", "wv", "ww", "read_normal")
+    assert_same_field(*({k: v for k, v in f.items() if k not in read} for f in (unseen, fast)))
+    np.testing.assert_array_equal(unseen["read_normal"], np.isfinite(fast["se_normal"]))
+    assert not fast["read_normal"].any()
     np.testing.assert_array_equal(moved["magnitude"], fast["magnitude"])
     assert (moved["se"][spread] > fast["se"][spread]).all()
 
 
 def test_kernel_matches_reference_on_surfaces():
     """Where voxels hold one surface (the ground 2 m below and a wall 12 m ahead, 1 cm of
-    noise), the whitened vector is the normal part over its standard error, along the normal,
-    and ``se_normal`` that standard error: the same from both implementations, with the change
-    of viewpoint in the covariance too."""
+    noise), ``se_normal`` is the standard error of the normal part, and from two places the
+    whitened vector is that part over it, along the normal: the same from both implementations,
+    with and without the change of viewpoint."""
     rng = np.random.default_rng(4)
 
     def sampled(n: int) -> np.ndarray:
@@ -190,6 +196,11 @@ def test_kernel_matches_reference_on_surfaces():
         assert (
             surface.sum() > 50 and (fast["planarity"][surface] >= 0.9).all() and (fast["se_normal"][surface] > 0).all()
         )
+        # Read by the normal part from two places only (one place: the scan pattern's term models
+        # the in-plane sampling).
+        np.testing.assert_array_equal(fast["read_normal"], surface & (viewpoint is not None))
+        if viewpoint is None:
+            continue
         normal = np.column_stack([fast["nx"], fast["ny"], fast["nz"]])[surface]
         whitened = np.column_stack([fast["wu"], fast["wv"], fast["ww"]])[surface]
         vector = np.column_stack([fast["u"], fast["v"], fast["w"]])[surface]

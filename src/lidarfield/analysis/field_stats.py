@@ -36,8 +36,8 @@ from ..defaults import default
 from ..field.channels import pair_binning
 from ..field.free_space import shared_points
 from ..field.grid import FieldSettings
-from ..field.kernel import SURFACE_COLUMNS, WHITENED_COLUMNS, field_from_voxel_ids
-from ..field.significance import ScanPattern, Viewpoint, surface_axes
+from ..field.kernel import NORMAL_READ_COLUMN, SURFACE_COLUMNS, WHITENED_COLUMNS, field_from_voxel_ids
+from ..field.significance import ScanPattern, Viewpoint
 from ..pair import RegisteredPair
 from ..poses import weighted_rigid_transform  # noqa: F401 (re-exported: the tests' Kabsch)
 from .randomness import neighbour_pairs, randomness_tests
@@ -146,12 +146,13 @@ def field_statistics(columns: dict[str, np.ndarray], settings: FieldSettings | N
 
 def tests_axes(columns: dict[str, np.ndarray], valid: np.ndarray) -> np.ndarray | None:
     """(M, 3): the normal of each valid voxel the randomness tests read along it alone
-    (``significance.surface_axes``), NaN for the others; None for a field without surface
-    columns (written before them: its whitened vectors are whole)."""
-    if not all(name in columns for name in SURFACE_COLUMNS):
+    (``read_normal``, ``significance``), NaN for the others; None for a field without that
+    column (written before it: its whitened vectors are whole)."""
+    if NORMAL_READ_COLUMN not in columns:
         return None
-    normal = np.vstack([np.asarray(columns[c], dtype=np.float64)[valid] for c in SURFACE_COLUMNS[:3]])
-    return surface_axes(normal, np.asarray(columns["planarity"], dtype=np.float64)[valid]).T
+    read = np.asarray(columns[NORMAL_READ_COLUMN], dtype=bool)[valid]
+    normal = np.column_stack([np.asarray(columns[c], dtype=np.float64)[valid] for c in SURFACE_COLUMNS[:3]])
+    return np.where(read[:, None], normal, np.nan)
 
 
 def rigid_energy_share(vectors: np.ndarray, residual: np.ndarray, weight: np.ndarray) -> float:

@@ -42,6 +42,9 @@ WHITENED_COLUMNS = ("wu", "wv", "ww")
 # weight of its normal part in the field's rigid fit (``analysis.rigid_fit.normal_part_fit``).
 # Optional when a field file is read.
 NORMAL_SE_COLUMN = "se_normal"
+# Whether the randomness tests read the voxel by its normal part alone: a surface voxel of a pair
+# from two places (``significance``). Optional when a field file is read.
+NORMAL_READ_COLUMN = "read_normal"
 
 # A Cartesian bounding box with more cells than this (and than a few per point) falls back to
 # np.unique for compaction: the dense bincount arrays would cost more than the sort.
@@ -50,7 +53,15 @@ _MAX_DENSE_CELLS = 1 << 24
 
 def field_columns(grid: Grid) -> tuple[str, ...]:
     """The column names of the field Parquet for ``grid``, in order."""
-    return ("voxel", *GRID_COLUMNS[grid.kind], *VALUE_COLUMNS, *SURFACE_COLUMNS, *WHITENED_COLUMNS, NORMAL_SE_COLUMN)
+    return (
+        "voxel",
+        *GRID_COLUMNS[grid.kind],
+        *VALUE_COLUMNS,
+        *SURFACE_COLUMNS,
+        *WHITENED_COLUMNS,
+        NORMAL_SE_COLUMN,
+        NORMAL_READ_COLUMN,
+    )
 
 
 def discrepancy_field(
@@ -233,8 +244,13 @@ def assemble_field(
     columns["nx"], columns["ny"], columns["nz"] = normal
     columns["planarity"] = planarity
     axes = surface_axes(normal, planarity)
-    columns["wu"], columns["wv"], columns["ww"] = whitened_vectors(uvw, combined, axes)
-    columns[NORMAL_SE_COLUMN] = np.where(np.isfinite(axes[0]), normal_standard_error(axes, combined), np.nan)
+    surface = np.isfinite(axes[0])
+    columns[NORMAL_SE_COLUMN] = np.where(surface, normal_standard_error(axes, combined), np.nan)
+    # From one place the scan pattern's term models a surface's in-plane sampling; from two,
+    # the change of viewpoint makes it unknown (``significance``).
+    columns[NORMAL_READ_COLUMN] = surface & (shared is not None and bool(np.any(shared[0][0] != shared[0][1])))
+    read = np.where(columns[NORMAL_READ_COLUMN], axes, np.nan)
+    columns["wu"], columns["wv"], columns["ww"] = whitened_vectors(uvw, combined, read)
     return {name: columns[name] for name in field_columns(grid)}
 
 

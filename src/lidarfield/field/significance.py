@@ -39,20 +39,25 @@ surface through it.
 ``whitened_vectors`` gives w = C^-1/2 d (symmetric root): under the null each w has mean 0 and
 covariance at most I (C is an upper estimate), which is what the randomness tests assume.
 
-On a surface, the normal part only. A voxel whose points lie on one surface that spans it
+On a surface seen from two places, the normal part only. A voxel whose points lie on one
+surface that spans it
 (planarity at least ``SURFACE_PLANARITY_MIN``: ten times thinner, in variance, along the
 normal than across the patch) sees any motion of that surface, a misregistration's or a range
 error's, through its normal part a = n . d alone: the voxel (a cone from sensor 1) cuts the
 moved surface elsewhere, its mean moving by a / (n . s) along the line of sight s, whose part in
 the surface's plane says nothing that a does not. What lies in the plane besides is sampling:
 which part of the surface each sensor hit (the lattice's phase, the change of density with the
-viewpoint), bounded above by the pattern and viewpoint terms but not known. Measured on the
+viewpoint), bounded above by the pattern and viewpoint terms but not known. From one place the
+density is the same and the pattern term models the phase, so there the whole vector is read
+(a field-of-view cut or a body that moves with the sensor shows only in-plane: read by the
+normal part, six 90-deg cuts of the diagnosis zoo's pairs from one place read ``random``). Measured on the
 simulated drives' pairs 3 m apart (exact poses): their ground voxels' whitened vectors of 6 to 9
-lay in the plane with normal parts under 2, and made four of six patterned (p_coherence
-0.001). So for such a voxel w = (n . d) / sqrt(n^T C n) n: the normal part in units of its own
-standard error, along the normal. Under the null it has variance at most 1 whatever n is
-(C bounds every direction's), and the randomness tests draw its null along n alone
-(``surface_axes``).
+lay in the plane with normal parts under 2, and made five of six patterned (p_coherence
+0.001; one of six read so). So for such a voxel of a pair from two places (sensor 2's origin not sensor 1's) w =
+(n . d) / sqrt(n^T C n) n: the normal part in units of its own standard error, along the normal
+(the field's ``read_normal``; its ``se_normal``, sqrt(n^T C n), is kept for every surface voxel:
+the field's rigid fit weighs the normal parts by it). Under the null it has variance at most 1 whatever n is
+(C bounds every direction's), and the randomness tests draw its null along n alone.
 
 The viewpoint. Two sensors at different places sample the same surfaces with different
 densities: per unit area a sensor's density is cos(incidence) / range^2 =

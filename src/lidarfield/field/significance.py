@@ -49,8 +49,8 @@ the surface's plane says nothing that a does not. What lies in the plane besides
 which part of the surface each sensor hit (the lattice's phase, the change of density with the
 viewpoint), bounded above by the pattern and viewpoint terms but not known. From one place the
 density is the same and the pattern term models the phase, so there the whole vector is read
-(a field-of-view cut or a body that moves with the sensor shows only in-plane: read by the
-normal part, six 90-deg cuts of the diagnosis zoo's pairs from one place read ``random``). Measured on the
+(a field-of-view cut ending a surface inside a voxel shows only in-plane: read by the normal
+part, six 90-deg cuts of the diagnosis zoo's pairs from one place read ``random``). Measured on the
 simulated drives' pairs 3 m apart (exact poses): their ground voxels' whitened vectors of 6 to 9
 lay in the plane with normal parts under 2, and made five of six patterned (p_coherence
 0.001; one of six read so). So for such a voxel of a pair from two places (sensor 2's origin not sensor 1's) w =

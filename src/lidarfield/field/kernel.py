@@ -35,8 +35,8 @@ VALUE_COLUMNS = ("n1", "n2", "x1", "y1", "z1", "x2", "y2", "z2", "u", "v", "w", 
 # The local surface of each valid voxel (``surface``): written after VALUE_COLUMNS, optional
 # when a field file is read (files written before them lack them).
 SURFACE_COLUMNS = ("nx", "ny", "nz", "planarity")
-# Each valid vector in units of its own sampling noise, C^-1/2 d, or on a surface its normal part
-# (``significance``): what the randomness tests read. Optional when a field file is read, like the surface columns.
+# Each valid vector in units of its own sampling noise, C^-1/2 d, or on a surface seen from two
+# places its normal part (``significance``): what the randomness tests read. Optional when a field file is read, like the surface columns.
 WHITENED_COLUMNS = ("wu", "wv", "ww")
 # A surface voxel's standard error of its normal part n . d (``significance``; NaN elsewhere): the
 # weight of its normal part in the field's rigid fit (``analysis.rigid_fit.normal_part_fit``).

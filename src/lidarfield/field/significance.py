@@ -230,8 +230,8 @@ def vector_covariance(
 
 def surface_axes(normal: np.ndarray, planarity: np.ndarray) -> np.ndarray:
     """(3, V): the normal of each voxel holding one surface (planarity at least
-    ``SURFACE_PLANARITY_MIN``), whose normal part alone the randomness tests read; NaN
-    elsewhere. See the module docstring."""
+    ``SURFACE_PLANARITY_MIN``), whose normal part alone the randomness tests read for a pair
+    from two places; NaN elsewhere. See the module docstring."""
     with np.errstate(invalid="ignore"):
         surface = np.all(np.isfinite(normal), axis=0) & (np.asarray(planarity) >= SURFACE_PLANARITY_MIN)
     return np.where(surface, normal, np.nan)

@@ -6,7 +6,7 @@ vector in units of that noise, the whitened vector w = C^-1/2 d of ``field.signi
 the covariance of d from both clouds' spread in the voxel and, when the pair's sensors are
 known, the phase of their scan patterns). Under the null every w has mean 0 and covariance at
 most I, so both tests draw their null distribution as independent standard normal vectors, one
-per voxel (``PERMUTATIONS`` draws from a fixed seed). A voxel holding one surface is read by its
+per voxel (``PERMUTATIONS`` draws from a fixed seed). A voxel holding one surface seen from two places is read by its
 normal part alone (w along its normal n, ``significance``): its draw is the standard normal
 vector's part along n, one degree of freedom.
 

@@ -27,7 +27,13 @@ counts, means, vectors and what follows from them); in the summary the field's s
 (magnitudes, energy shares, rigid part, p_direction, p_coherence, share_significant, voxels,
 voxels_valid) and four new columns (elevation_edges_deg, azimuth_edges_deg, binning,
 binning_warning). Unchanged: n1, n2, removed1, removed2 (and every removed.parquet, compared
-file by file), the verdicts and voxels_significant.
+file by file), the verdicts and voxels_significant. Regenerated on branch verdict (2026-11-27)
+when the randomness tests began to read a surface voxel of a pair from two places by its normal
+part alone (``field.significance``; every pair of the default study is from two places): the
+field's wu, wv, ww changed and it gained se_normal and read_normal; in the summary
+p_direction, p_coherence and the verdict (paper-sim's three stages now ``random``: p 0.586 /
+0.506 at stage 0, patterned before). Unchanged: every other column, n1, n2, removed1, removed2,
+voxels_significant, the vectors and their se and z.
 """
 
 from __future__ import annotations

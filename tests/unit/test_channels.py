@@ -231,10 +231,12 @@ def assert_within_noise(free: tuple, after: tuple, what: str) -> None:
 def test_a_sub_millimetre_move_of_scan_2_changes_the_field_within_noise(simulated, name):
     """Every preset, the fault-free pair against scan 2 moved 0.5 mm (x, z) or 0.01 deg (yaw),
     on the default grid and on round-number grids: no point of scan 2 changes voxel, fields
-    within noise; the 0.5 mm shift along x keeps the verdict (random). The other moves are real
-    rigid moves, coherent over 100-200 voxels: the randomness tests detect some of them (a
-    0.01 deg yaw is 3.5 mm at 20 m, more than the 3 mm test_significance requires them to see;
-    on a Cartesian grid too), so only their binning and fields are held here (docs/field.md)."""
+    within noise. The moves are real rigid moves, coherent over 100-200 voxels: the randomness
+    tests detect some of them (a 0.01 deg yaw is 3.5 mm at 20 m, more than the 3 mm
+    test_significance requires them to see; on a Cartesian grid too), and since they read a
+    surface by its normal part alone (one degree of freedom, each to about a millimetre) the
+    0.5 mm shift along x too on four of the presets (random before), so only their binning and
+    fields are held here (docs/field.md)."""
     pair = simulated(name)
     for label, grid in GRIDS.items():
         settings = FieldSettings(grid)
@@ -247,8 +249,6 @@ def test_a_sub_millimetre_move_of_scan_2_changes_the_field_within_noise(simulate
             np.testing.assert_array_equal(pair_binning(settings, shifted).settings.grid.assign(shifted.xyz2), ids)
             after = analyse_field(shifted, settings)
             assert_within_noise(free, after, f"{name} {label} {move}")
-            if move == "0.5 mm x":
-                assert after[1]["verdict"] == "random", (name, label, move)
 
 
 @pytest.fixture(scope="module")

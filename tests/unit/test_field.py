@@ -153,10 +153,59 @@ def test_kernel_matches_reference(name):
     assert_same_field(moved, discrepancy_field_reference(xyz1, xyz2, settings, origin, shared))
     assert_same_field(field_from_voxel_ids(ids1, xyz1, ids2, xyz2, settings, origin, viewpoint=shared), moved)
     assert_same_field(discrepancy_field(xyz1, xyz2, settings, origin, shared._replace(origin2=origin)), fast)
-    unseen = Viewpoint(shared.origin2, np.zeros(len(xyz1), bool), np.zeros(len(xyz2), bool))
-    assert_same_field(discrepancy_field(xyz1, xyz2, settings, origin, unseen), fast)
+    # No point shared: no viewpoint term, but two places, so a surface is read by its normal part.
+    unseen = discrepancy_field(
+        xyz1, xyz2, settings, origin, Viewpoint(shared.origin2, np.zeros(len(xyz1), bool), np.zeros(len(xyz2), bool))
+    )
+    read = ("wu", "wv", "ww", "read_normal")
+    assert_same_field(*({k: v for k, v in f.items() if k not in read} for f in (unseen, fast)))
+    np.testing.assert_array_equal(unseen["read_normal"], np.isfinite(fast["se_normal"]))
+    assert not fast["read_normal"].any()
     np.testing.assert_array_equal(moved["magnitude"], fast["magnitude"])
     assert (moved["se"][spread] > fast["se"][spread]).all()
+
+
+def test_kernel_matches_reference_on_surfaces():
+    """Where voxels hold one surface (the ground 2 m below and a wall 12 m ahead, 1 cm of
+    noise), ``se_normal`` is the standard error of the normal part, and from two places the
+    whitened vector is that part over it, along the normal: the same from both implementations,
+    with and without the change of viewpoint."""
+    rng = np.random.default_rng(4)
+
+    def sampled(n: int) -> np.ndarray:
+        r, az = np.sqrt(rng.uniform(9.0, 400.0, n)), rng.uniform(-np.pi, np.pi, n)
+        ground = np.column_stack([r * np.cos(az), r * np.sin(az), np.full(n, -2.0)])
+        wall = np.column_stack([np.full(n, 12.0), rng.uniform(-8, 8, n), rng.uniform(-2, 2, n)])
+        points = np.vstack([ground[ground[:, 0] < 12.0], wall])
+        return points + rng.normal(scale=0.01, size=points.shape)
+
+    xyz1, xyz2 = sampled(40_000), sampled(40_000) + [0.01, 0.0, 0.005]
+    settings = FieldSettings(SphericalGrid(), min_points=20)
+    shared = Viewpoint((0.5, 0.2, 0.0), rng.random(len(xyz1)) < 0.8, rng.random(len(xyz2)) < 0.8)
+    for viewpoint in (None, shared):
+        fast = discrepancy_field(xyz1, xyz2, settings, viewpoint=viewpoint)
+        reference = discrepancy_field_reference(xyz1, xyz2, settings, (0.0, 0.0, 0.0), viewpoint)
+        # Readings of 10 to 30 standard errors: the two sums' last digits agree to 1e-8 of them.
+        read = ("wu", "wv", "ww", "se_normal")
+        assert_same_field(*({k: v for k, v in field.items() if k not in read} for field in (fast, reference)))
+        for column in read:
+            np.testing.assert_allclose(
+                fast[column], reference[column], rtol=1e-8, atol=1e-6, equal_nan=True, err_msg=column
+            )
+        surface = np.isfinite(fast["se_normal"])
+        assert (
+            surface.sum() > 50 and (fast["planarity"][surface] >= 0.9).all() and (fast["se_normal"][surface] > 0).all()
+        )
+        # Read by the normal part from two places only (one place: the scan pattern's term models
+        # the in-plane sampling).
+        np.testing.assert_array_equal(fast["read_normal"], surface & (viewpoint is not None))
+        if viewpoint is None:
+            continue
+        normal = np.column_stack([fast["nx"], fast["ny"], fast["nz"]])[surface]
+        whitened = np.column_stack([fast["wu"], fast["wv"], fast["ww"]])[surface]
+        vector = np.column_stack([fast["u"], fast["v"], fast["w"]])[surface]
+        reading = np.einsum("ij,ij->i", vector, normal) / fast["se_normal"][surface]
+        np.testing.assert_allclose(whitened, normal * reading[:, None], atol=1e-9)
 
 
 def assert_same_field(a: dict, b: dict) -> None:

@@ -83,6 +83,33 @@ def test_independent_samplings_stay_near_zero():
     assert stats["energy_share_rigid"] < 0.05
 
 
+def test_the_normal_part_fit_recovers_a_small_motion_as_precisely_as_the_verdict_reads_it():
+    """The generalised least squares of the surfaces' normal parts (weights 1 / se_normal^2,
+    ``field_normal_part_fit``): on the intersection (two samplings, each cloud's scan pattern in
+    the vectors' covariance) moved by 5 mm and turned 0.05 deg about z, it finds the motion to
+    within 0.5 mm and 0.003 deg (measured 0.22 mm and 0.0018 deg), and the field corrected by it
+    reads random (patterned before)."""
+    from lidarfield.analysis.field_stats import analyse_field
+    from lidarfield.analysis.rigid_fit import field_normal_part_fit
+
+    xyz1, xyz2 = intersection_scans()
+    sensor = PRESETS["paper-sim-80"]
+    motion = pose_from_xyzrpy([0.004, 0.003, 0.0, 0.0, 0.0, math.radians(0.05)])
+    moved = RegisteredPair(xyz1, apply_pose(motion, xyz2), sensor1=sensor, sensor2=sensor)
+    columns, stats = analyse_field(moved, SETTINGS)
+    assert stats["verdict"] == "patterned"
+    surfaces = np.isfinite(columns["se_normal"])
+    assert surfaces.sum() > 50 and np.all(columns["se_normal"][surfaces] > 0)
+    fit = field_normal_part_fit(columns)
+    correction = np.eye(4)
+    correction[:3, :3], correction[:3, 3] = fit.rotation, fit.translation
+    residual = correction @ motion  # the identity if the fit undid the motion
+    assert np.degrees(math.acos(min(1.0, (np.trace(residual[:3, :3]) - 1) / 2))) < 0.003
+    assert np.abs(residual[:3, 3]).max() < 0.0005
+    corrected = RegisteredPair(xyz1, apply_pose(residual, xyz2), sensor1=sensor, sensor2=sensor)
+    assert analyse_field(corrected, SETTINGS)[1]["verdict"] == "random"
+
+
 def corridor(n: int, seed: int) -> np.ndarray:
     """Rays uniform over the grid's angles onto two walls at y = +-4 m and the ground 3 m below
     the sensor, open along x (to 60 m), with 2 cm of range noise."""
@@ -117,7 +144,7 @@ def test_fit_on_exact_planes_recovers_a_known_motion():
     motion = pose_from_xyzrpy([0.2, -0.1, 0.05, 0.01, -0.02, 0.03])  # maps scan 2 onto scan 1
     slide = 0.5 * np.cross(normal, rng.normal(size=(200, 3)))
     mean2 = apply_pose(np.linalg.inv(motion), mean1 + slide)
-    fit = point_to_plane_fit(mean1, mean2, normal, np.ones(200), np.full(200, 50))
+    fit = point_to_plane_fit(mean1, mean2, normal, np.full(200, 50.0))
     assert fit.unconstrained == []
     np.testing.assert_allclose(fit.rotation, motion[:3, :3], atol=1e-10)
     np.testing.assert_allclose(fit.translation, motion[:3, 3], atol=1e-10)

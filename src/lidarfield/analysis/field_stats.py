@@ -36,7 +36,7 @@ from ..defaults import default
 from ..field.channels import pair_binning
 from ..field.free_space import shared_points
 from ..field.grid import FieldSettings
-from ..field.kernel import WHITENED_COLUMNS, field_from_voxel_ids
+from ..field.kernel import NORMAL_READ_COLUMN, SURFACE_COLUMNS, WHITENED_COLUMNS, field_from_voxel_ids
 from ..field.significance import ScanPattern, Viewpoint
 from ..pair import RegisteredPair
 from ..poses import weighted_rigid_transform  # noqa: F401 (re-exported: the tests' Kabsch)
@@ -68,9 +68,17 @@ STATISTIC_KEYS = (
 
 
 def analyse_field(pair: RegisteredPair, settings: FieldSettings) -> tuple[dict[str, np.ndarray], dict]:
-    """The field of a pair (binned about sensor 1, on the grid of ``settings`` made
-    channel-aware for the pair: ``field.channels``) with its tag columns, and its statistics
-    (with the edges used and why)."""
+    """The field of a pair (``pair_field``) with its tag columns, and its statistics (with the
+    edges used and why)."""
+    columns, binning, ids = pair_field(pair, settings)
+    columns.update(voxel_tags(columns, pair, binning.settings, ids))
+    return columns, {**field_statistics(columns, binning.settings), **binning.statistics()}
+
+
+def pair_field(pair: RegisteredPair, settings: FieldSettings):
+    """The field's columns of a pair, binned about sensor 1 on the grid of ``settings`` made
+    channel-aware for the pair (``field.channels``), with each cloud's scan pattern and the
+    change of viewpoint in its vectors' covariance; the binning and both clouds' voxel ids."""
     binning = pair_binning(settings, pair)
     settings = binning.settings
     ids = settings.grid.assign(pair.xyz1), settings.grid.assign(pair.xyz2)  # binned once: the tags need them too
@@ -79,8 +87,7 @@ def analyse_field(pair: RegisteredPair, settings: FieldSettings) -> tuple[dict[s
     columns = field_from_voxel_ids(
         ids[0], pair.xyz1, ids[1], pair.xyz2, settings, patterns=scan_patterns(pair), viewpoint=viewpoint
     )
-    columns.update(voxel_tags(columns, pair, settings, ids))
-    return columns, {**field_statistics(columns, settings), **binning.statistics()}
+    return columns, binning, ids
 
 
 def scan_patterns(pair: RegisteredPair) -> tuple[ScanPattern | None, ScanPattern | None]:
@@ -131,10 +138,21 @@ def field_statistics(columns: dict[str, np.ndarray], settings: FieldSettings | N
     else:
         neighbours = neighbour_pairs(settings.grid, np.asarray(columns["voxel"])[valid])
     whitened = np.column_stack([columns[c][valid] for c in WHITENED_COLUMNS]).astype(np.float64)
-    stats.update(randomness_tests(whitened, neighbours))
+    stats.update(randomness_tests(whitened, neighbours, tests_axes(columns, valid)))
     stats["field_energy"] = float(voxel_energy(columns).sum())
     stats.update(energy_shares(columns))
     return stats
+
+
+def tests_axes(columns: dict[str, np.ndarray], valid: np.ndarray) -> np.ndarray | None:
+    """(M, 3): the normal of each valid voxel the randomness tests read along it alone
+    (``read_normal``, ``significance``), NaN for the others; None for a field without that
+    column (written before it: its whitened vectors are whole)."""
+    if NORMAL_READ_COLUMN not in columns:
+        return None
+    read = np.asarray(columns[NORMAL_READ_COLUMN], dtype=bool)[valid]
+    normal = np.column_stack([np.asarray(columns[c], dtype=np.float64)[valid] for c in SURFACE_COLUMNS[:3]])
+    return np.where(read[:, None], normal, np.nan)
 
 
 def rigid_energy_share(vectors: np.ndarray, residual: np.ndarray, weight: np.ndarray) -> float:

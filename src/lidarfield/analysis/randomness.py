@@ -6,7 +6,9 @@ vector in units of that noise, the whitened vector w = C^-1/2 d of ``field.signi
 the covariance of d from both clouds' spread in the voxel and, when the pair's sensors are
 known, the phase of their scan patterns). Under the null every w has mean 0 and covariance at
 most I, so both tests draw their null distribution as independent standard normal vectors, one
-per voxel (``PERMUTATIONS`` draws from a fixed seed):
+per voxel (``PERMUTATIONS`` draws from a fixed seed). A voxel holding one surface seen from two places is read by its
+normal part alone (w along its normal n, ``significance``): its draw is the standard normal
+vector's part along n, one degree of freedom.
 
 - ``p_direction``: do the vectors share a resultant? Statistic |sum w|^2 (chi^2 with 3 degrees
   of freedom times the voxel count under the null). Catches a translation.
@@ -45,13 +47,22 @@ MIN_VOXELS = 3
 _CHUNK = 16  # null draws evaluated at a time (bounds memory on grids of 10^5 voxels)
 
 
-def randomness_tests(whitened: np.ndarray, neighbours: tuple[np.ndarray, np.ndarray], seed: int = SEED) -> dict:
+def randomness_tests(
+    whitened: np.ndarray, neighbours: tuple[np.ndarray, np.ndarray], axes: np.ndarray | None = None, seed: int = SEED
+) -> dict:
     """``p_direction``, ``p_coherence`` and ``verdict`` of (M, 3) whitened vectors with grid
-    neighbour pairs (two index arrays into them). See the module docstring."""
+    neighbour pairs (two index arrays into them); ``axes`` (M, 3): the unit normal of each
+    vector read along it alone (``significance.surface_axes``), NaN for the others. See the
+    module docstring."""
     m = len(whitened)
     if m < MIN_VOXELS:
         return {"p_direction": math.nan, "p_coherence": math.nan, "verdict": "undetermined"}
     first, second = neighbours
+    along = None if axes is None else np.flatnonzero(np.all(np.isfinite(axes), axis=1))
+    normals = None if along is None else axes[along]
+    if along is not None:  # a vector read along its normal is tested along it (a no-op for the kernel's)
+        whitened = whitened.copy()
+        whitened[along] = normals * np.einsum("vi,vi->v", whitened[along], normals)[:, None]
     observed_direction = float(np.sum(np.sum(whitened, axis=0) ** 2))
     observed_coherence = float(np.einsum("ij,ij->", whitened[first], whitened[second]))
     rng = np.random.default_rng(seed)
@@ -61,6 +72,8 @@ def randomness_tests(whitened: np.ndarray, neighbours: tuple[np.ndarray, np.ndar
     tol_coherence = 1e-9 * max(1.0, abs(observed_coherence))
     for start in range(0, PERMUTATIONS, _CHUNK):
         noise = rng.standard_normal(size=(min(_CHUNK, PERMUTATIONS - start), m, 3))
+        if along is not None:
+            noise[:, along] = np.einsum("kv,vi->kvi", np.einsum("kvi,vi->kv", noise[:, along], normals), normals)
         direction = np.sum(noise.sum(axis=1) ** 2, axis=1)
         coherence = np.einsum("kij,kij->k", noise[:, first], noise[:, second])
         exceed_direction += int(np.count_nonzero(direction >= observed_direction - tol_direction))

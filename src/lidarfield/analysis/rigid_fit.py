@@ -54,6 +54,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..field.kernel import NORMAL_SE_COLUMN
 from ..poses import rotation_angle, rotation_from_vector
 
 UNCONSTRAINED_RATIO = 1e-3
@@ -83,15 +84,14 @@ def nan_fit() -> RigidFit:
     return RigidFit(np.full((3, 3), np.nan), np.full(3, np.nan), np.full((6, 6), np.nan))
 
 
-def point_to_plane_fit(
-    mean1: np.ndarray, mean2: np.ndarray, normal: np.ndarray, planarity: np.ndarray, count: np.ndarray
-) -> RigidFit:
-    """The rigid part of a field: (V, 3) voxel means of both clouds, (V, 3) unit normals, (V,)
-    planarity and (V,) counts min(n1, n2) of its valid voxels (see the module docstring).
-    Voxels with a NaN normal or planarity carry no weight; NaN-filled with fewer than 3
-    weighted voxels."""
-    usable = np.all(np.isfinite(normal), axis=1) & np.isfinite(planarity) & np.all(np.isfinite(mean1 + mean2), axis=1)
-    base = np.where(usable, np.asarray(count, np.float64) * np.where(usable, planarity, 0.0), 0.0)
+def point_to_plane_fit(mean1: np.ndarray, mean2: np.ndarray, normal: np.ndarray, weight: np.ndarray) -> RigidFit:
+    """The rigid part of a field: (V, 3) voxel means of both clouds, (V, 3) unit normals and
+    (V,) base weights of its valid voxels (``field_rigid_part``: min(n1, n2) x planarity;
+    ``field_normal_part_fit``: 1 / se_normal^2), see the module docstring. Voxels with a NaN
+    normal or weight carry no weight; NaN-filled with fewer than 3 weighted voxels."""
+    weight = np.asarray(weight, np.float64)
+    usable = np.all(np.isfinite(normal), axis=1) & np.isfinite(weight) & np.all(np.isfinite(mean1 + mean2), axis=1)
+    base = np.where(usable, weight, 0.0)
     if np.count_nonzero(base > 0) < 3:
         return nan_fit()
     m1, m2, n, w0 = mean1[usable], mean2[usable], normal[usable], base[usable]
@@ -188,6 +188,24 @@ def voxel_residuals(
     return np.where(better[:, None], planar, whole)
 
 
+def field_normal_part_fit(columns: dict[str, np.ndarray]) -> RigidFit:
+    """The rigid correction of scan 2 that the verdict's reading of a field's surfaces asks
+    for: ``point_to_plane_fit`` over its valid surface voxels (those with ``se_normal``, the
+    standard error of their normal part), each weighted 1 / se_normal^2, so that a normal part
+    measured to a millimetre counts as such (the generalised least squares of the normal parts
+    the randomness tests read); NaN-filled for a field without them. See the module docstring."""
+    if NORMAL_SE_COLUMN not in columns:
+        return nan_fit()
+    valid = np.asarray(columns["valid"], dtype=bool)
+    mean1, mean2, normal = (
+        np.column_stack([columns[c] for c in names]).astype(np.float64)[valid]
+        for names in (("x1", "y1", "z1"), ("x2", "y2", "z2"), ("nx", "ny", "nz"))
+    )
+    with np.errstate(divide="ignore"):
+        weight = 1.0 / np.asarray(columns[NORMAL_SE_COLUMN], dtype=np.float64)[valid] ** 2
+    return point_to_plane_fit(mean1, mean2, normal, weight)
+
+
 def field_rigid_part(columns: dict[str, np.ndarray]) -> tuple[RigidFit, np.ndarray]:
     """The point-to-plane rigid part of a field (its columns, with ``nx, ny, nz, planarity``)
     over its valid voxels, and the (V, 3) residual vectors ``voxel_residuals`` of every row
@@ -203,7 +221,7 @@ def field_rigid_part(columns: dict[str, np.ndarray]) -> tuple[RigidFit, np.ndarr
     normal = np.column_stack([columns[c] for c in ("nx", "ny", "nz")]).astype(np.float64)[valid]
     planarity = np.asarray(columns["planarity"], dtype=np.float64)[valid]
     count = np.minimum(columns["n1"], columns["n2"])[valid]
-    fit = point_to_plane_fit(mean1, mean2, normal, planarity, count)
+    fit = point_to_plane_fit(mean1, mean2, normal, count * planarity)
     if np.all(np.isfinite(fit.rotation)):
         spherical = "az_bin" in columns
         residual[valid] = voxel_residuals(fit, mean1, mean2, normal, planarity, spherical)

@@ -19,7 +19,9 @@ from .significance import (
     ScanPattern,
     Viewpoint,
     covariance_from_sums,
+    normal_standard_error,
     pattern_covariance,
+    surface_axes,
     vector_covariance,
     vector_standard_error,
     viewpoint_covariance,
@@ -33,9 +35,16 @@ VALUE_COLUMNS = ("n1", "n2", "x1", "y1", "z1", "x2", "y2", "z2", "u", "v", "w", 
 # The local surface of each valid voxel (``surface``): written after VALUE_COLUMNS, optional
 # when a field file is read (files written before them lack them).
 SURFACE_COLUMNS = ("nx", "ny", "nz", "planarity")
-# Each valid vector in units of its own sampling noise, C^-1/2 d (``significance``): what the
-# randomness tests read. Optional when a field file is read, like the surface columns.
+# Each valid vector in units of its own sampling noise, C^-1/2 d, or on a surface seen from two
+# places its normal part (``significance``): what the randomness tests read. Optional when a field file is read, like the surface columns.
 WHITENED_COLUMNS = ("wu", "wv", "ww")
+# A surface voxel's standard error of its normal part n . d (``significance``; NaN elsewhere): the
+# weight of its normal part in the field's rigid fit (``analysis.rigid_fit.normal_part_fit``).
+# Optional when a field file is read.
+NORMAL_SE_COLUMN = "se_normal"
+# Whether the randomness tests read the voxel by its normal part alone: a surface voxel of a pair
+# from two places (``significance``). Optional when a field file is read.
+NORMAL_READ_COLUMN = "read_normal"
 
 # A Cartesian bounding box with more cells than this (and than a few per point) falls back to
 # np.unique for compaction: the dense bincount arrays would cost more than the sort.
@@ -44,7 +53,15 @@ _MAX_DENSE_CELLS = 1 << 24
 
 def field_columns(grid: Grid) -> tuple[str, ...]:
     """The column names of the field Parquet for ``grid``, in order."""
-    return ("voxel", *GRID_COLUMNS[grid.kind], *VALUE_COLUMNS, *SURFACE_COLUMNS, *WHITENED_COLUMNS)
+    return (
+        "voxel",
+        *GRID_COLUMNS[grid.kind],
+        *VALUE_COLUMNS,
+        *SURFACE_COLUMNS,
+        *WHITENED_COLUMNS,
+        NORMAL_SE_COLUMN,
+        NORMAL_READ_COLUMN,
+    )
 
 
 def discrepancy_field(
@@ -226,7 +243,14 @@ def assemble_field(
     columns["z"] = z_score(columns["magnitude"], columns["se"])
     columns["nx"], columns["ny"], columns["nz"] = normal
     columns["planarity"] = planarity
-    columns["wu"], columns["wv"], columns["ww"] = whitened_vectors(uvw, combined)
+    axes = surface_axes(normal, planarity)
+    surface = np.isfinite(axes[0])
+    columns[NORMAL_SE_COLUMN] = np.where(surface, normal_standard_error(axes, combined), np.nan)
+    # From one place the scan pattern's term models a surface's in-plane sampling; from two,
+    # the change of viewpoint makes it unknown (``significance``).
+    columns[NORMAL_READ_COLUMN] = surface & (shared is not None and bool(np.any(shared[0][0] != shared[0][1])))
+    read = np.where(columns[NORMAL_READ_COLUMN], axes, np.nan)
+    columns["wu"], columns["wv"], columns["ww"] = whitened_vectors(uvw, combined, read)
     return {name: columns[name] for name in field_columns(grid)}
 
 

@@ -18,6 +18,7 @@ from .significance import (
     GRAZING_MIN,
     SPREAD_FLOOR_M,
     SPREAD_MIN_POINTS,
+    SURFACE_PLANARITY_MIN,
     VIEWPOINT_DENSITY_EXPONENT,
     VIEWPOINT_MAX_REWEIGHT,
     Viewpoint,
@@ -127,8 +128,14 @@ def field_from_voxel_ids_reference(
         columns[name] = table[name].to_numpy()
     for name in ("nx", "ny", "nz", "planarity"):
         columns[name] = table[name].to_numpy()
-    whitened = [_whitened(row, *covariances, viewpoints) if row.valid else (np.nan,) * 3 for row in table.itertuples()]
-    columns["wu"], columns["wv"], columns["ww"] = np.array(whitened, dtype=np.float64).reshape(-1, 3).T
+    two_places = viewpoints is not None and bool(np.any(viewpoints[0] != viewpoints[1]))
+    read = [
+        _surface_reading(row, *covariances, viewpoints, surfaces[k], two_places) if row.valid else (np.nan,) * 5
+        for k, row in enumerate(table.itertuples())
+    ]
+    read = np.array(read, dtype=np.float64).reshape(-1, 5).T
+    columns["wu"], columns["wv"], columns["ww"], columns["se_normal"] = read[:4]
+    columns["read_normal"] = read[4] == 1.0
     return columns
 
 
@@ -222,11 +229,20 @@ def _standard_error(row, covariance1: dict, covariance2: dict, viewpoints) -> fl
     return float(np.sqrt(max(along, 0.0)))
 
 
-def _whitened(row, covariance1: dict, covariance2: dict, viewpoints) -> tuple[float, float, float]:
-    """C^-1/2 d of one voxel (the symmetric root)."""
+def _surface_reading(row, covariance1: dict, covariance2: dict, viewpoints, surface, two_places) -> tuple:
+    """The whitened vector of one voxel, the standard error of its normal part and whether the
+    tests read it by that part: C^-1/2 d (the symmetric root), NaN, 0; on a surface (normal and
+    planarity ``surface``, planarity at least SURFACE_PLANARITY_MIN) sqrt(n^T C n), and with
+    ``two_places`` the normal part over it, along the normal, and 1."""
     d = np.array([row.u, row.v, row.w])
     combined = _vector_covariance(row, covariance1, covariance2, viewpoints)
     if not np.all(np.isfinite(d)) or combined is None:
-        return (np.nan,) * 3
+        return (np.nan,) * 4 + (0.0,)
+    normal = np.asarray(surface[:3])
+    se_normal = np.nan
+    if np.all(np.isfinite(normal)) and surface[3] >= SURFACE_PLANARITY_MIN:
+        se_normal = np.sqrt(normal @ combined @ normal)
+        if two_places:
+            return (*(normal * (normal @ d) / se_normal), se_normal, 1.0)
     values, vectors = np.linalg.eigh(combined)
-    return tuple(vectors @ ((vectors.T @ d) / np.sqrt(values)))
+    return (*(vectors @ ((vectors.T @ d) / np.sqrt(values))), se_normal, 0.0)

@@ -39,6 +39,26 @@ surface through it.
 ``whitened_vectors`` gives w = C^-1/2 d (symmetric root): under the null each w has mean 0 and
 covariance at most I (C is an upper estimate), which is what the randomness tests assume.
 
+On a surface seen from two places, the normal part only. A voxel whose points lie on one
+surface that spans it
+(planarity at least ``SURFACE_PLANARITY_MIN``: ten times thinner, in variance, along the
+normal than across the patch) sees any motion of that surface, a misregistration's or a range
+error's, through its normal part a = n . d alone: the voxel (a cone from sensor 1) cuts the
+moved surface elsewhere, its mean moving by a / (n . s) along the line of sight s, whose part in
+the surface's plane says nothing that a does not. What lies in the plane besides is sampling:
+which part of the surface each sensor hit (the lattice's phase, the change of density with the
+viewpoint), bounded above by the pattern and viewpoint terms but not known. From one place the
+density is the same and the pattern term models the phase, so there the whole vector is read
+(a field-of-view cut ending a surface inside a voxel shows only in-plane: read by the normal
+part, six 90-deg cuts of the diagnosis zoo's pairs from one place read ``random``). Measured on the
+simulated drives' pairs 3 m apart (exact poses): their ground voxels' whitened vectors of 6 to 9
+lay in the plane with normal parts under 2, and made five of six patterned (p_coherence
+0.001; one of six read so). So for such a voxel of a pair from two places (sensor 2's origin not sensor 1's) w =
+(n . d) / sqrt(n^T C n) n: the normal part in units of its own standard error, along the normal
+(the field's ``read_normal``; its ``se_normal``, sqrt(n^T C n), is kept for every surface voxel:
+the field's rigid fit weighs the normal parts by it). Under the null it has variance at most 1 whatever n is
+(C bounds every direction's), and the randomness tests draw its null along n alone.
+
 The viewpoint. Two sensors at different places sample the same surfaces with different
 densities: per unit area a sensor's density is cos(incidence) / range^2 =
 |n.(x - o)| / |x - o|^3 (n the surface's normal, o the sensor). A voxel's mean is the
@@ -85,6 +105,9 @@ VIEWPOINT_DENSITY_EXPONENT = 3.0
 # The first-order bound holds while the reweighting is small; beyond it a voxel's mean is taken
 # to move by at most its content's own spread (standard deviation 1 in units of S).
 VIEWPOINT_MAX_REWEIGHT = 1.0
+# A voxel this planar ((l2 - l3) / l2, ``surface``) holds one surface spanning it: the
+# randomness tests read its normal part only (module docstring).
+SURFACE_PLANARITY_MIN = 0.9
 # The order of the six distinct entries of a 3x3 covariance, as rows of a (6, V) array.
 COVARIANCE_ENTRIES = ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))
 
@@ -205,9 +228,19 @@ def vector_covariance(
     return combined
 
 
-def whitened_vectors(uvw: np.ndarray, combined: np.ndarray) -> np.ndarray:
-    """C^-1/2 d (3, V) of vectors (3, V) with covariances (6, V, ``vector_covariance``); NaN
-    where either is."""
+def surface_axes(normal: np.ndarray, planarity: np.ndarray) -> np.ndarray:
+    """(3, V): the normal of each voxel holding one surface (planarity at least
+    ``SURFACE_PLANARITY_MIN``), whose normal part alone the randomness tests read for a pair
+    from two places; NaN elsewhere. See the module docstring."""
+    with np.errstate(invalid="ignore"):
+        surface = np.all(np.isfinite(normal), axis=0) & (np.asarray(planarity) >= SURFACE_PLANARITY_MIN)
+    return np.where(surface, normal, np.nan)
+
+
+def whitened_vectors(uvw: np.ndarray, combined: np.ndarray, axes: np.ndarray | None = None) -> np.ndarray:
+    """C^-1/2 d (3, V) of vectors (3, V) with covariances (6, V, ``vector_covariance``); where
+    ``axes`` (3, V, ``surface_axes``) is finite, (n . d) / sqrt(n^T C n) n instead; NaN where
+    the vector or C is."""
     out = np.full(uvw.shape, np.nan)
     # Only where both are finite (a fine Cartesian grid has far more voxels than valid ones).
     good = np.flatnonzero(np.all(np.isfinite(uvw), axis=0) & np.all(np.isfinite(combined), axis=0))
@@ -220,7 +253,28 @@ def whitened_vectors(uvw: np.ndarray, combined: np.ndarray) -> np.ndarray:
         along = (vectors.transpose(0, 2, 1) @ uvw[:, good].T[:, :, None])[:, :, 0]
         along /= np.sqrt(np.maximum(values, 1e-30))
         out[:, good] = (vectors @ along[:, :, None])[:, :, 0].T
+    if axes is not None:
+        with np.errstate(invalid="ignore", divide="ignore"):
+            part = np.einsum("iv,iv->v", axes, uvw) / normal_standard_error(axes, combined)
+        surface = np.isfinite(part)
+        out[:, surface] = axes[:, surface] * part[surface]
     return out
+
+
+def normal_standard_error(axes: np.ndarray, combined: np.ndarray) -> np.ndarray:
+    """(V,) sqrt(n^T C n): the standard error of the normal part n . d of each vector with a
+    finite axis n (3, V, ``surface_axes``) and covariance C (6, V, ``vector_covariance``);
+    NaN elsewhere."""
+    return np.sqrt(np.maximum(quadratic_form(combined, axes), 1e-30))
+
+
+def quadratic_form(combined: np.ndarray, vectors: np.ndarray) -> np.ndarray:
+    """(V,) v^T C v of vectors (3, V) with covariances (6, V) in ``COVARIANCE_ENTRIES`` order
+    (the off-diagonal entries count twice)."""
+    quadratic = np.zeros(vectors.shape[1])
+    for row, (a, b) in enumerate(COVARIANCE_ENTRIES):
+        quadratic += (1.0 if a == b else 2.0) * combined[row] * vectors[a] * vectors[b]
+    return quadratic
 
 
 def vector_standard_error(uvw: np.ndarray, combined: np.ndarray) -> np.ndarray:
@@ -228,11 +282,7 @@ def vector_standard_error(uvw: np.ndarray, combined: np.ndarray) -> np.ndarray:
     ``vector_covariance``); NaN where it is undefined. See the module docstring."""
     with np.errstate(invalid="ignore", divide="ignore"):
         length2 = np.einsum("ij,ij->j", uvw, uvw)
-        # d^T C d / |d|^2 from the six distinct entries (off-diagonal ones count twice).
-        quadratic = np.zeros(uvw.shape[1])
-        for row, (a, b) in enumerate(COVARIANCE_ENTRIES):
-            quadratic += (1.0 if a == b else 2.0) * combined[row] * uvw[a] * uvw[b]
-        along = quadratic / length2
+        along = quadratic_form(combined, uvw) / length2
         # A zero vector has no direction: its se is the mean of the three axes' variances.
         along = np.where(length2 > 0, along, (combined[0] + combined[1] + combined[2]) / 3.0)
         se = np.sqrt(np.maximum(along, 0.0))

@@ -93,6 +93,12 @@ class Params:
         default=1.0, metadata=doc("cloud 1's normals from its points within this radius (m)")
     )
     normal_max_nn: int = field(default=30, metadata=doc("... and at most this many of them"))
+    field_refinement: bool = field(
+        default=True,
+        metadata=doc(
+            "follow ICP with the field's own rigid fit of its surfaces' normal parts (needs both sensor models)"
+        ),
+    )
 
     def __post_init__(self):
         if not self.max_correspondence_m > 0 or self.voxel_m < 0 or self.max_iterations < 1:
@@ -129,15 +135,35 @@ def realign(pair: RegisteredPair, params: Params) -> Outcome:
         )
     pairs = pairs[np.argsort(pairs[:, 0], kind="stable")]  # source order: sums independent of Open3D's threads
     mapped = np.asarray(source.points)[pairs[:, 0]] @ T[:3, :3].T + T[:3, 3]
+    refinement = np.eye(4)
+    if params.field_refinement and pair.sensor1 is not None and pair.sensor2 is not None:  # both scan patterns
+        refinement = _field_refinement(replace(pair, xyz2=pair.xyz2 @ T[:3, :3].T + T[:3, 3], T_1_2=T @ pair.T_1_2))
+        T = _rounded(refinement @ T)
     fitted = {
         **_fitted(T, mapped, np.asarray(target.points)[pairs[:, 1]], np.asarray(target.normals)[pairs[:, 1]]),
         "fitness": float(result.fitness),
         "correspondences": len(pairs),
         "method": "icp_point_to_plane",
+        "field_refinement": _fitted_transform(refinement),
     }
     keep1, keep2 = np.ones(len(pair.xyz1), dtype=bool), np.ones(len(pair.xyz2), dtype=bool)
     xyz2 = pair.xyz2 @ T[:3, :3].T + T[:3, 3]
     return Outcome(keep1, keep2, xyz2=xyz2, T_1_2=T @ pair.T_1_2, fitted=fitted)
+
+
+def _field_refinement(pair: RegisteredPair) -> np.ndarray:
+    """The 4x4 correction of cloud 2 that the field of the ICP-fitted pair still asks for: its
+    surfaces' normal parts fitted by generalised least squares (``rigid_fit.normal_part_fit``)
+    on the default grid; the identity where the field has too few surfaces."""
+    from ..analysis.field_stats import pair_field
+    from ..analysis.rigid_fit import field_normal_part_fit
+    from ..field.grid import FieldSettings, SphericalGrid
+
+    fit = field_normal_part_fit(pair_field(pair, FieldSettings(SphericalGrid()))[0])
+    T = np.eye(4)
+    if np.all(np.isfinite(fit.rotation)) and np.all(np.isfinite(fit.translation)):
+        T[:3, :3], T[:3, 3] = fit.rotation, fit.translation
+    return T
 
 
 def _icp(xyz1: np.ndarray, xyz2: np.ndarray, sensor1, params: Params, start: np.ndarray):
@@ -174,7 +200,6 @@ def _icp(xyz1: np.ndarray, xyz2: np.ndarray, sensor1, params: Params, start: np.
 
 def _fitted(T: np.ndarray, mapped: np.ndarray, target: np.ndarray, normals: np.ndarray) -> dict:
     """The transform's translation and rotation vector, and their standard errors (see the module)."""
-    from scipy.spatial.transform import Rotation
 
     residuals = np.einsum("ij,ij->i", mapped - target, normals)
     J = np.hstack([np.cross(mapped, normals), normals])  # d r / d (rotation, translation) applied after T
@@ -189,20 +214,29 @@ def _fitted(T: np.ndarray, mapped: np.ndarray, target: np.ndarray, normals: np.n
     # t after a small rotation w and translation v applied after T: t + w x t + v
     A = np.hstack([-skew(t), np.eye(3)])
     translation_cov = A @ covariance @ A.T
-    rotvec = Rotation.from_matrix(T[:3, :3]).as_rotvec()
 
     def se(values: np.ndarray, scale: float = 1.0) -> list | None:
         values = np.sqrt(np.clip(np.diag(values), 0, None)) * scale
         return [float(v) for v in values] if np.isfinite(values).all() else None  # singular: unknown
 
     return {
-        "translation_m": [float(v) for v in t],
+        **_fitted_transform(T),
         "translation_se_m": se(translation_cov),
-        "rotation_deg": [float(v) for v in np.degrees(rotvec)],
         "rotation_se_deg": se(covariance[:3, :3], float(np.degrees(1.0))),
-        "angle_deg": float(np.degrees(np.linalg.norm(rotvec))),
         "inlier_rmse_m": float(np.sqrt(np.mean(np.sum((mapped - target) ** 2, axis=1)))),
         "sigma_m": float(np.sqrt(sigma2)),
+    }
+
+
+def _fitted_transform(T: np.ndarray) -> dict:
+    """A transform's translation, rotation vector (degrees) and angle."""
+    from scipy.spatial.transform import Rotation
+
+    rotvec = Rotation.from_matrix(T[:3, :3]).as_rotvec()
+    return {
+        "translation_m": [float(v) for v in T[:3, 3]],
+        "rotation_deg": [float(v) for v in np.degrees(rotvec)],
+        "angle_deg": float(np.degrees(np.linalg.norm(rotvec))),
     }
 
 

@@ -22,9 +22,10 @@ import os
 
 import numpy as np
 
-from lidarfield.analysis.field_stats import analyse_field, scan_patterns
+from lidarfield.analysis.field_stats import analyse_field
 from lidarfield.field.grid import field_settings_from_config
 from lidarfield.field.kernel import field_from_voxel_ids
+from lidarfield.field.pair_field import scan_patterns
 from lidarfield.hypotheses import apply_step
 from lidarfield.pair import RegisteredPair
 from lidarfield.poses import pose_from_xyzrpy

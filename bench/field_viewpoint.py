@@ -18,10 +18,11 @@ from __future__ import annotations
 import argparse
 
 from explain import GRID, ego_car_pair  # bench/explain.py
-from lidarfield.analysis.field_stats import analyse_field, scan_patterns
+from lidarfield.analysis.field_stats import analyse_field
 from lidarfield.field.free_space import shared_points
 from lidarfield.field.grid import field_settings_from_config
 from lidarfield.field.kernel import field_from_voxel_ids
+from lidarfield.field.pair_field import scan_patterns
 from lidarfield.field.significance import Viewpoint
 from timing import best_time, machine  # bench/timing.py
 

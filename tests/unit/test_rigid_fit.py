@@ -1,4 +1,4 @@
-"""The field's rigid part fitted point-to-plane (``analysis.rigid_fit``) on real geometry: the
+"""The field's rigid part fitted point-to-plane (``field.rigid_fit``) on real geometry: the
 simulated intersection of the source paper, a corridor, and the real ExpD VLP-16 pair.
 
 Two independent samplings (2 cm range noise) of the intersection, scan 2 registered wrong by
@@ -16,10 +16,10 @@ from pathlib import Path
 import numpy as np
 
 from lidarfield.analysis.field_stats import field_statistics
-from lidarfield.analysis.rigid_fit import point_to_plane_fit
 from lidarfield.analysis.tags import voxel_tags
 from lidarfield.field.grid import FieldSettings, SphericalGrid
 from lidarfield.field.kernel import discrepancy_field
+from lidarfield.field.rigid_fit import point_to_plane_fit
 from lidarfield.io import read_scan
 from lidarfield.io.pose_files import read_pose
 from lidarfield.pair import RegisteredPair
@@ -90,7 +90,7 @@ def test_the_normal_part_fit_recovers_a_small_motion_as_precisely_as_the_verdict
     within 0.5 mm and 0.003 deg (measured 0.22 mm and 0.0018 deg), and the field corrected by it
     reads random (patterned before)."""
     from lidarfield.analysis.field_stats import analyse_field
-    from lidarfield.analysis.rigid_fit import field_normal_part_fit
+    from lidarfield.field.rigid_fit import field_normal_part_fit
 
     xyz1, xyz2 = intersection_scans()
     sensor = PRESETS["paper-sim-80"]

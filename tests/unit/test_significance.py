@@ -427,7 +427,7 @@ def test_what_real_pairs_from_two_places_hold_is_their_reference_and_their_chann
 
     from helpers.fault_zoo import Case, default_study, faulted_pair, load_base
     from lidarfield.analysis.field_stats import analyse_field
-    from lidarfield.analysis.rigid_fit import field_normal_part_fit
+    from lidarfield.field.rigid_fit import field_normal_part_fit
 
     for name, left in (("real-os1-128-frames", (0.0, 2.5)), ("real-hdl32-pair", (8.0, np.inf))):
         pair = faulted_pair(load_base(name, 20_000), Case(name, "none", ""))

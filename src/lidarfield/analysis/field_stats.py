@@ -33,15 +33,13 @@ import math
 import numpy as np
 
 from ..defaults import default
-from ..field.channels import pair_binning
-from ..field.free_space import shared_points
 from ..field.grid import FieldSettings
-from ..field.kernel import NORMAL_READ_COLUMN, SURFACE_COLUMNS, WHITENED_COLUMNS, field_from_voxel_ids
-from ..field.significance import ScanPattern, Viewpoint
+from ..field.kernel import NORMAL_READ_COLUMN, SURFACE_COLUMNS, WHITENED_COLUMNS
+from ..field.pair_field import pair_field
+from ..field.rigid_fit import field_rigid_part
 from ..pair import RegisteredPair
 from ..poses import weighted_rigid_transform  # noqa: F401 (re-exported: the tests' Kabsch)
 from .randomness import neighbour_pairs, randomness_tests
-from .rigid_fit import field_rigid_part
 from .tags import energy_shares, voxel_energy, voxel_tags
 
 STATISTIC_KEYS = (
@@ -73,32 +71,6 @@ def analyse_field(pair: RegisteredPair, settings: FieldSettings) -> tuple[dict[s
     columns, binning, ids = pair_field(pair, settings)
     columns.update(voxel_tags(columns, pair, binning.settings, ids))
     return columns, {**field_statistics(columns, binning.settings), **binning.statistics()}
-
-
-def pair_field(pair: RegisteredPair, settings: FieldSettings):
-    """The field's columns of a pair, binned about sensor 1 on the grid of ``settings`` made
-    channel-aware for the pair (``field.channels``), with each cloud's scan pattern and the
-    change of viewpoint in its vectors' covariance; the binning and both clouds' voxel ids."""
-    binning = pair_binning(settings, pair)
-    settings = binning.settings
-    ids = settings.grid.assign(pair.xyz1), settings.grid.assign(pair.xyz2)  # binned once: the tags need them too
-    shared = shared_points(pair)
-    viewpoint = None if shared is None else Viewpoint(pair.origin2, *shared)
-    columns = field_from_voxel_ids(
-        ids[0], pair.xyz1, ids[1], pair.xyz2, settings, patterns=scan_patterns(pair), viewpoint=viewpoint
-    )
-    return columns, binning, ids
-
-
-def scan_patterns(pair: RegisteredPair) -> tuple[ScanPattern | None, ScanPattern | None]:
-    """Each cloud's lattice of rays in frame 1, from its sensor model (None without one)."""
-    poses = (np.eye(4), pair.T_1_2)
-    return tuple(
-        None
-        if sensor is None
-        else ScanPattern(pose[:3, 3], pose[:3, 2], sensor.azimuth_resolution_deg, np.asarray(sensor.elevation_deg))
-        for sensor, pose in zip((pair.sensor1, pair.sensor2), poses)
-    )
 
 
 def field_statistics(columns: dict[str, np.ndarray], settings: FieldSettings | None = None) -> dict:

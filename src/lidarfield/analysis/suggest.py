@@ -71,13 +71,13 @@ from ..errors import HypothesisError, InputError, NotApplicableError
 from ..field.channels import pair_binning
 from ..field.grid import FieldSettings
 from ..field.kernel import field_from_voxel_ids
+from ..field.pair_field import scan_patterns
 from ..hypotheses import BUILTINS, CORRECTING, apply_step, validate_step
 from ..hypotheses.outcome import displacement
 from ..hypotheses.steps import step_name
 from ..io.parquet_table import read_metadata, read_table, write_table
 from ..pair import RegisteredPair
 from ..storage.stage_ids import canonical_json
-from .field_stats import scan_patterns
 from .tags import vector_tags, voxel_energy, whitened_energy
 
 log = logging.getLogger(__name__)

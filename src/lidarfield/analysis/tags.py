@@ -38,8 +38,8 @@ import numpy as np
 from ..errors import HypothesisError
 from ..field.grid import FieldSettings, SphericalGrid
 from ..field.kernel import WHITENED_COLUMNS
+from ..field.rigid_fit import field_rigid_part
 from ..pair import RegisteredPair
-from .rigid_fit import field_rigid_part
 
 TAGS = ("fov_edge", "near_sensor", "depth_edge", "radial", "rigid", "count_imbalance")
 POINT_SHARE = 0.1

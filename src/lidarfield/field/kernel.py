@@ -36,10 +36,11 @@ VALUE_COLUMNS = ("n1", "n2", "x1", "y1", "z1", "x2", "y2", "z2", "u", "v", "w", 
 # when a field file is read (files written before them lack them).
 SURFACE_COLUMNS = ("nx", "ny", "nz", "planarity")
 # Each valid vector in units of its own sampling noise, C^-1/2 d, or on a surface seen from two
-# places its normal part (``significance``): what the randomness tests read. Optional when a field file is read, like the surface columns.
+# places its normal part (``significance``): what the randomness tests read. Optional when a
+# field file is read, like the surface columns.
 WHITENED_COLUMNS = ("wu", "wv", "ww")
 # A surface voxel's standard error of its normal part n . d (``significance``; NaN elsewhere): the
-# weight of its normal part in the field's rigid fit (``analysis.rigid_fit.normal_part_fit``).
+# weight of its normal part in the field's rigid fit (``field.rigid_fit.normal_part_fit``).
 # Optional when a field file is read.
 NORMAL_SE_COLUMN = "se_normal"
 # Whether the randomness tests read the voxel by its normal part alone: a surface voxel of a pair

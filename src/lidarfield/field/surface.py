@@ -2,7 +2,7 @@
 
 A voxel mean sees only the part of a motion normal to the surface inside the voxel (moving
 points along a wall changes which points fall in the voxel, not their mean), so the field's
-rigid part is fitted point-to-plane (``analysis.rigid_fit``) along these normals.
+rigid part is fitted point-to-plane (``field.rigid_fit``) along these normals.
 
 The spread is the **pooled within-cloud covariance** of the voxel,
 S = ((n1 - 1) S1 + (n2 - 1) S2) / (n1 + n2 - 2): both clouds sample the same surface patch, so

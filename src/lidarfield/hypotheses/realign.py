@@ -155,9 +155,9 @@ def _field_refinement(pair: RegisteredPair) -> np.ndarray:
     """The 4x4 correction of cloud 2 that the field of the ICP-fitted pair still asks for: its
     surfaces' normal parts fitted by generalised least squares (``rigid_fit.normal_part_fit``)
     on the default grid; the identity where the field has too few surfaces."""
-    from ..analysis.field_stats import pair_field
-    from ..analysis.rigid_fit import field_normal_part_fit
     from ..field.grid import FieldSettings, SphericalGrid
+    from ..field.pair_field import pair_field
+    from ..field.rigid_fit import field_normal_part_fit
 
     fit = field_normal_part_fit(pair_field(pair, FieldSettings(SphericalGrid()))[0])
     T = np.eye(4)

@@ -261,19 +261,6 @@ def pair_stage_dirs(wildcards):
 
 
 @planned
-def earlier_suggestions(wildcards):
-    """The stage before's suggestions, where the study makes every stage's (plots.pairs): made
-    first, they let a stage whose hypothesis changed no point reuse their rows instead of running
-    its candidates again (lidarfield.analysis.suggest); any other stage's suggest runs alone.
-    """
-    level = stage_level(wildcards)
-    if level == 0 or wildcards.pair not in PLOT_PAIRS:
-        return []
-    previous = STAGES[wildcards.pair][level - 1]
-    return f"{stage_dir(wildcards.pair, previous)}/suggestions.parquet"
-
-
-@planned
 def page_has_figures(wildcards):
     """A pair's report.html shows its pair and stage figures when plots.pairs selects it; its
     stages.html (asked for on demand) always does."""

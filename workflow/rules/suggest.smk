@@ -2,9 +2,7 @@
 # the field it would leave. A rule of its own so that it never delays the stages: the next
 # stage's mitigate job does not wait for it. The pairs that suggest_pairs selects get their last
 # stage's suggestions (the study's next steps); those that plots.pairs selects get every stage's,
-# as any pair's stages.html does when it is asked for (pair_suggestions in common.smk). A
-# stage's job reuses the rows of a sibling stage with the same points; on the plotted pairs it
-# waits for the stage before's (earlier_suggestions) so that a no-op stage always can.
+# as any pair's stages.html does when it is asked for (pair_suggestions in common.smk).
 
 
 rule suggest:
@@ -12,7 +10,6 @@ rule suggest:
         registered=f"{RESULTS}/{{pair}}/registered.parquet",
         stage_changes=stage_changes,
         plugins=candidate_plugin_sources,
-        earlier=earlier_suggestions,
     output:
         f"{RESULTS}/{{pair}}/stages/{{stage}}/suggestions.parquet",
     log:

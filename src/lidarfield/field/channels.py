@@ -52,7 +52,8 @@ PHASE_SUBSAMPLE = 7
 MIN_RING_POINTS = 10
 # A ring whose points lie farther than this from their median elevation (half of them at
 # least; deg) is no channel: a driver's ring 0 for every point, or a rig's other lidar seen from
-# this one. (The free-space rows drop such rings the same way: field.free_space.channel_rows.)
+# this one. (The free-space rows drop a ring by another test, its distance from the channel it
+# is matched to: field.free_space.channel_rows.)
 RING_SPREAD_DEG = 0.5
 # An edge within this of a channel (deg), or of a firing (in steps), is on it.
 _ON = 1e-6

@@ -40,7 +40,7 @@ SURFACE_COLUMNS = ("nx", "ny", "nz", "planarity")
 # field file is read, like the surface columns.
 WHITENED_COLUMNS = ("wu", "wv", "ww")
 # A surface voxel's standard error of its normal part n . d (``significance``; NaN elsewhere): the
-# weight of its normal part in the field's rigid fit (``field.rigid_fit.normal_part_fit``).
+# weight of its normal part in the field's rigid fit (``field.rigid_fit.field_normal_part_fit``).
 # Optional when a field file is read.
 NORMAL_SE_COLUMN = "se_normal"
 # Whether the randomness tests read the voxel by its normal part alone: a surface voxel of a pair

@@ -153,7 +153,7 @@ def realign(pair: RegisteredPair, params: Params) -> Outcome:
 
 def _field_refinement(pair: RegisteredPair) -> np.ndarray:
     """The 4x4 correction of cloud 2 that the field of the ICP-fitted pair still asks for: its
-    surfaces' normal parts fitted by generalised least squares (``rigid_fit.normal_part_fit``)
+    surfaces' normal parts fitted by generalised least squares (``field_normal_part_fit``)
     on the default grid; the identity where the field has too few surfaces."""
     from ..field.grid import FieldSettings, SphericalGrid
     from ..field.pair_field import pair_field

@@ -10,8 +10,9 @@ Writes to ``--out`` (default ``diagnosis-results``): ``cases.parquet`` (one row 
 ``confusion.md`` and ``confusion.html`` (per sensor, fault x first proposal, and the overall
 rates) and ``rates.png`` (the share named by fault and level).
 
-Run: ``python bench/diagnosis.py [--slice small|full] [--out DIR] [--points N] [--jobs N]``
-(``make diagnosis`` runs the full zoo).
+Run: ``python bench/diagnosis.py [--slice small|full] [--base TEXT ...] [--out DIR] [--points N]
+[--jobs N]`` (``make diagnosis`` runs the full zoo; ``--base real-hdl32 --base canyon-apart`` only
+the base pairs whose names hold one of the texts).
 """
 
 from __future__ import annotations
@@ -52,8 +53,10 @@ def progress(done: int, total: int, start: float) -> None:
     print(f"\r[{bar:<30}] {done}/{total} cases, {elapsed:5.0f} s, about {left:4.0f} s left", end="", file=sys.stderr)
 
 
-def run(slice_name: str, points: int, jobs: int) -> pd.DataFrame:
-    cases = zoo(slice_name)
+def run(slice_name: str, points: int, jobs: int, bases: list[str]) -> pd.DataFrame:
+    cases = [case for case in zoo(slice_name) if not bases or any(text in case.base for text in bases)]
+    if not cases:
+        sys.exit(f"no base pair of the {slice_name} zoo holds {' or '.join(bases)}")
     by_base: dict[str, list] = {}
     for case in cases:
         by_base.setdefault(case.base, []).append(case)
@@ -173,6 +176,7 @@ def rates_figure(table: pd.DataFrame, path: Path) -> None:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--slice", choices=("small", "full"), default="full")
+    parser.add_argument("--base", action="append", default=[], help="only the base pairs whose names hold this text")
     parser.add_argument("--out", type=Path, default=Path("diagnosis-results"))
     parser.add_argument("--points", type=int, default=POINTS, help=f"per cloud, at most (default {POINTS:,})")
     parser.add_argument("--jobs", type=int, default=2, help="worker processes (default 2)")
@@ -183,10 +187,12 @@ def main() -> None:
         write_outputs(table, args.out, f"{len(table)} cases of {args.tables_from}")
         return
     start = time.perf_counter()
-    table = run(args.slice, args.points, args.jobs)
+    table = run(args.slice, args.points, args.jobs, args.base)
     wall = time.perf_counter() - start
+    chosen = "".join(f", bases holding {text}" for text in args.base)
     header = (
-        f"{len(table)} cases ({args.slice} zoo), at most {args.points:,} points per cloud, {args.jobs} workers: "
+        f"{len(table)} cases ({args.slice} zoo{chosen}), at most {args.points:,} points per cloud, "
+        f"{args.jobs} workers: "
         f"{wall:.0f} s wall, {table['cpu_seconds'].sum():.0f} s of CPU in the cases (faults, registration, explain); "
         f"{machine()}, load average {os.getloadavg()[0]:.1f} at the end"
     )

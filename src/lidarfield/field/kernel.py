@@ -21,6 +21,7 @@ from .significance import (
     covariance_from_sums,
     normal_standard_error,
     pattern_covariance,
+    read_by_normal_part,
     surface_axes,
     vector_covariance,
     vector_standard_error,
@@ -248,8 +249,10 @@ def assemble_field(
     surface = np.isfinite(axes[0])
     columns[NORMAL_SE_COLUMN] = np.where(surface, normal_standard_error(axes, combined), np.nan)
     # From one place the scan pattern's term models a surface's in-plane sampling; from two,
-    # the change of viewpoint makes it unknown (``significance``).
-    columns[NORMAL_READ_COLUMN] = surface & (shared is not None and bool(np.any(shared[0][0] != shared[0][1])))
+    # the change of viewpoint makes it unknown where the line of sight crosses the surface
+    # (``significance``).
+    origins = None if shared is None else shared[0]
+    columns[NORMAL_READ_COLUMN] = read_by_normal_part(axes, 0.5 * (mean1 + mean2), origins)
     read = np.where(columns[NORMAL_READ_COLUMN], axes, np.nan)
     columns["wu"], columns["wv"], columns["ww"] = whitened_vectors(uvw, combined, read)
     return {name: columns[name] for name in field_columns(grid)}

@@ -233,7 +233,9 @@ def _surface_reading(row, covariance1: dict, covariance2: dict, viewpoints, surf
     """The whitened vector of one voxel, the standard error of its normal part and whether the
     tests read it by that part: C^-1/2 d (the symmetric root), NaN, 0; on a surface (normal and
     planarity ``surface``, planarity at least SURFACE_PLANARITY_MIN) sqrt(n^T C n), and with
-    ``two_places`` the normal part over it, along the normal, and 1."""
+    ``two_places``, where the line of sight from sensor 1 to the voxel's centre meets the surface
+    at more than grazing (|n . s| >= GRAZING_MIN), the normal part over it, along the normal,
+    and 1."""
     d = np.array([row.u, row.v, row.w])
     combined = _vector_covariance(row, covariance1, covariance2, viewpoints)
     if not np.all(np.isfinite(d)) or combined is None:
@@ -242,7 +244,10 @@ def _surface_reading(row, covariance1: dict, covariance2: dict, viewpoints, surf
     se_normal = np.nan
     if np.all(np.isfinite(normal)) and surface[3] >= SURFACE_PLANARITY_MIN:
         se_normal = np.sqrt(normal @ combined @ normal)
-        if two_places:
+        sight = (
+            0.5 * np.array([row.x1 + row.x2, row.y1 + row.y2, row.z1 + row.z2]) - viewpoints[0] if two_places else None
+        )
+        if two_places and abs(normal @ sight) / np.linalg.norm(sight) >= GRAZING_MIN:
             return (*(normal * (normal @ d) / se_normal), se_normal, 1.0)
     values, vectors = np.linalg.eigh(combined)
     return (*(vectors @ ((vectors.T @ d) / np.sqrt(values))), se_normal, 0.0)

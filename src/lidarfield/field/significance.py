@@ -237,6 +237,27 @@ def surface_axes(normal: np.ndarray, planarity: np.ndarray) -> np.ndarray:
     return np.where(surface, normal, np.nan)
 
 
+def crosses_line_of_sight(normal: np.ndarray, centre: np.ndarray, origin) -> np.ndarray:
+    """(V,) whether each voxel's surface, of normal (3, V; NaN: none) through its (3, V)
+    ``centre``, meets the line of sight from ``origin`` (3,, sensor 1: the voxel's apex) at more
+    than grazing, |n . s| >= ``GRAZING_MIN``: only there is its normal part all a motion of it
+    shows (module docstring)."""
+    sight = np.asarray(centre, dtype=np.float64) - np.asarray(origin, dtype=np.float64).reshape(3, 1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        facing = np.abs(np.einsum("ij,ij->j", normal, sight)) / np.linalg.norm(sight, axis=0)
+        return facing >= GRAZING_MIN
+
+
+def read_by_normal_part(axes: np.ndarray, centre: np.ndarray, origins: tuple | None) -> np.ndarray:
+    """(V,) whether the randomness tests read each voxel by its normal part alone: a surface
+    (finite axis, 3 x V, ``surface_axes``) of a pair from two places (``origins``: both sensors'
+    (3,) origins, None for one place) that the line of sight from sensor 1 to the voxel's (3, V)
+    ``centre`` crosses (``crosses_line_of_sight``). See the module docstring."""
+    if origins is None or not np.any(np.asarray(origins[0]) != np.asarray(origins[1])):
+        return np.zeros(axes.shape[1], dtype=bool)
+    return crosses_line_of_sight(axes, centre, origins[0])
+
+
 def whitened_vectors(uvw: np.ndarray, combined: np.ndarray, axes: np.ndarray | None = None) -> np.ndarray:
     """C^-1/2 d (3, V) of vectors (3, V) with covariances (6, V, ``vector_covariance``); where
     ``axes`` (3, V, ``surface_axes``) is finite, (n . d) / sqrt(n^T C n) n instead; NaN where

@@ -33,7 +33,13 @@ part alone (``field.significance``; every pair of the default study is from two 
 field's wu, wv, ww changed and it gained se_normal and read_normal; in the summary
 p_direction, p_coherence and the verdict (paper-sim's three stages now ``random``: p 0.586 /
 0.506 at stage 0, patterned before). Unchanged: every other column, n1, n2, removed1, removed2,
-voxels_significant, the vectors and their se and z.
+voxels_significant, the vectors and their se and z. Regenerated on branch surface (2026-11-28)
+when a surface voxel began to be read by its normal part only where the line of sight from
+sensor 1 crosses its surface (``significance.read_by_normal_part``): on the drive's pairs
+drive-000 (stages 0-2), drive-001 and drive-004 (stages 1-2) one or two voxels a stage that hold
+a plane along the rays are read whole, so the field's read_normal, wu, wv and ww changed there.
+Unchanged: every summary column (the p-values and verdicts among them), every other field
+column and every removal (n1, n2, removed1, removed2).
 """
 
 from __future__ import annotations

@@ -59,6 +59,22 @@ lay in the plane with normal parts under 2, and made five of six patterned (p_co
 the field's rigid fit weighs the normal parts by it). Under the null it has variance at most 1 whatever n is
 (C bounds every direction's), and the randomness tests draw its null along n alone.
 
+Only where the line of sight crosses the surface. The argument needs the cone to cut the surface
+across: a / (n . s) is a move along the ray only while n . s is not near 0. Planarity does not
+say so: a surface that ends inside the voxel with another seen past it (the own car's roof 1-2 m
+from the sensor and the ground 8 m beyond its edge, in one cone) is two flat patches at two
+depths, which lie on one plane holding the rays (planarity 0.9-0.99, |n . s| 0.01-0.06 on the
+diagnosis zoo's drives), and there the mean moves with the share of each patch (a carried roof's
+edge moved 0.3 m in its plane: metres along that plane, a normal part under 1 standard error).
+Such a voxel (|n . s| < ``GRAZING_MIN``, the grazing bound the pattern term stretches its
+cell to, s from sensor 1, the cone's apex, to the voxel's centre) is read whole: its depth
+along the rays is in C (the pattern's stretch along the ray, the content's spread in the
+viewpoint term). Measured on the zoo (2026-11-28): the car body 0.3 m below the sensor reads
+``patterned`` at stage 0 on the VLP-16's two drives and the VLP-32C's canyon drive (it read
+``random``), with no control of the drives or the canyon lost; a roof spanning its voxels from
+0.3 m apart (in-plane offsets 0.11-0.18 m, sampling) is still read by its normal part
+(``test_significance.py``).
+
 The viewpoint. Two sensors at different places sample the same surfaces with different
 densities: per unit area a sensor's density is cos(incidence) / range^2 =
 |n.(x - o)| / |x - o|^3 (n the surface's normal, o the sensor). A voxel's mean is the

@@ -248,9 +248,9 @@ def assemble_field(
     axes = surface_axes(normal, planarity)
     surface = np.isfinite(axes[0])
     columns[NORMAL_SE_COLUMN] = np.where(surface, normal_standard_error(axes, combined), np.nan)
-    # From one place the scan pattern's term models a surface's in-plane sampling; from two,
-    # the change of viewpoint makes it unknown where the line of sight crosses the surface
-    # (``significance``).
+    # From one place the scan pattern's term models a surface's in-plane sampling; from two the
+    # change of viewpoint makes it unknown, so a surface the line of sight crosses is read by its
+    # normal part (``significance``).
     origins = None if shared is None else shared[0]
     columns[NORMAL_READ_COLUMN] = read_by_normal_part(axes, 0.5 * (mean1 + mean2), origins)
     read = np.where(columns[NORMAL_READ_COLUMN], axes, np.nan)

@@ -244,10 +244,9 @@ def _surface_reading(row, covariance1: dict, covariance2: dict, viewpoints, surf
     se_normal = np.nan
     if np.all(np.isfinite(normal)) and surface[3] >= SURFACE_PLANARITY_MIN:
         se_normal = np.sqrt(normal @ combined @ normal)
-        sight = (
-            0.5 * np.array([row.x1 + row.x2, row.y1 + row.y2, row.z1 + row.z2]) - viewpoints[0] if two_places else None
-        )
-        if two_places and abs(normal @ sight) / np.linalg.norm(sight) >= GRAZING_MIN:
-            return (*(normal * (normal @ d) / se_normal), se_normal, 1.0)
+        if two_places:
+            sight = 0.5 * np.array([row.x1 + row.x2, row.y1 + row.y2, row.z1 + row.z2]) - viewpoints[0]
+            if abs(normal @ sight) / np.linalg.norm(sight) >= GRAZING_MIN:
+                return (*(normal * (normal @ d) / se_normal), se_normal, 1.0)
     values, vectors = np.linalg.eigh(combined)
     return (*(vectors @ ((vectors.T @ d) / np.sqrt(values))), se_normal, 0.0)

@@ -13,6 +13,9 @@ stack, steps). Baseline in the same run: applying the stack it found once, with 
 field and statistics (``apply_stack`` + ``analyse_field``), i.e. what running the found stack
 costs without searching for it.
 
+OpenBLAS runs with one thread unless ``OPENBLAS_NUM_THREADS`` is set, as the command runs it
+(``lidarfield.cli.one_blas_thread``).
+
 Run: ``python bench/explain.py [points_per_cloud]``.
 """
 
@@ -22,13 +25,16 @@ import sys
 import tempfile
 from pathlib import Path
 
-from lidarfield.analysis.field_stats import analyse_field
-from lidarfield.analysis.stopping_rule import ExplainSettings
-from lidarfield.report.explanation import write_explanation
-from lidarfield.study.config import validate_config
-from lidarfield.study.explain_loop import explain_pair, format_step
-from lidarfield.study.stack import apply_stack
-from timing import best_time, machine  # bench/timing.py
+from lidarfield.cli import one_blas_thread
+
+one_blas_thread()  # as the command runs: before numpy is imported
+from lidarfield.analysis.field_stats import analyse_field  # noqa: E402
+from lidarfield.analysis.stopping_rule import ExplainSettings  # noqa: E402
+from lidarfield.report.explanation import write_explanation  # noqa: E402
+from lidarfield.study.config import validate_config  # noqa: E402
+from lidarfield.study.explain_loop import explain_pair, format_step  # noqa: E402
+from lidarfield.study.stack import apply_stack  # noqa: E402
+from timing import best_time, machine  # noqa: E402 (bench/timing.py)
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 from helpers.ego_car import ego_car_pair, registered_off  # noqa: E402 (the tests' ego-car drive)

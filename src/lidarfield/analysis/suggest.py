@@ -73,7 +73,7 @@ from ..field.grid import FieldSettings
 from ..field.kernel import field_from_voxel_ids
 from ..field.pair_field import scan_patterns
 from ..hypotheses import BUILTINS, CORRECTING, apply_step, validate_step
-from ..hypotheses.outcome import displacement
+from ..hypotheses.outcome import Outcome, displacement
 from ..hypotheses.steps import step_name
 from ..io.parquet_table import read_metadata, read_table, write_table
 from ..pair import RegisteredPair
@@ -141,12 +141,15 @@ def suggestions(
     study_grid: dict | None = None,
     defaults: bool = False,
     known: dict[tuple[str, str], dict] | None = None,
+    outcomes: dict[tuple[str, str], Outcome] | None = None,
 ) -> dict[str, np.ndarray]:
     """The suggestion table (``SUGGESTION_COLUMNS``, one row per candidate, sorted by rank).
 
     ``defaults``: the candidates are the default ones, so one that cannot apply to this pair is
     skipped (and logged) rather than an error. ``known``: rows already computed for the same
     ``points_digest`` (``rows_by_candidate``), reused for the built-in candidates they hold.
+    ``outcomes``: filled with each built-in candidate's outcome run here, by ``candidate_key``
+    (``explain`` applies the chosen one's as it is instead of running it again).
     """
     known = known or {}
     reused = [known.get(candidate_key(spec)) for spec in candidates]
@@ -174,6 +177,8 @@ def suggestions(
                 raise HypothesisError(f"suggest entry {k}: {e}") from None
             log.info("candidate %s skipped: it does not apply to this pair (%s)", step_name(spec), e)
             continue
+        if outcomes is not None and candidate_key(spec)[0]:
+            outcomes[candidate_key(spec)] = outcome
         keep1, keep2 = outcome
         removed1, removed2 = int(np.count_nonzero(~keep1)), int(np.count_nonzero(~keep2))
         moved = [displacement(pair.xyz1, outcome.xyz1), displacement(pair.xyz2, outcome.xyz2)]

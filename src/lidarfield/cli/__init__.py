@@ -7,6 +7,7 @@ registers its arguments and sets ``func`` to a callable taking the parsed argume
 from __future__ import annotations
 
 import functools
+import os
 import sys
 
 SUBCOMMANDS = ("field", "simulate", "register", "run", "explain", "plot", "report", "compare", "info", "job")
@@ -28,7 +29,19 @@ def build_parser():
     return parser
 
 
+def one_blas_thread() -> None:
+    """OpenBLAS with one thread, unless the user set ``OPENBLAS_NUM_THREADS``, and only before
+    numpy is imported (OpenBLAS reads it once, when it loads). Its default, a thread per core,
+    was slower here: its small products (a fit's normal equations) wait for the other thread to
+    be scheduled. Measured 2026-11-28 on the 2-core machine under load 14-16, ``bench/explain.py
+    120000`` twice in turn: the loop 15.5-15.6 s with OpenBLAS's default, 12.0-12.4 s with one
+    thread. The workflow's jobs run with one already (``runner.launch.THREAD_VARS``)."""
+    if "numpy" not in sys.modules:
+        os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+
 def main(argv: list[str] | None = None) -> int:
+    one_blas_thread()
     argv = sys.argv[1:] if argv is None else list(argv)
     if argv[:1] == ["job"]:
         from .worker_client import run_on_worker

@@ -1,10 +1,13 @@
 """The loop closed (``lidarfield explain``): from a registered pair, apply the best suggestion
 worth it, recompute the field, and repeat until the verdict is not ``patterned`` or nothing helps.
 
-Everything stays in memory: each step is a :class:`~.stack.Stage` (the same ``next_stage`` as a
+Everything stays in memory: each step is a :class:`~.stack.Stage` (the same ``parsed_stage`` as a
 study's mitigate job) with its field and statistics (``analyse_field``, as the field job), and
 the candidates of each step are the suggestions of that stage (``analysis.suggest``: the
-config's ``suggest`` list, or every built-in the stack has not applied). The stopping rule is
+config's ``suggest`` list, or every built-in the stack has not applied); the chosen one's
+outcome, computed for its suggestion, makes the next stage as it is (not run again), and what
+the stage did not change of the points' neighbour distances is carried to it
+(``stack.following_stage``). The stopping rule is
 :mod:`lidarfield.analysis.stopping_rule`. Before it stops, it looks at what the field cannot
 show: a scan that returned nothing in a sector the other fills (``analysis.coverage``) is a
 finding, and a step of ``field_of_view`` when that removes the sector's points (whatever the
@@ -34,13 +37,13 @@ from ..analysis.stopping_rule import (
     repeats,
     worth_it,
 )
-from ..analysis.suggest import candidate_steps, suggestions
+from ..analysis.suggest import candidate_key, candidate_steps, suggestions
 from ..field.grid import FieldSettings
-from ..hypotheses import apply_step
+from ..hypotheses import parse_step
 from ..hypotheses.steps import step_name
 from ..pair import RegisteredPair
 from ..storage.stage_ids import canonical_json
-from .stack import Stage, initial_stage, next_stage
+from .stack import Stage, following_stage, initial_stage
 from .summary import summary_row
 
 log = logging.getLogger(__name__)
@@ -150,11 +153,15 @@ def explain_pair(
     current = explained_stage(initial_stage(pair), settings)
     result = Explanation(pair_name, [current])
 
-    def take(table: dict[str, np.ndarray], chosen: int) -> None:
+    def take(table: dict[str, np.ndarray], chosen: int, outcomes: dict) -> None:
+        """Apply row ``chosen`` of ``table``: the outcome its suggestion computed (``outcomes``)
+        as it is, not run again."""
         nonlocal current
-        spec = {str(table["hypothesis"][chosen]): json.loads(table["params"][chosen])}
+        key = (str(table["hypothesis"][chosen]), str(table["params"][chosen]))
         level = len(result.steps) + 1
-        following = explained_stage(next_stage(current.stage.pair, spec, level, base_dir, grid_section), settings)
+        name, params = parse_step({key[0]: json.loads(key[1])}, base_dir, grid_section, level)
+        stage = following_stage(current.stage, name, params, level, base_dir, outcomes.get(key))
+        following = explained_stage(stage, settings)
         result.steps.append(step_row(level, table, chosen, current, following, explain))
         result.stages.append(following)
         log.info("step %d: %s", level, format_step(result.steps[-1]))
@@ -171,10 +178,13 @@ def explain_pair(
             result.stop = STOP_VERDICT.format(verdict=verdict)
             if not room:
                 break
-            table = blind_sector_step(current.stage.pair, settings, candidates, base_dir, grid_section, suggest, result)
+            outcomes = {}
+            table = blind_sector_step(
+                current.stage.pair, settings, candidates, base_dir, grid_section, suggest, result, outcomes
+            )
             if table is None:
                 break
-            take(table, 0)
+            take(table, 0, outcomes)
             continue
         if not room:
             result.stop = STOP_MAX_STEPS
@@ -182,15 +192,20 @@ def explain_pair(
         if not candidates:
             result.stop = STOP_NO_CANDIDATES
             break
-        table = suggestions(current.stage.pair, settings, candidates, base_dir, grid_section, suggest is None)
+        outcomes = {}
+        table = suggestions(
+            current.stage.pair, settings, candidates, base_dir, grid_section, suggest is None, outcomes=outcomes
+        )
         chosen = best_worth_it(table, explain)
         if chosen is None:
             result.stop = STOP_NOTHING_HELPS
-            table = blind_sector_step(current.stage.pair, settings, candidates, base_dir, grid_section, suggest, result)
+            table = blind_sector_step(
+                current.stage.pair, settings, candidates, base_dir, grid_section, suggest, result, outcomes
+            )
             if table is None:
                 break
             chosen = 0
-        take(table, chosen)
+        take(table, chosen, outcomes)
     log.info("explain %s: %d step(s), stopped: %s", pair_name, len(result.steps), result.stop)
     return result
 
@@ -203,12 +218,14 @@ def blind_sector_step(
     grid_section: dict,
     suggest: list[dict] | None,
     result: Explanation,
+    outcomes: dict,
 ) -> dict[str, np.ndarray] | None:
     """When the loop would stop: a scan that returned nothing in a sector the other fills
     (``coverage.blind_sectors``) is a field of view the field cannot show (it has no vector
     there). Each is a finding of ``result``; the suggestion table of ``field_of_view`` alone
     when it is a candidate and removes most of the other cloud's points in the sector (the
-    blind scan's model says so), else None (the finding says the model does not)."""
+    blind scan's model says so), else None (the finding says the model does not); its outcome
+    in ``outcomes`` (``suggestions``')."""
     sectors = blind_sectors(pair)
     for sector in sectors:
         if sector.statement() not in result.findings:
@@ -216,10 +233,10 @@ def blind_sector_step(
     view = [step for step in candidates if step_name(step) == "field_of_view"]
     if not sectors or not view:
         return None
-    table = suggestions(pair, settings, view, base_dir, grid_section, suggest is None)
+    table = suggestions(pair, settings, view, base_dir, grid_section, suggest is None, outcomes=outcomes)
     if not len(table["rank"]):
         return None
-    keep1, keep2 = apply_step(pair, view[0], base_dir, grid_section)
+    keep1, keep2 = outcomes[candidate_key(view[0])]
     for sector in sectors:
         kept = keep2 if sector.blind == 1 else keep1
         if np.count_nonzero(sector.points & ~kept) >= 0.5 * np.count_nonzero(sector.points):

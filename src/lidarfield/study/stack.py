@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from ..hypotheses import parse_stack, parse_step, run_step, step_spec
-from ..hypotheses.outcome import displacement, reasons_of_removed
+from ..hypotheses.outcome import Outcome, displacement, reasons_of_removed
 from ..hypotheses.outliers import carry_neighbours
 from ..hypotheses.steps import step_name
 from ..pair import RegisteredPair
@@ -107,10 +107,15 @@ def next_stage(
     return parsed_stage(pair, *parse_step(step, base_dir, study_grid, level), level, base_dir)
 
 
-def parsed_stage(pair: RegisteredPair, name: str, params, level: int, base_dir: str | Path = ".") -> Stage:
-    """Stage ``level``: the parsed entry (``parse_step``'s name and parameters) applied to ``pair``."""
+def parsed_stage(
+    pair: RegisteredPair, name: str, params, level: int, base_dir: str | Path = ".", outcome: Outcome | None = None
+) -> Stage:
+    """Stage ``level``: the parsed entry (``parse_step``'s name and parameters) applied to
+    ``pair``; ``outcome``: the entry's outcome on ``pair`` when it is known already (a
+    suggestion's), not run again."""
     spec = step_spec(name, params)
-    outcome = run_step(pair, name, params, base_dir, level)
+    if outcome is None:
+        outcome = run_step(pair, name, params, base_dir, level)
     keep1, keep2 = outcome
     survivors = pair.subset(keep1, keep2)
     stage = Stage(level, step_name(spec), spec, survivors, pair.subset(~keep1, ~keep2), keep1, keep2)
@@ -151,12 +156,21 @@ def _stages(pair: RegisteredPair, parsed: list[tuple], base_dir) -> Iterator[Sta
     stage = initial_stage(pair)
     yield stage
     for level, (name, params) in enumerate(parsed, start=1):
-        previous, stage = stage, parsed_stage(stage.pair, name, params, level, base_dir)
-        # what the caller derived from the previous stage's points (its suggestions' outlier
-        # scores), carried over exactly for less than a new search costs; a cloud the stage
-        # moved is searched anew when needed (carrying assumes unmoved points)
-        carry_neighbours(previous.pair, stage.keep1, stage.keep2, stage.pair, skip=moved_clouds(stage))
+        stage = following_stage(stage, name, params, level, base_dir)
         yield stage
+
+
+def following_stage(
+    previous: Stage, name: str, params, level: int, base_dir: str | Path = ".", outcome: Outcome | None = None
+) -> Stage:
+    """Stage ``level`` after ``previous`` (``parsed_stage`` on its survivors), with what was
+    derived from ``previous``'s points carried over."""
+    stage = parsed_stage(previous.pair, name, params, level, base_dir, outcome)
+    # what the caller derived from the previous stage's points (its suggestions' outlier
+    # scores), carried over exactly for less than a new search costs; a cloud the stage
+    # moved is searched anew when needed (carrying assumes unmoved points)
+    carry_neighbours(previous.pair, stage.keep1, stage.keep2, stage.pair, skip=moved_clouds(stage))
+    return stage
 
 
 def moved_clouds(stage: Stage) -> tuple[int, ...]:

@@ -271,15 +271,22 @@ def test_explain_on_the_ego_car_pair_removes_the_body_realigns_and_ends_random(e
     noise (realign takes 99.9% of its whitened energy, 5% of its raw energy): realign comes first,
     and the body does not pull it (its refit is on what both sensors saw): it lands within a few
     mm and hundredths of a degree of the truth (measured 3.5 mm and 0.009 deg, as when the body
-    went first), ego_vehicle follows, and then what is left is random: the change of viewpoint on what both sensors saw
+    went first), ego_vehicle follows, and then the field is random: the change of viewpoint on what both sensors saw
     is in the field's covariance (docs/field.md), and the moving car, in one voxel whose content
-    spans the cone (z about 2), makes no pattern. So the loop stops there, and moving_objects,
-    which would remove the car from scan 2, is not needed for the verdict."""
-    truth, _, _ = ego_car
+    spans the cone (z about 2), makes no pattern. The car shows in the free space instead: before
+    it stops, the loop finds scan 2's car where sensor 1's rays passed through, and
+    moving_objects removes it (counted from the simulator's object labels) and nothing static."""
+    truth, off, _ = ego_car
     names = [row["hypothesis"] for row in ego_car_explanation.steps]
-    assert names == ["realign", "ego_vehicle"], names
-    assert ego_car_explanation.verdict == "random" and ego_car_explanation.stop == "verdict random"
-    realigned = ego_car_explanation.stages[-1].stage.pair.T_1_2 @ np.linalg.inv(truth.T_1_2)
+    assert names == ["realign", "ego_vehicle", "moving_objects"], names
+    assert [s.statistics["verdict"] for s in ego_car_explanation.stages[2:]] == ["random", "random"]
+    assert ego_car_explanation.stop == "verdict random"
+    assert any("points of objects that moved" in text for text in ego_car_explanation.findings)
+    given, last = (ego_car_explanation.stages[k].stage.pair for k in (2, 3))
+    car = [np.count_nonzero(pair.attributes2["object"] > 0) for pair in (given, last)]
+    assert car[0] > 50 and car[1] <= 0.1 * car[0], car
+    assert np.count_nonzero(last.attributes2["object"] == 0) >= 0.99 * np.count_nonzero(given.attributes2["object"] == 0)
+    realigned = ego_car_explanation.stages[2].stage.pair.T_1_2 @ np.linalg.inv(truth.T_1_2)
     angle = np.degrees(np.arccos(min(1.0, (np.trace(realigned[:3, :3]) - 1) / 2)))
     assert np.abs(realigned[:3, 3]).max() < 0.005 and angle < 0.02
 

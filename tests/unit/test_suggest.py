@@ -260,6 +260,8 @@ def test_a_suggested_correction_shows_its_displacement_and_fit(tmp_path):
         "energy_reduction": 0.95,
         "whitened_reduction": 0.97,
         "removal_null": 0.0,
+        "seen_through_removed": np.nan,
+        "seen_through_null": np.nan,
     }
     table = {name: np.asarray([row[name]]) for name in SUGGESTION_COLUMNS}
     stage = tmp_path / "stages" / "00-none"

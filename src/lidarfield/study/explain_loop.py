@@ -8,7 +8,10 @@ config's ``suggest`` list, or every built-in the stack has not applied). The sto
 :mod:`lidarfield.analysis.stopping_rule`. Before it stops, it looks at what the field cannot
 show: a scan that returned nothing in a sector the other fills (``analysis.coverage``) is a
 finding, and a step of ``field_of_view`` when that removes the sector's points (whatever the
-verdict: the cut sector has no vector). What it found is a stack (normalised entries, as a config's
+verdict: the cut sector has no vector); then objects that moved (points of one cloud where the
+other scan's rays passed through) are a finding, and a step of ``moving_objects`` when it
+removes them (``stopping_rule.explains_seen_through``, whatever the verdict: the free space is
+not in the field). What it found is a stack (normalised entries, as a config's
 ``hypotheses:``), one row per step with the numbers behind the choice, and every stage's field.
 """
 
@@ -16,6 +19,7 @@ from __future__ import annotations
 
 import json
 import logging
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -31,6 +35,7 @@ from ..analysis.stopping_rule import (
     STOP_VERDICT,
     ExplainSettings,
     best_worth_it,
+    explains_seen_through,
     repeats,
     worth_it,
 )
@@ -160,6 +165,18 @@ def explain_pair(
         log.info("step %d: %s", level, format_step(result.steps[-1]))
         current = following
 
+    def before_stopping(candidates: list[dict], table: dict[str, np.ndarray] | None = None):
+        """What the field cannot show, before the loop stops: (table, row) of a step, or None."""
+        pair = current.stage.pair
+        sector = blind_sector_step(pair, settings, candidates, base_dir, grid_section, suggest, result)
+        if sector is not None:
+            return sector, 0
+
+        def table_of(steps: list[dict]) -> dict[str, np.ndarray]:
+            return suggestions(pair, settings, steps, base_dir, grid_section, suggest is None)
+
+        return moved_objects_step(candidates, table_of, explain, result, table)
+
     while True:
         verdict = current.statistics["verdict"]
         room = len(result.steps) < explain.max_steps
@@ -171,10 +188,10 @@ def explain_pair(
             result.stop = STOP_VERDICT.format(verdict=verdict)
             if not room:
                 break
-            table = blind_sector_step(current.stage.pair, settings, candidates, base_dir, grid_section, suggest, result)
-            if table is None:
+            found = before_stopping(candidates)
+            if found is None:
                 break
-            take(table, 0)
+            take(*found)
             continue
         if not room:
             result.stop = STOP_MAX_STEPS
@@ -186,10 +203,10 @@ def explain_pair(
         chosen = best_worth_it(table, explain)
         if chosen is None:
             result.stop = STOP_NOTHING_HELPS
-            table = blind_sector_step(current.stage.pair, settings, candidates, base_dir, grid_section, suggest, result)
-            if table is None:
+            found = before_stopping(candidates, table)
+            if found is None:
                 break
-            chosen = 0
+            table, chosen = found
         take(table, chosen)
     log.info("explain %s: %d step(s), stopped: %s", pair_name, len(result.steps), result.stop)
     return result
@@ -224,6 +241,35 @@ def blind_sector_step(
         kept = keep2 if sector.blind == 1 else keep1
         if np.count_nonzero(sector.points & ~kept) >= 0.5 * np.count_nonzero(sector.points):
             return table
+    return None
+
+
+def moved_objects_step(
+    candidates: list[dict],
+    table_of: Callable[[list[dict]], dict[str, np.ndarray]],
+    explain: ExplainSettings,
+    result: Explanation,
+    table: dict[str, np.ndarray] | None = None,
+) -> tuple[dict[str, np.ndarray], int] | None:
+    """When the loop would stop: points of one cloud where the other scan's rays passed through
+    are objects that moved, which the field cannot show in units of its noise. (table, row) of
+    the ``moving_objects`` candidate that explains them (``explains_seen_through``), from the
+    stage's ``table`` when it has one, else from ``table_of(candidates)`` (the stage's
+    suggestions); a finding of ``result``. None when none does."""
+    moving = [step for step in candidates if step_name(step) == "moving_objects"]
+    if not moving:
+        return None
+    if table is None or "moving_objects" not in table["hypothesis"]:
+        table = table_of(moving)
+    for i in np.flatnonzero(table["hypothesis"] == "moving_objects"):
+        row = {name: column[i] for name, column in table.items()}
+        if explains_seen_through(row, explain):
+            result.findings.append(
+                f"{row['removed1']} + {row['removed2']} points of objects that moved: they hold "
+                f"{row['seen_through_removed']:.0%} of the points one scan saw through where the other has returns "
+                f"(removing as many points of each voxel at random: {row['seen_through_null']:.0%})"
+            )
+            return table, int(i)
     return None
 
 

@@ -20,6 +20,7 @@ from lidarfield.analysis.stopping_rule import (
     STOP_NOTHING_HELPS,
     ExplainSettings,
     explain_settings,
+    explains_seen_through,
     repeats,
     worth_it,
 )
@@ -174,6 +175,27 @@ def test_worth_it_weighs_the_reduction_against_a_random_removal():
     assert worth_it(row(0.06, 0.0, raw=-0.2), settings)  # a correction: the raw energy may rise
 
 
+def test_a_removal_explains_the_points_seen_through_beyond_thinning_and_not_against_the_vectors():
+    settings = ExplainSettings(min_energy_reduction=0.05, max_removed_share=0.5, min_reduction_per_removed=1.0)
+
+    def row(seen, null, whitened=0.02, share=0.02):
+        return {
+            "seen_through_removed": seen,
+            "seen_through_null": null,
+            "whitened_reduction": whitened,
+            "removed_share": share,
+        }
+
+    assert explains_seen_through(row(1.0, 0.48), settings)  # the HDL-32E's car: all of them, its voxels half
+    assert explains_seen_through(row(1.0, 0.38, whitened=math.nan), settings)  # no voxel left to say
+    assert not explains_seen_through(row(0.3, 0.35), settings)  # no more than thinning the same voxels
+    assert not explains_seen_through(row(0.03, 0.0), settings)  # too few of them
+    assert not explains_seen_through(row(0.47, 0.19, whitened=-0.91), settings)  # one scan's car kept
+    assert not explains_seen_through(row(1.0, 0.4, share=0.6), settings)  # over max_removed_share
+    assert not explains_seen_through(row(math.nan, math.nan), settings)  # a correction, or none seen through
+    assert not explains_seen_through(row(0.0, 0.0), settings)  # removes none of them
+
+
 def test_repeats_compares_builtins_by_name_and_plugins_by_file_and_function():
     plugin = {"plugin": {"file": "a.py", "function": "f", "params": {}}}
     assert repeats({"shadow": {"jump_m": 2.0}}, [{"shadow": {"jump_m": 1.0}}])
@@ -271,15 +293,24 @@ def test_explain_on_the_ego_car_pair_removes_the_body_realigns_and_ends_random(e
     noise (realign takes 99.9% of its whitened energy, 5% of its raw energy): realign comes first,
     and the body does not pull it (its refit is on what both sensors saw): it lands within a few
     mm and hundredths of a degree of the truth (measured 3.5 mm and 0.009 deg, as when the body
-    went first), ego_vehicle follows, and then what is left is random: the change of viewpoint on what both sensors saw
+    went first), ego_vehicle follows, and then the field is random: the change of viewpoint on what both sensors saw
     is in the field's covariance (docs/field.md), and the moving car, in one voxel whose content
-    spans the cone (z about 2), makes no pattern. So the loop stops there, and moving_objects,
-    which would remove the car from scan 2, is not needed for the verdict."""
-    truth, _, _ = ego_car
+    spans the cone (z about 2), makes no pattern. The car shows in the free space instead: before
+    it stops, the loop finds scan 2's car where sensor 1's rays passed through, and
+    moving_objects removes it (counted from the simulator's object labels) and nothing static."""
+    truth, off, _ = ego_car
     names = [row["hypothesis"] for row in ego_car_explanation.steps]
-    assert names == ["realign", "ego_vehicle"], names
-    assert ego_car_explanation.verdict == "random" and ego_car_explanation.stop == "verdict random"
-    realigned = ego_car_explanation.stages[-1].stage.pair.T_1_2 @ np.linalg.inv(truth.T_1_2)
+    assert names == ["realign", "ego_vehicle", "moving_objects"], names
+    assert [s.statistics["verdict"] for s in ego_car_explanation.stages[2:]] == ["random", "random"]
+    assert ego_car_explanation.stop == "verdict random"
+    assert any("points of objects that moved" in text for text in ego_car_explanation.findings)
+    given, last = (ego_car_explanation.stages[k].stage.pair for k in (2, 3))
+    car = [np.count_nonzero(pair.attributes2["object"] > 0) for pair in (given, last)]
+    assert car[0] > 50 and car[1] <= 0.1 * car[0], car
+    assert np.count_nonzero(last.attributes2["object"] == 0) >= 0.99 * np.count_nonzero(
+        given.attributes2["object"] == 0
+    )
+    realigned = ego_car_explanation.stages[2].stage.pair.T_1_2 @ np.linalg.inv(truth.T_1_2)
     angle = np.degrees(np.arccos(min(1.0, (np.trace(realigned[:3, :3]) - 1) / 2)))
     assert np.abs(realigned[:3, 3]).max() < 0.005 and angle < 0.02
 

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from helpers.clouds import targets
-from lidarfield.analysis.suggest import SUGGESTION_COLUMNS, candidate_steps, suggestions
+from lidarfield.analysis.suggest import SUGGESTION_COLUMNS, candidate_steps, seen_through_columns, suggestions
 from lidarfield.errors import HypothesisError
 from lidarfield.field.grid import FieldSettings, SphericalGrid
 from lidarfield.pair import RegisteredPair
@@ -260,6 +260,8 @@ def test_a_suggested_correction_shows_its_displacement_and_fit(tmp_path):
         "energy_reduction": 0.95,
         "whitened_reduction": 0.97,
         "removal_null": 0.0,
+        "seen_through_removed": np.nan,
+        "seen_through_null": np.nan,
     }
     table = {name: np.asarray([row[name]]) for name in SUGGESTION_COLUMNS}
     stage = tmp_path / "stages" / "00-none"
@@ -275,3 +277,23 @@ def test_a_suggested_correction_shows_its_displacement_and_fit(tmp_path):
         "realign reduces the energy by 97.0% in units of its noise (95.0% raw) (fitted t = (-0.300, 0.000, 0.000) m"
         in line
     )
+
+
+def test_seen_through_columns_weigh_a_removal_against_thinning_the_same_voxels():
+    """Voxel 0 holds 6 points (two of cloud 1 seen through), voxel 1 holds 4 (one of cloud 2
+    seen through). Removing the two seen through in voxel 0 takes 2 of the 3; removing as many
+    points of each voxel at random takes a third of voxel 0's two and none of voxel 1's: 2/9."""
+    ids1, ids2 = np.array([0, 0, 0, 0, 1, 1]), np.array([0, 0, 1, 1])
+    seen = (np.array([1, 1, 0, 0, 0, 0], bool), np.array([0, 0, 1, 0], bool))
+    keep1, keep2 = np.array([0, 0, 1, 1, 1, 1], bool), np.ones(4, bool)
+    got = seen_through_columns(seen, ids1, ids2, keep1, keep2)
+    assert got["seen_through_removed"] == pytest.approx(2 / 3) and got["seen_through_null"] == pytest.approx(2 / 9)
+    # the same number of points, one of each voxel's ordinary ones: none seen through, the same null
+    other = seen_through_columns(seen, ids1, ids2, np.array([1, 1, 0, 0, 1, 1], bool), keep2)
+    assert other["seen_through_removed"] == 0 and other["seen_through_null"] == pytest.approx(2 / 9)
+    # a voxel emptied of what was seen through: all of them, against the voxel's share
+    whole = seen_through_columns(seen, ids1, ids2, ~seen[0], ~seen[1])
+    assert whole["seen_through_removed"] == 1 and whole["seen_through_null"] == pytest.approx((2 / 6 * 2 + 1 / 4) / 3)
+    assert math.isnan(seen_through_columns(None, ids1, ids2, keep1, keep2)["seen_through_removed"])
+    nothing = (np.zeros(6, bool), np.zeros(4, bool))
+    assert math.isnan(seen_through_columns(nothing, ids1, ids2, keep1, keep2)["seen_through_null"])

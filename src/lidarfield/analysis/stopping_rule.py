@@ -14,7 +14,11 @@ takes the field's pattern away. The loop (``study.explain_loop``) applies the be
 candidate that is worth it, and stops when the field's verdict is no longer ``patterned``
 (``random``, or ``undetermined`` with too few valid voxels to judge), when no candidate is
 worth it, or after ``max_steps``; before it stops, a scan that returned nothing in a sector
-the other fills (``coverage``) has ``field_of_view`` applied when its model says so.
+the other fills (``coverage``) has ``field_of_view`` applied when its model says so, and
+objects that moved have ``moving_objects`` applied when it explains the points seen through
+(:func:`explains_seen_through`): a moved object is evidenced by free space, not by the field
+(its voxels hold its own spread, so its vectors are small in units of their noise, and the
+voxels its removal empties leave the reduction).
 The defaults are the config's ``explain`` section (the schema).
 """
 
@@ -64,6 +68,26 @@ def worth_it(row: dict, settings: ExplainSettings) -> bool:
         return False
     null = float(row["removal_null"]) if math.isfinite(row["removal_null"]) else 0.0
     return share <= settings.max_removed_share and reduction >= settings.min_reduction_per_removed * null
+
+
+def explains_seen_through(row: dict, settings: ExplainSettings) -> bool:
+    """Whether a removal (a suggestion row) explains the points one scan saw through where the
+    other has returns (``seen_through_removed``): it removes at least ``min_energy_reduction``
+    of them and ``min_reduction_per_removed`` times what removing as many points of each voxel
+    at random would (``seen_through_null``: the null of a removal, read on the points seen
+    through, which random thinning cannot single out), at most ``max_removed_share`` of the
+    points, and it leaves the field no worse in units of its noise (a whitened reduction below
+    0 says it removed one scan's part of what moved and kept the other's)."""
+    share, null = float(row["seen_through_removed"]), float(row["seen_through_null"])
+    if not (math.isfinite(share) and share > 0 and math.isfinite(null)):
+        return False
+    removed, whitened = float(row["removed_share"]), float(row["whitened_reduction"])
+    return (
+        share >= settings.min_energy_reduction
+        and share >= settings.min_reduction_per_removed * null
+        and removed <= settings.max_removed_share
+        and not whitened < 0  # NaN: no voxel valid before and after to say
+    )
 
 
 def best_worth_it(table: dict[str, np.ndarray], settings: ExplainSettings) -> int | None:

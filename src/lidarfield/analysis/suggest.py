@@ -37,6 +37,17 @@ binned once) and compared with the stage's field:
   a removal concentrated where the pattern is (a moving object, the own body) beats it, one
   that thins the whole field (statistical outliers of every surface's edges) does not.
 - ``max_after``, ``p95_after`` (m) and ``energy_after``: the field it leaves, all valid voxels.
+- ``seen_through_removed`` and ``seen_through_null``: what a removal explains of the points
+  the field cannot show, those of one cloud that lie where the other scan's rays passed through
+  (``moving_objects.seen_through``, with its defaults): the share of them it removes, and the
+  share removing as many points of each voxel at random would (sum of s c over sum of c, c a
+  voxel's points seen through). A static scene gives none, so they are the evidence of an
+  object that moved; removing a moved object removes them all, where its vectors are small in
+  units of their noise (its voxels hold its own spread) and the voxels it empties are no
+  longer in the reduction. NaN for a correction (it moves points: what they are then is not
+  measured) and where they cannot be told (no sensor model, no origin of sensor 2, or none seen
+  through); 0 for a candidate that removes nothing. ``stopping_rule.explains_seen_through``
+  reads them.
 
 ``rank`` 1 is the largest whitened reduction (ties: fewer points removed, then the larger share
 of the energy in the tag that points to it; undefined reductions last). Candidates are the
@@ -103,6 +114,8 @@ SUGGESTION_COLUMNS = (
     "energy_reduction",
     "whitened_reduction",
     "removal_null",
+    "seen_through_removed",
+    "seen_through_null",
 )
 
 # The tag whose voxels each correcting built-in would explain: a field whose energy sits in
@@ -162,6 +175,7 @@ def suggestions(
     before = field_from_voxel_ids(ids1, pair.xyz1, ids2, pair.xyz2, settings, patterns=patterns)
     shares = tag_energy_shares(before)
     total = len(pair.xyz1) + len(pair.xyz2)
+    seen = None  # the points seen through, found once, for the first candidate that removes any
     rows = []
     for k, (spec, row) in enumerate(zip(candidates, reused), start=1):
         if row is not None:
@@ -218,6 +232,13 @@ def suggestions(
         }
         if not (removed1 or removed2):  # a correction moves points between voxels, it removes none
             row["removal_null"] = 0.0
+        if outcome.corrects:
+            row |= {"seen_through_removed": math.nan, "seen_through_null": math.nan}
+        elif removed1 or removed2:
+            seen = seen_through_points(pair) if seen is None else seen
+            row |= seen_through_columns(seen, ids1, ids2, keep1, keep2)
+        else:
+            row |= {"seen_through_removed": 0.0, "seen_through_null": 0.0}
         log.info(
             "candidate %s %s: energy reduction %.3f (whitened %.3f), %d + %d points removed, moved up to %.3f m "
             "(%.2f s)",
@@ -295,6 +316,39 @@ def compare_fields(before: dict[str, np.ndarray], after: dict[str, np.ndarray]) 
         "removal_null": float(removed[common] @ whitened_before) / whitened_before.sum()
         if whitened_before.sum() > 0
         else math.nan,
+    }
+
+
+def seen_through_points(pair: RegisteredPair) -> tuple[np.ndarray, np.ndarray] | None:
+    """Per cloud, its points seen through by the other scan (``moving_objects.seen_through``
+    with its defaults); None where that cannot be told (no sensor model, or no origin of sensor 2)."""
+    from ..hypotheses.moving_objects import Params, seen_through
+
+    try:
+        return seen_through(pair, Params())
+    except NotApplicableError:
+        return None
+
+
+def seen_through_columns(
+    seen: tuple[np.ndarray, np.ndarray] | None,
+    ids1: np.ndarray,
+    ids2: np.ndarray,
+    keep1: np.ndarray,
+    keep2: np.ndarray,
+) -> dict[str, float]:
+    """``seen_through_removed`` and ``seen_through_null`` of a removal (keep-masks) of points
+    with voxel ids ``ids1``, ``ids2``, of which ``seen`` are seen through (NaN without any)."""
+    count = 0 if seen is None else int(np.count_nonzero(seen[0]) + np.count_nonzero(seen[1]))
+    if not count:
+        return {"seen_through_removed": math.nan, "seen_through_null": math.nan}
+    seen_all, kept = np.concatenate(seen), np.concatenate([keep1, keep2])
+    _, voxel = np.unique(np.concatenate([ids1, ids2]), return_inverse=True)
+    removed_share = np.bincount(voxel, weights=~kept) / np.bincount(voxel)
+    in_voxel = np.bincount(voxel, weights=seen_all)
+    return {
+        "seen_through_removed": np.count_nonzero(seen_all & ~kept) / count,
+        "seen_through_null": float(removed_share @ in_voxel) / count,
     }
 
 

@@ -203,14 +203,21 @@ def carried_points(pair: RegisteredPair, candidates: tuple[np.ndarray, np.ndarra
     return carried[0], carried[1]
 
 
+def seen_through(pair: RegisteredPair, params: Params) -> tuple[np.ndarray, np.ndarray]:
+    """Per cloud, its points that lie where the other scan's rays passed through
+    (:func:`pair_evidence`) and that the vehicle does not carry (:func:`carried_points`): the
+    evidence that something moved, which no static scene gives."""
+    check_origins(pair)
+    evidence = pair_evidence(pair, params)
+    carried = carried_points(pair, evidence, params.margin_m)
+    return evidence[0] & ~carried[0], evidence[1] & ~carried[1]
+
+
 def moving_objects(pair: RegisteredPair, params: Params) -> Outcome:
     """Keep-masks without the evidenced objects of each cloud (and the objects of the other
     cloud that overlap them), and why each removed point went."""
-    check_origins(pair)
     clouds = (pair.xyz1, pair.xyz2)
-    evidence = pair_evidence(pair, params)
-    carried = carried_points(pair, evidence, params.margin_m)
-    evidence = (evidence[0] & ~carried[0], evidence[1] & ~carried[1])
+    evidence = seen_through(pair, params)
     voxels = voxel_grid(list(clouds), params.voxel_m)
     size = (
         np.max([v.max(axis=0) for v in voxels if len(v)], axis=0) + 2 if any(map(len, voxels)) else np.ones(3, np.int64)

@@ -14,25 +14,38 @@ import itertools
 import numpy as np
 
 # The ground plane is fitted to the points within these bands (m) of it, narrowing: the first
-# guess is the densest 0.25 m layer of the lower half of the cloud.
+# guess is a 0.25 m layer of the lower half of the cloud (``ground_layer``), layers slid by 5 cm.
 _GROUND_BANDS_M = (1.0, 0.5, 0.25)
 _LAYER_M = 0.25
+_LAYER_STEP_M = 0.05
 _GROUND_SAMPLE = 100_000
+
+
+def ground_layer(z: np.ndarray) -> float:
+    """The height of the ground's layer among heights ``z`` (the lower half of a cloud): the
+    lowest 0.25 m layer that holds at least half as many points as the densest one, or the
+    densest layer within a layer above it. The ground is the lowest extensive surface; it need
+    not be the densest: in a street canyon a lidar whose channels crowd near the horizon (a
+    VLP-32C) puts more points on the walls' band at its own height than on the ground. Layers
+    slide by 5 cm, so that a flat ground is not split between two."""
+    z = np.sort(z)
+    starts = np.arange(z[0] - _LAYER_M, z[-1] + _LAYER_STEP_M, _LAYER_STEP_M)
+    counts = np.searchsorted(z, starts + _LAYER_M) - np.searchsorted(z, starts)
+    lowest = int(np.flatnonzero(counts >= counts.max() / 2)[0])
+    near = slice(lowest, lowest + int(round(_LAYER_M / _LAYER_STEP_M)) + 1)
+    return float(starts[near][np.argmax(counts[near])] + _LAYER_M / 2)
 
 
 def heights_above_ground(xyz: np.ndarray) -> np.ndarray:
     """Each point's height above a plane ``z = a x + b y + c`` fitted by least squares to the
-    ground: first the densest 0.25 m layer of the lower half of the cloud, then the points within
-    1, 0.5 and 0.25 m of the plane so far; fitted on every k-th point of a large cloud (at most
-    ``_GROUND_SAMPLE``: a plane has three parameters)."""
+    ground: first the ground's layer of the lower half of the cloud (:func:`ground_layer`), then
+    the points within 1, 0.5 and 0.25 m of the plane so far; fitted on every k-th point of a
+    large cloud (at most ``_GROUND_SAMPLE``: a plane has three parameters)."""
     if len(xyz) < 3:
         return np.full(len(xyz), np.inf)
     sample = xyz[:: max(1, len(xyz) // _GROUND_SAMPLE)]
     z = sample[:, 2]
-    lower = z[z <= np.median(z)]
-    edges = np.arange(lower.min(), lower.max() + 2 * _LAYER_M, _LAYER_M)
-    counts, _ = np.histogram(lower, edges)
-    plane = np.array([0.0, 0.0, edges[np.argmax(counts)] + _LAYER_M / 2])
+    plane = np.array([0.0, 0.0, ground_layer(z[z <= np.median(z)])])
     design = np.column_stack([sample[:, 0], sample[:, 1], np.ones(len(z))])
     for band in _GROUND_BANDS_M:
         near = np.abs(z - design @ plane) < band

@@ -11,7 +11,10 @@ the stage did not change of the points' neighbour distances is carried to it
 :mod:`lidarfield.analysis.stopping_rule`. Before it stops, it looks at what the field cannot
 show: a scan that returned nothing in a sector the other fills (``analysis.coverage``) is a
 finding, and a step of ``field_of_view`` when that removes the sector's points (whatever the
-verdict: the cut sector has no vector). What it found is a stack (normalised entries, as a config's
+verdict: the cut sector has no vector); then objects that moved (points of one cloud where the
+other scan's rays passed through) are a finding, and a step of ``moving_objects`` when it
+removes them (``stopping_rule.explains_seen_through``, whatever the verdict: the free space is
+not in the field). What it found is a stack (normalised entries, as a config's
 ``hypotheses:``), one row per step with the numbers behind the choice, and every stage's field.
 """
 
@@ -19,6 +22,7 @@ from __future__ import annotations
 
 import json
 import logging
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -34,6 +38,7 @@ from ..analysis.stopping_rule import (
     STOP_VERDICT,
     ExplainSettings,
     best_worth_it,
+    explains_seen_through,
     repeats,
     worth_it,
 )
@@ -167,6 +172,19 @@ def explain_pair(
         log.info("step %d: %s", level, format_step(result.steps[-1]))
         current = following
 
+    def before_stopping(candidates: list[dict], outcomes: dict, table: dict[str, np.ndarray] | None = None):
+        """What the field cannot show, before the loop stops: (table, row) of a step, or None;
+        the suggestions' outcomes in ``outcomes``."""
+        pair = current.stage.pair
+        sector = blind_sector_step(pair, settings, candidates, base_dir, grid_section, suggest, result, outcomes)
+        if sector is not None:
+            return sector, 0
+
+        def table_of(steps: list[dict]) -> dict[str, np.ndarray]:
+            return suggestions(pair, settings, steps, base_dir, grid_section, suggest is None, outcomes=outcomes)
+
+        return moved_objects_step(candidates, table_of, explain, result, table)
+
     while True:
         verdict = current.statistics["verdict"]
         room = len(result.steps) < explain.max_steps
@@ -179,12 +197,10 @@ def explain_pair(
             if not room:
                 break
             outcomes = {}
-            table = blind_sector_step(
-                current.stage.pair, settings, candidates, base_dir, grid_section, suggest, result, outcomes
-            )
-            if table is None:
+            found = before_stopping(candidates, outcomes)
+            if found is None:
                 break
-            take(table, 0, outcomes)
+            take(*found, outcomes)
             continue
         if not room:
             result.stop = STOP_MAX_STEPS
@@ -199,12 +215,10 @@ def explain_pair(
         chosen = best_worth_it(table, explain)
         if chosen is None:
             result.stop = STOP_NOTHING_HELPS
-            table = blind_sector_step(
-                current.stage.pair, settings, candidates, base_dir, grid_section, suggest, result, outcomes
-            )
-            if table is None:
+            found = before_stopping(candidates, outcomes, table)
+            if found is None:
                 break
-            chosen = 0
+            table, chosen = found
         take(table, chosen, outcomes)
     log.info("explain %s: %d step(s), stopped: %s", pair_name, len(result.steps), result.stop)
     return result
@@ -241,6 +255,35 @@ def blind_sector_step(
         kept = keep2 if sector.blind == 1 else keep1
         if np.count_nonzero(sector.points & ~kept) >= 0.5 * np.count_nonzero(sector.points):
             return table
+    return None
+
+
+def moved_objects_step(
+    candidates: list[dict],
+    table_of: Callable[[list[dict]], dict[str, np.ndarray]],
+    explain: ExplainSettings,
+    result: Explanation,
+    table: dict[str, np.ndarray] | None = None,
+) -> tuple[dict[str, np.ndarray], int] | None:
+    """When the loop would stop: points of one cloud where the other scan's rays passed through
+    are objects that moved, which the field cannot show in units of its noise. (table, row) of
+    the ``moving_objects`` candidate that explains them (``explains_seen_through``), from the
+    stage's ``table`` when it has one, else from ``table_of(candidates)`` (the stage's
+    suggestions); a finding of ``result``. None when none does."""
+    moving = [step for step in candidates if step_name(step) == "moving_objects"]
+    if not moving:
+        return None
+    if table is None or "moving_objects" not in table["hypothesis"]:
+        table = table_of(moving)
+    for i in np.flatnonzero(table["hypothesis"] == "moving_objects"):
+        row = {name: column[i] for name, column in table.items()}
+        if explains_seen_through(row, explain):
+            result.findings.append(
+                f"{row['removed1']} + {row['removed2']} points of objects that moved: they hold "
+                f"{row['seen_through_removed']:.0%} of the points one scan saw through where the other has returns "
+                f"(removing as many points of each voxel at random: {row['seen_through_null']:.0%})"
+            )
+            return table, int(i)
     return None
 
 

@@ -72,7 +72,11 @@ def test_default_candidates_are_the_builtins_not_yet_applied():
         "realign",
         "range_calibration",
         "deskew",
-    ]  # corrections last
+        "range_calibration",
+    ]  # corrections last, then a range offset per laser
+    assert candidate_steps(None, [], ".", grid)[-1]["range_calibration"]["per_ring"] is True
+    after = candidate_steps(None, [{"range_calibration": {}}], ".", grid)
+    assert "range_calibration" not in [next(iter(step)) for step in after]  # neither, once one is applied
     shadow = candidate_steps(None, [], ".", grid)[2]["shadow"]
     assert shadow["grid"]["azimuth_bins"] == 12 and shadow["origins"] == [1, 2]  # the study's grid, defaults
     with pytest.raises(HypothesisError, match="suggest entry 2"):
@@ -91,6 +95,7 @@ def test_study_candidates_per_stage(tmp_path):
         "realign",
         "range_calibration",
         "deskew",
+        "range_calibration",
     ]
     assert [next(iter(s)) for s in study.candidates(2)] == [
         "ego_vehicle",
@@ -100,6 +105,7 @@ def test_study_candidates_per_stage(tmp_path):
         "realign",
         "range_calibration",
         "deskew",
+        "range_calibration",
     ]
     config = tmp_path / "study.yaml"
     config.write_text(
@@ -260,6 +266,7 @@ def test_a_suggested_correction_shows_its_displacement_and_fit(tmp_path):
         "energy_reduction": 0.95,
         "whitened_reduction": 0.97,
         "removal_null": 0.0,
+        "fitted_null": 0.02,
     }
     table = {name: np.asarray([row[name]]) for name in SUGGESTION_COLUMNS}
     stage = tmp_path / "stages" / "00-none"

@@ -72,11 +72,7 @@ def test_default_candidates_are_the_builtins_not_yet_applied():
         "realign",
         "range_calibration",
         "deskew",
-        "range_calibration",
-    ]  # corrections last, then a range offset per laser
-    assert candidate_steps(None, [], ".", grid)[-1]["range_calibration"]["per_ring"] is True
-    after = candidate_steps(None, [{"range_calibration": {}}], ".", grid)
-    assert "range_calibration" not in [next(iter(step)) for step in after]  # neither, once one is applied
+    ]  # corrections last
     shadow = candidate_steps(None, [], ".", grid)[2]["shadow"]
     assert shadow["grid"]["azimuth_bins"] == 12 and shadow["origins"] == [1, 2]  # the study's grid, defaults
     with pytest.raises(HypothesisError, match="suggest entry 2"):
@@ -95,7 +91,6 @@ def test_study_candidates_per_stage(tmp_path):
         "realign",
         "range_calibration",
         "deskew",
-        "range_calibration",
     ]
     assert [next(iter(s)) for s in study.candidates(2)] == [
         "ego_vehicle",
@@ -105,7 +100,6 @@ def test_study_candidates_per_stage(tmp_path):
         "realign",
         "range_calibration",
         "deskew",
-        "range_calibration",
     ]
     config = tmp_path / "study.yaml"
     config.write_text(

@@ -52,9 +52,10 @@ binned once) and compared with the stage's field:
 then the larger share of the energy in the tag that points to it; undefined reductions last).
 Candidates are the config's ``suggest`` list, or by default every built-in hypothesis the stack
 has not applied up to that stage, with its defaults: the removing ones and every correcting one
-(``CORRECTING``: a correction joins by being registered there), and ``range_calibration`` also
-with ``per_ring`` (``PER_CHANNEL``: a per-laser calibration, for a cloud with rings or a sensor
-model). A default candidate that cannot apply to the pair (``NotApplicableError``:
+(``CORRECTING``: a correction joins by being registered there). The per-laser calibration
+(``range_calibration`` with ``per_ring``) is not among them: on the zoo's real pairs it named no
+fault more and doubled explain's time (docs/diagnosis.md); a config's ``suggest`` can list it. A
+default candidate that cannot apply to the pair (``NotApplicableError``:
 ``field_of_view`` without sensor models; for a correcting one any ``HypothesisError``, e.g.
 ``realign`` with too few points) is skipped with a logged line; a configured one is an error
 naming it.
@@ -122,10 +123,6 @@ SUGGESTION_COLUMNS = (
 # ``rigid`` voxels is a registration offset (``realign``), in ``radial`` ones a range error
 # (``range_calibration``). Used to break ties and to annotate the tables.
 TAG_CORRECTIONS = {"rigid": "realign", "radial": "range_calibration"}
-# Default candidates beside each built-in with its defaults: a range offset per laser (one per
-# ring or channel, one common scale), which a spinning lidar's factory calibration leaves at up
-# to a centimetre or two.
-PER_CHANNEL = ({"range_calibration": {"per_ring": True}},)
 
 
 def candidate_steps(
@@ -139,7 +136,6 @@ def candidate_steps(
         fresh = [name for name in BUILTINS if name not in done]
         suggest = [{name: {}} for name in fresh if name not in CORRECTING]
         suggest += [{name: {}} for name in fresh if name in CORRECTING]
-        suggest += [dict(step) for step in PER_CHANNEL if step_name(step) in fresh]
     if not isinstance(suggest, list):
         raise HypothesisError(f"suggest: a list of {{name: {{parameters}}}} entries, got {suggest!r}")
     candidates = []

@@ -262,6 +262,7 @@ def test_a_suggested_correction_shows_its_displacement_and_fit(tmp_path):
         "removal_null": 0.0,
         "seen_through_removed": np.nan,
         "seen_through_null": np.nan,
+        "fitted_null": 0.02,
     }
     table = {name: np.asarray([row[name]]) for name in SUGGESTION_COLUMNS}
     stage = tmp_path / "stages" / "00-none"
@@ -297,3 +298,29 @@ def test_seen_through_columns_weigh_a_removal_against_thinning_the_same_voxels()
     assert math.isnan(seen_through_columns(None, ids1, ids2, keep1, keep2)["seen_through_removed"])
     nothing = (np.zeros(6, bool), np.zeros(4, bool))
     assert math.isnan(seen_through_columns(nothing, ids1, ids2, keep1, keep2)["seen_through_null"])
+
+
+def test_a_correction_is_ranked_by_what_it_explains_beyond_its_free_parameters():
+    """Two corrections explaining the same share of the whitened energy: the one fitting fewer
+    parameters ranks first; one with many parameters ranks first only for what it explains
+    beyond them (``fitted_null``: parameters over the whitened energy)."""
+    from lidarfield.analysis.suggest import compare_fields, fitted_null, rank_table
+    from lidarfield.analysis.tags import whitened_energy
+    from lidarfield.field.kernel import field_from_voxel_ids
+
+    assert fitted_null(6, 600.0) == pytest.approx(0.01) and fitted_null(0, 600.0) == 0.0
+    vehicle, _ = with_vehicle()
+    pair = RegisteredPair(targets(60, 1), np.vstack([targets(60, 2), vehicle]))
+    ids1, ids2 = SETTINGS.grid.assign(pair.xyz1), SETTINGS.grid.assign(pair.xyz2)
+    before = field_from_voxel_ids(ids1, pair.xyz1, ids2, pair.xyz2, SETTINGS)
+    same = compare_fields(before, before, parameters=33)
+    assert same["fitted_null"] == pytest.approx(33 / whitened_energy(before).sum())
+
+    def row(name, reduction, null):
+        given = {"hypothesis": name, "whitened_reduction": reduction, "fitted_null": null, "tag_share": math.nan}
+        return {column: given.get(column, 0) for column in SUGGESTION_COLUMNS[1:]}
+
+    table = rank_table([row("per_ring", 0.30, 0.05), row("common", 0.27, 0.001), row("rigid", 0.26, 0.006)])
+    assert list(table["hypothesis"]) == ["common", "rigid", "per_ring"]
+    table = rank_table([row("per_ring", 0.40, 0.05), row("common", 0.27, 0.001)])
+    assert list(table["hypothesis"]) == ["per_ring", "common"]

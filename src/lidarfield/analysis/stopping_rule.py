@@ -6,8 +6,9 @@ A candidate is *worth it* when its reduction of the field's energy in units of i
 and at least ``min_energy_reduction``, it removes at most ``max_removed_share`` of the points
 left, and its reduction is at least ``min_reduction_per_removed`` times ``removal_null``, what
 removing as many points of each voxel at random would give (a correction removes nothing:
-only the first test applies). The last test is the null of a removal: it is worth it only for
-what it explains beyond thinning the field. The whitened energy, not the raw one, because the
+only ``fitted_null`` applies, what fitting its parameters to noise would give). The last test is
+the null: a removal is worth it only for what it explains beyond thinning the field, a
+correction beyond what its free parameters fit of the noise. The whitened energy, not the raw one, because the
 verdict reads the field in units of its noise: a correction that finds the fault can leave the
 raw energy unchanged (a turn moves whole rings between voxels at the band edges) while it
 takes the field's pattern away. The loop (``study.explain_loop``) applies the best-ranked
@@ -66,7 +67,7 @@ def worth_it(row: dict, settings: ExplainSettings) -> bool:
         return False
     if not math.isfinite(share):  # no points at all: nothing to remove, nothing to explain
         return False
-    null = float(row["removal_null"]) if math.isfinite(row["removal_null"]) else 0.0
+    null = sum(float(row[name]) for name in ("removal_null", "fitted_null") if math.isfinite(row[name]))
     return share <= settings.max_removed_share and reduction >= settings.min_reduction_per_removed * null
 
 

@@ -16,16 +16,20 @@ weighted linear least squares, with Huber weights (k = 1.345 times the residuals
 then pairs the corrected sample anew, until no corrected range of the sample changes by more
 than 0.1 mm (or ``max_iterations``). Pairs farther apart than ``max_correspondence_m`` are not used.
 
-``per_ring: true`` fits one offset per ring (the cloud's ``ring`` attribute) and one common
-scale: ``r = scale * r_true + offset_ring``. A ring with fewer than ``MIN_RING_POINTS`` points
+``per_ring: true`` fits one offset per ring and one common scale: ``r = scale * r_true +
+offset_ring``, a per-laser range calibration (each laser of a spinning lidar has its own range
+offset, calibrated at the factory to a centimetre or so). The ring is the cloud's ``ring``
+attribute, else the channel of the sensor model nearest each point's elevation
+(``cloud_channels``). A ring with fewer than ``MIN_RING_POINTS`` points
 in the fit shares one pooled offset.
 
 What it records (the stage's ``correction``): ``cloud``, ``scale``, ``offset_m``, their standard
-errors ``scale_se``, ``offset_se_m``, ``points`` (pairs used in the last solve), ``residual_rms_m``
-(their point-to-plane residuals' RMS), ``sigma_m`` (the weighted residuals' standard deviation),
-``iterations``; with ``per_ring``, ``ring_offsets_m`` and ``ring_offsets_se_m`` (by ring, as text)
-and ``offset_m`` their mean over the rings. The standard errors are ``sigma^2 (J^T W J)^-1`` of
-the last solve, carried from ``(alpha, beta)`` to ``(scale, offset)`` to first order. They treat
+errors ``scale_se``, ``offset_se_m``, ``points`` (pairs used in the last solve),
+``residual_rms_m`` (their point-to-plane residuals' RMS), ``sigma_m`` (the weighted residuals'
+standard deviation), ``iterations``, ``parameters`` (how many it fitted: 2, or 1 + the offsets);
+with ``per_ring``, ``ring_offsets_m`` and ``ring_offsets_se_m`` (by ring, as text) and
+``offset_m`` their mean over the rings. The standard errors are ``sigma^2 (J^T W J)^-1`` of the
+last solve, carried from ``(alpha, beta)`` to ``(scale, offset)`` to first order. They treat
 neighbouring residuals as independent, which on a scan they are not quite: read them as lower
 bounds.
 """
@@ -37,7 +41,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import HypothesisError
+from ..field.free_space import directions, nearest_channel, sensor_channels
 from ..pair import RegisteredPair
+from ..poses import in_sensor_frame
 from .outcome import Outcome
 from .params import doc
 
@@ -87,10 +93,7 @@ def range_calibration(pair: RegisteredPair, params: Params) -> Outcome:
     from scipy.spatial import cKDTree
 
     name = "range_calibration"
-    if params.cloud == 2:
-        xyz, other, attributes = pair.xyz2, pair.xyz1, pair.attributes2
-    else:
-        xyz, other, attributes = pair.xyz1, pair.xyz2, pair.attributes1
+    xyz, other = (pair.xyz2, pair.xyz1) if params.cloud == 2 else (pair.xyz1, pair.xyz2)
     origin = pair.point_origins(params.cloud)  # each point's own lidar
     for cloud, points, need in (
         (params.cloud, xyz, MIN_POINTS),
@@ -98,14 +101,7 @@ def range_calibration(pair: RegisteredPair, params: Params) -> Outcome:
     ):
         if len(points) < need:
             raise HypothesisError(f"{name}: too few points: cloud {cloud} has {len(points)}, it needs at least {need}")
-    ring = None
-    if params.per_ring:
-        if "ring" not in attributes:
-            raise HypothesisError(f"{name}: per_ring needs a ring attribute, and cloud {params.cloud} has none")
-        ring = np.asarray(attributes["ring"])
-        if not np.isfinite(ring).all():
-            raise HypothesisError(f"{name}: per_ring: cloud {params.cloud} has points without a ring")
-        ring = ring.astype(np.int64)
+    ring = cloud_channels(pair, params.cloud) if params.per_ring else None
 
     d = xyz - origin
     r = np.linalg.norm(d, axis=1)
@@ -194,6 +190,7 @@ def range_calibration(pair: RegisteredPair, params: Params) -> Outcome:
         "sigma_m": float(np.sqrt(sigma2)),
         "iterations": iterations,
         "method": "point_to_plane_huber",
+        "parameters": p,
     }
     if ring is None:
         fitted.update(offset_m=float(offsets[0]), offset_se_m=number(se[1]))
@@ -209,6 +206,31 @@ def range_calibration(pair: RegisteredPair, params: Params) -> Outcome:
     if params.cloud == 2:
         return Outcome(keep1, keep2, xyz2=new_xyz, fitted=fitted)
     return Outcome(keep1, keep2, xyz1=new_xyz, fitted=fitted)
+
+
+def cloud_channels(pair: RegisteredPair, cloud: int) -> np.ndarray:
+    """Each point's channel (laser) of cloud 1 or 2, whose range offset ``per_ring`` fits: its
+    ``ring`` attribute, else the channel of its own lidar's model nearest its elevation about
+    that lidar, numbered from the lowest (a rig's lidars one after another). A return's
+    elevation lies within a few hundredths of a degree of its beam's, and beams are at least
+    0.3 deg apart, so the elevation names the laser where the scan does not record it."""
+    name, attributes = "range_calibration", pair.attributes1 if cloud == 1 else pair.attributes2
+    if "ring" in attributes:
+        ring = np.asarray(attributes["ring"])
+        if not np.isfinite(ring).all():
+            raise HypothesisError(f"{name}: per_ring: cloud {cloud} has points without a ring")
+        return ring.astype(np.int64)
+    views = pair.lidars(cloud)
+    if any(view.sensor is None for view in views):
+        raise HypothesisError(f"{name}: per_ring needs a ring attribute or a sensor model; cloud {cloud} has neither")
+    xyz = pair.xyz1 if cloud == 1 else pair.xyz2
+    channel, first = np.zeros(len(xyz), dtype=np.int64), 0
+    for view in views:
+        channels = sensor_channels(view.sensor)
+        elevation = directions(in_sensor_frame(xyz[view.points], view.pose))[1]
+        channel[view.points] = first + nearest_channel(elevation, channels)
+        first += len(channels)
+    return channel
 
 
 def _normal_equations(

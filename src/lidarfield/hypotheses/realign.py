@@ -31,7 +31,7 @@ What it records (the stage's ``correction``): ``translation_m`` (t, frame 1), ``
 rotations its z is the yaw), ``angle_deg`` (its norm), their standard errors
 ``translation_se_m`` and ``rotation_se_deg``, ``fitness`` (share of the cloud-2 points in the
 fit with a cloud-1 point within ``max_correspondence_m``), ``inlier_rmse_m``,
-``correspondences`` and ``sigma_m``. All are computed from ICP's own correspondences, those
+``correspondences``, ``sigma_m`` and ``parameters`` (6). All are computed from ICP's own correspondences, those
 Open3D finds after its last update (a second search at ``T`` found the same ones, as a test
 checks, for a tenth of realign's time). The standard errors are the point-to-plane least
 squares' at ``T``: with one residual ``r_i = n_i . (T s_i - q_i)`` per correspondence and its
@@ -145,6 +145,7 @@ def realign(pair: RegisteredPair, params: Params) -> Outcome:
         "correspondences": len(pairs),
         "method": "icp_point_to_plane",
         "field_refinement": _fitted_transform(refinement),
+        "parameters": 6,  # a rigid motion's: what fitting it to noise alone explains (analysis.suggest)
     }
     keep1, keep2 = np.ones(len(pair.xyz1), dtype=bool), np.ones(len(pair.xyz2), dtype=bool)
     xyz2 = pair.xyz2 @ T[:3, :3].T + T[:3, 3]

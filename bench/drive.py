@@ -34,6 +34,7 @@ from timing import machine  # bench/timing.py
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests"))
 from helpers.drive import SIMULATION  # noqa: E402 (the drive, defined once with the tests' pair of it)
+from helpers.workflow import workflow_command  # noqa: E402 (the workflow's command, as the tests run it)
 
 APPENDED = {"crop": {"max_range_m": 60}}
 TIME = "/usr/bin/time"  # GNU time
@@ -75,8 +76,7 @@ def folder_size(folder: Path) -> tuple[int, int]:
 def snakemake(code: Path, workdir: Path, *args: str) -> Run:
     """One snakemake run of ``code``'s workflow in ``workdir``."""
     env = {**os.environ, "PYTHONPATH": str(code / "src")}
-    command = [sys.executable, "-m", "snakemake", "--snakefile", str(code / "Snakefile"), "--directory", str(workdir)]
-    command += ["--configfile", str(workdir / "study.yaml"), "--cores", "2", *args]
+    command = [*workflow_command(workdir, workdir / "study.yaml", snakefile=code / "Snakefile"), "--cores", "2", *args]
     bytes_before, files_before = folder_size(workdir)
     # GNU time: the CPU of snakemake and every process it waited for (the job worker waits for
     # the jobs it forks), and the largest one's peak resident memory, for this run alone

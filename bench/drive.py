@@ -5,7 +5,8 @@ The drive: the paper's intersection, N pairs of consecutive frames (rolling shut
 noise, ``register: truth``), stack ``field_of_view``, ``shadow``, ``ego_vehicle``, default
 figures and suggestions. For each code tree given (``--code``, a checkout with its ``src`` and
 ``Snakefile``; default: this one) it runs ``snakemake --cores 2`` in a fresh folder and prints,
-for the cold run and for the rerun after appending ``crop``: wall time, the CPU user and system
+for the cold run and for the rerun after appending ``crop`` (``--append outliers``: a hypothesis
+that removes points): wall time, the CPU user and system
 time of every process it started, the largest process's peak memory, and the bytes and files
 the run left; then the planning time of ``snakemake -n`` for the drive. Each tree's jobs import
 its own ``src`` (PYTHONPATH), so two trees compare in one run:
@@ -36,7 +37,8 @@ sys.path.insert(0, str(ROOT / "tests"))
 from helpers.drive import SIMULATION  # noqa: E402 (the drive, defined once with the tests' pair of it)
 from helpers.workflow import workflow_command  # noqa: E402 (the workflow's command, as the tests run it)
 
-APPENDED = {"crop": {"max_range_m": 60}}
+# what an append adds: a crop beyond the drive's points (it removes none), or one that removes some
+APPENDED = {"crop": {"max_range_m": 60}, "outliers": {}}
 TIME = "/usr/bin/time"  # GNU time
 
 
@@ -112,7 +114,7 @@ def job_time(results: Path, since: float = 0.0) -> str:
     )
 
 
-def bench(code: Path, pairs: int, workdir: Path, plan_only: bool) -> list[str]:
+def bench(code: Path, pairs: int, workdir: Path, plan_only: bool, appended: str = "crop") -> list[str]:
     workdir.mkdir(parents=True)
     study = drive(pairs)
     (workdir / "study.yaml").write_text(yaml.safe_dump(study, sort_keys=False))
@@ -123,10 +125,10 @@ def bench(code: Path, pairs: int, workdir: Path, plan_only: bool) -> list[str]:
     cold = snakemake(code, workdir)
     rows.append(row(f"{code.name}: cold", cold))
     print(f"  {code.name} cold: {job_time(workdir / 'results')}", flush=True)
-    study["hypotheses"].append(APPENDED)
+    study["hypotheses"].append({appended: APPENDED[appended]})
     (workdir / "study.yaml").write_text(yaml.safe_dump(study, sort_keys=False))
     since = time.time()
-    rows.append(row(f"{code.name}: appending `crop`", snakemake(code, workdir)))
+    rows.append(row(f"{code.name}: appending `{appended}`", snakemake(code, workdir)))
     print(f"  {code.name} append: {job_time(workdir / 'results', since)}", flush=True)
     return rows
 
@@ -137,13 +139,15 @@ def main() -> None:
     parser.add_argument("--code", type=Path, action="append", help="a code tree to run (repeat: in turn)")
     parser.add_argument("--plan-only", action="store_true", help="only snakemake -n")
     parser.add_argument("--workdir", type=Path, help="where the runs go (default: a new temporary folder)")
+    parser.add_argument("--append", choices=sorted(APPENDED), default="crop", help="the hypothesis appended")
     args = parser.parse_args()
     workdir = args.workdir or Path(tempfile.mkdtemp(prefix="drive-"))
     print(machine())
     print(f"drive of {args.pairs} pairs x 4 stages, in {workdir}", flush=True)
     rows = []
     for index, code in enumerate(args.code or [ROOT]):
-        rows += bench(code.resolve(), args.pairs, workdir / f"{index}-{code.resolve().name}", args.plan_only)
+        folder = workdir / f"{index}-{code.resolve().name}"
+        rows += bench(code.resolve(), args.pairs, folder, args.plan_only, args.append)
     print("| run | wall | CPU user | CPU system | peak memory | bytes left | files left |")
     print("|---|---|---|---|---|---|---|")
     print("\n".join(rows))

@@ -42,6 +42,7 @@ from timing import machine  # bench/timing.py
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests"))  # the tests' synthetic studies
 from helpers.synthetic_study import write_field_study, write_synthetic_pair  # noqa: E402
+from helpers.workflow import workflow_command  # noqa: E402 (the workflow's command, as the tests run it)
 
 EXPLORER_READY = ".explorer[data-ready='1']"
 OVERVIEW_READY = "html[data-overview-ready='1']"
@@ -92,8 +93,7 @@ def measure(browser, label: str, path: Path, ready: str, runs: int) -> dict:
 
 def default_study(work: Path) -> Path:
     """The default study's results folder, run with Snakemake in ``work``."""
-    cmd = [sys.executable, "-m", "snakemake", "--snakefile", str(ROOT / "Snakefile"), "--directory", str(work)]
-    cmd += ["--configfile", str(ROOT / "config" / "config.yaml"), "--cores", "2", "--quiet"]
+    cmd = [*workflow_command(work, ROOT / "config" / "config.yaml"), "--cores", "2", "--quiet"]
     subprocess.run(cmd, check=True, capture_output=True)
     return work / "results"
 

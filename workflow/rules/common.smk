@@ -240,6 +240,15 @@ def pair_suggestions(wildcards):
 
 
 @planned
+def suggest_priority(wildcards):
+    """A plotted pair's suggest jobs after the other jobs, its earlier stages first: a stage whose
+    hypothesis changed no point then finds the stage before's rows written and reuses them
+    (lidarfield.analysis.suggest) instead of running the same candidates beside it. A priority
+    is no rerun trigger: choosing plots.pairs replans no job."""
+    return -stage_level(wildcards) if wildcards.pair in PLOT_PAIRS else 0
+
+
+@planned
 def last_stage_suggestions(wildcards):
     """The study's next steps: the suggestions of each pair of suggest_pairs at its last stage."""
     return [

@@ -2,7 +2,8 @@
 # the field it would leave. A rule of its own so that it never delays the stages: the next
 # stage's mitigate job does not wait for it. The pairs that suggest_pairs selects get their last
 # stage's suggestions (the study's next steps); those that plots.pairs selects get every stage's,
-# as any pair's stages.html does when it is asked for (pair_suggestions in common.smk).
+# as any pair's stages.html does when it is asked for (pair_suggestions in common.smk), stage by
+# stage (suggest_priority), so that a stage with the points of the one before reuses its rows.
 
 
 rule suggest:
@@ -16,6 +17,7 @@ rule suggest:
         f"{RESULTS}/logs/suggest/{{pair}}/{{stage}}.log",
     benchmark:
         f"{RESULTS}/benchmarks/suggest/{{pair}}/{{stage}}.tsv"
+    priority: suggest_priority
     conda:
         "../envs/lidarfield.yaml"
     threads: 1

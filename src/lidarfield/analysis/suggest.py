@@ -72,16 +72,19 @@ default candidate that cannot apply to the pair (``NotApplicableError``:
 naming it.
 
 A candidate's row depends only on its parameters, the stage's points (with their attributes and
-the pair's metadata) and the grid: ``points_digest`` digests the last two, and a row computed
-for the same digest (another stage of the pair whose points its hypothesis left unchanged, as a
-no-op ``crop`` appended to a stack does) is reused as it is (``known``) instead of running the
-candidate again. Plugin candidates are always run: their source can change under the same
+the pair's metadata), the grid and the code that computes it: ``points_digest`` digests the last
+three (the code as ``code_digest``: the package version and the source of every module of the
+package), and a row computed for the same digest (another stage of the pair whose points its
+hypothesis left unchanged, as a no-op ``crop`` appended to a stack does) is reused as it is
+(``known``) instead of running the candidate again; after an edit of the code no row written
+before it is reused. Plugin candidates are always run: their source can change under the same
 parameters.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import functools
 import hashlib
 import json
 import logging
@@ -91,6 +94,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .. import __version__
 from ..errors import HypothesisError, InputError, NotApplicableError
 from ..field.channels import pair_binning
 from ..field.grid import FieldSettings
@@ -407,10 +411,33 @@ def candidate_key(spec: dict) -> tuple[str, str]:
     return (name, canonical_json(spec[name])) if name in BUILTINS else ("", "")
 
 
-def points_digest(pair: RegisteredPair, grid_section: dict) -> str:
+# The package's own source: what computes a suggestion row (the candidates, the field, the tags).
+PACKAGE = Path(__file__).resolve().parents[1]
+
+
+def source_digest(root: Path, version: str) -> str:
+    """A digest of ``version`` and every module (``*.py``, by its path) under ``root``."""
+    digest = hashlib.blake2b(version.encode(), digest_size=16)
+    for path in sorted(root.rglob("*.py")):
+        digest.update(f"{path.relative_to(root).as_posix()}:{path.stat().st_size}:".encode())
+        digest.update(path.read_bytes())
+    return digest.hexdigest()
+
+
+@functools.cache
+def code_digest() -> str:
+    """``source_digest`` of this package: Snakemake reruns a rule when its own code changes, not
+    when the package's does, and the version alone does not change with every edit. The whole
+    package rather than the modules a row uses: an edit anywhere costs one rerun of the
+    candidates, a missed module would reuse stale rows."""
+    return source_digest(PACKAGE, __version__)
+
+
+def points_digest(pair: RegisteredPair, grid_section: dict, code: str | None = None) -> str:
     """A digest of all a candidate's row depends on but its parameters: both clouds' points with
-    their attributes, the pair's metadata (pose, sensors, sweeps, rigs) and the grid."""
-    digest = hashlib.blake2b(digest_size=16)
+    their attributes, the pair's metadata (pose, sensors, sweeps, rigs), the grid and the code
+    (``code``, default ``code_digest()``)."""
+    digest = hashlib.blake2b((code or code_digest()).encode(), digest_size=16)
     for xyz, attributes in ((pair.xyz1, pair.attributes1), (pair.xyz2, pair.attributes2)):
         digest.update(np.ascontiguousarray(xyz).data)
         for name in sorted(attributes):
@@ -437,7 +464,7 @@ def _scalar(value):
 
 def stored_rows(paths: list[Path], digest: str) -> dict[tuple[str, str], dict]:
     """The rows of the first of the ``suggestions.parquet`` files ``paths`` computed for the same
-    ``points_digest`` (a stage of the pair with the same points); {} when none was."""
+    ``points_digest`` (a stage of the pair with the same points, by the same code); {} when none was."""
     for path in paths:
         try:
             if read_metadata(path).get("points") != digest:
@@ -445,7 +472,7 @@ def stored_rows(paths: list[Path], digest: str) -> dict[tuple[str, str], dict]:
             table, _ = read_table(path, required=SUGGESTION_COLUMNS)
         except (InputError, OSError):  # one being replaced, or of another version: not reused
             continue
-        log.info("reusing the rows of %s: the same points and grid", path)
+        log.info("reusing the rows of %s: the same points, grid and code", path)
         return rows_by_candidate(table)
     return {}
 

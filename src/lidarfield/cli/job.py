@@ -60,6 +60,7 @@ def add_parser(subparsers) -> None:
     p = jobs.add_parser("field")
     add_stage_points(p)
     p.add_argument("--removed", nargs="?", help="the stage's removed.parquet (none for stage 0)")
+    p.add_argument("--previous", nargs="?", help="the stage before's field.parquet (none for stage 0)")
     p.add_argument("--grid", type=_json, required=True)
     p.add_argument("--pair", required=True)
     p.add_argument("--field-out", required=True)
@@ -220,6 +221,7 @@ def _field(args: argparse.Namespace) -> None:
         args.field_out,
         args.stats_out,
         args.stage,
+        args.previous,
     )
 
 

@@ -17,11 +17,11 @@ from pathlib import Path
 import numpy as np
 
 from ..analysis.field_stats import analyse_field, summary_json_safe
-from ..field.file import field_meta, write_field
+from ..field.file import field_meta, read_field, write_field
 from ..field.grid import field_settings_from_config
 from ..io import read_scan, write_scan
 from ..io.atomic import write_text
-from ..io.parquet_table import read_table, write_table
+from ..io.parquet_table import read_metadata, read_table, write_table
 from ..pair import read_pair, write_pair
 from ..poses import apply_pose, invert_pose
 from ..scan import Scan
@@ -134,18 +134,30 @@ def field_stage(
     field_out: str | Path,
     stats_out: str | Path,
     stage_id: str | None = None,
+    previous: str | Path | None = None,
 ) -> dict:
     """The field of a stage's points (the registered pair with ``changes``, those of stages
     1..k) and its summary row (``stats.json``); returns the row. Stage 0 (no changes, its id
-    ``stage_id``) has no removed points (``removed_path`` None)."""
+    ``stage_id``) has no removed points (``removed_path`` None). ``previous``: the stage
+    before's ``field.parquet``, whose columns and statistics are taken as they are when it was
+    computed from the same points, grid and code (``points_digest``: its hypothesis removed and
+    moved nothing)."""
+    from ..analysis.suggest import points_digest
+
     pair, meta = read_stage_points(registered, changes, stage_id)
     removed = {"cloud": np.zeros(0, np.uint8)}
     if removed_path is not None:
         removed, _ = read_table(removed_path, columns=("cloud",))
     settings = field_settings_from_config(grid_section)
-    columns, statistics = analyse_field(pair, settings)
-    statistics = summary_json_safe(statistics)
-    write_field(field_out, columns, field_meta(settings, statistics, stage=meta.get("stage")))
+    digest = points_digest(pair, grid_section)
+    previous_meta = read_metadata(previous) if previous is not None else {}
+    if previous_meta.get("points") == digest:
+        log.info("the field of %s: the same points, grid and code", previous)
+        columns, statistics = read_field(previous)[0], previous_meta["statistics"]
+    else:
+        columns, statistics = analyse_field(pair, settings)
+        statistics = summary_json_safe(statistics)
+    write_field(field_out, columns, field_meta(settings, statistics, stage=meta.get("stage"), points=digest))
     row = summary_row(pair_name, pair, meta, removed["cloud"], statistics)
     write_text(stats_out, json.dumps(row, indent=1) + "\n")
     return row
@@ -188,6 +200,7 @@ def stack_jobs(
             folder / "field.parquet",
             folder / "stats.json",
             folder.name,
+            folders[level - 1] / "field.parquet" if level else None,
         )
     return changes
 

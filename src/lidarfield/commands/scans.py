@@ -167,6 +167,7 @@ def run_pair(
             folder / "field.parquet",
             folder / "stats.json",
             stage_id,
+            folders[level - 1] / "field.parquet" if level else None,
         )
         write_suggestions(
             folder / "suggestions.parquet", table, stage_id, candidates[level], study.grid_section, digests[level]

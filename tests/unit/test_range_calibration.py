@@ -240,3 +240,27 @@ def test_a_points_laser_from_the_model_is_its_ring(expd):
     assert np.mean(channel == np.array([matched[k] for k in ring])) > 0.999
     with_rings = replace(bare, attributes2={"ring": ring.astype(np.float64)})
     assert np.array_equal(cloud_channels(with_rings, 2), ring)  # the ring itself where there is one
+
+
+def test_a_rigs_lidars_have_lasers_of_their_own(expd):
+    """Two lidars of a rig each with rings 0-15 (the ExpD VLP-16's scan seen by both, the second
+    0.3 m lower and upside down): ``per_ring`` takes 32 lasers, the second lidar's after the
+    first's, from the rings and, without them, from each lidar's own model in its own frame."""
+    from lidarfield.io import read_scan
+    from lidarfield.poses import apply_pose, pose_from_xyzrpy
+    from lidarfield.sensors.models import PRESETS
+    from lidarfield.sensors.rig import LIDAR, Lidar
+
+    scan = read_scan(expd / "Cloud1_ExpD.txt", sensor="vlp16")
+    ring = np.asarray(scan.attributes["ring"]).astype(int)
+    down = pose_from_xyzrpy([0.0, 0.0, -0.3, np.pi, 0.0, 0.0])
+    model = PRESETS["vlp16"]
+    rig = (Lidar("up", np.eye(4), model), Lidar("down", down, model))
+    xyz = np.vstack([scan.xyz, apply_pose(down, scan.xyz)])  # the same returns, each in its lidar
+    lidar = np.repeat([0, 1], len(ring)).astype(np.uint8)
+    bare = RegisteredPair(xyz, xyz, np.eye(4), model, model, lidars2=rig, attributes2={LIDAR: lidar})
+    channel = cloud_channels(bare, 2)
+    assert len(np.unique(channel)) == 32
+    assert np.array_equal(channel[len(ring) :], channel[: len(ring)] + 16)  # its own model, in its own frame
+    rings = replace(bare, attributes2={LIDAR: lidar, "ring": np.tile(ring, 2).astype(np.float64)})
+    assert np.array_equal(cloud_channels(rings, 2), np.concatenate([ring, ring + 16]))

@@ -211,25 +211,29 @@ def range_calibration(pair: RegisteredPair, params: Params) -> Outcome:
 def cloud_channels(pair: RegisteredPair, cloud: int) -> np.ndarray:
     """Each point's channel (laser) of cloud 1 or 2, whose range offset ``per_ring`` fits: its
     ``ring`` attribute, else the channel of its own lidar's model nearest its elevation about
-    that lidar, numbered from the lowest (a rig's lidars one after another). A return's
-    elevation lies within a few hundredths of a degree of its beam's, and beams are at least
-    0.3 deg apart, so the elevation names the laser where the scan does not record it."""
+    that lidar, numbered from the lowest. A return's elevation lies within a few hundredths of a
+    degree of its beam's, and beams are at least 0.3 deg apart, so the elevation names the laser
+    where the scan does not record it. A rig's lidars are numbered one after another (each
+    lidar's rings or channels past the last of the one before): two lidars' ring 0 are two lasers."""
     name, attributes = "range_calibration", pair.attributes1 if cloud == 1 else pair.attributes2
-    if "ring" in attributes:
-        ring = np.asarray(attributes["ring"])
-        if not np.isfinite(ring).all():
-            raise HypothesisError(f"{name}: per_ring: cloud {cloud} has points without a ring")
-        return ring.astype(np.int64)
+    ring = attributes.get("ring")
+    if ring is not None and not np.isfinite(ring).all():
+        raise HypothesisError(f"{name}: per_ring: cloud {cloud} has points without a ring")
     views = pair.lidars(cloud)
-    if any(view.sensor is None for view in views):
+    if ring is None and any(view.sensor is None for view in views):
         raise HypothesisError(f"{name}: per_ring needs a ring attribute or a sensor model; cloud {cloud} has neither")
     xyz = pair.xyz1 if cloud == 1 else pair.xyz2
     channel, first = np.zeros(len(xyz), dtype=np.int64), 0
     for view in views:
-        channels = sensor_channels(view.sensor)
-        elevation = directions(in_sensor_frame(xyz[view.points], view.pose))[1]
-        channel[view.points] = first + nearest_channel(elevation, channels)
-        first += len(channels)
+        if ring is not None:
+            own = np.asarray(ring[view.points]).astype(np.int64)
+            count = int(own.max()) + 1 if len(own) else 0
+        else:
+            channels = sensor_channels(view.sensor)
+            own = nearest_channel(directions(in_sensor_frame(xyz[view.points], view.pose))[1], channels)
+            count = len(channels)
+        channel[view.points] = first + own
+        first += count
     return channel
 
 

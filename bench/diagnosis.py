@@ -10,9 +10,11 @@ Writes to ``--out`` (default ``diagnosis-results``): ``cases.parquet`` (one row 
 ``confusion.md`` and ``confusion.html`` (per sensor, fault x first proposal, and the overall
 rates) and ``rates.png`` (the share named by fault and level).
 
-Run: ``python bench/diagnosis.py [--slice small|full] [--base TEXT ...] [--out DIR] [--points N]
-[--jobs N]`` (``make diagnosis`` runs the full zoo; ``--base real-hdl32 --base canyon-apart`` only
-the base pairs whose names hold one of the texts).
+Run: ``python bench/diagnosis.py [--slice small|full] [--base TEXT ...] [--real-pose reference|registered]
+[--out DIR] [--points N] [--jobs N]`` (``make diagnosis`` runs the full zoo; ``--base real-hdl32
+--base canyon-apart`` only the base pairs whose names hold one of the texts; ``--real-pose
+registered`` registers the real base pairs by the tool's GICP from their reference poses, once
+per base pair, before the faults).
 """
 
 from __future__ import annotations
@@ -30,7 +32,7 @@ import numpy as np
 import pandas as pd
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
-from helpers.fault_zoo import CONTROL, FAULTS, LEVELS, NAMING, run_case, zoo  # noqa: E402
+from helpers.fault_zoo import CONTROL, FAULTS, LEVELS, NAMING, REAL_POSES, run_case, zoo  # noqa: E402
 from timing import machine  # noqa: E402 (bench/timing.py)
 
 POINTS = 20_000  # per cloud: the whole zoo in under 15 minutes on 2 cores
@@ -53,8 +55,8 @@ def progress(done: int, total: int, start: float) -> None:
     print(f"\r[{bar:<30}] {done}/{total} cases, {elapsed:5.0f} s, about {left:4.0f} s left", end="", file=sys.stderr)
 
 
-def run(slice_name: str, points: int, jobs: int, bases: list[str]) -> pd.DataFrame:
-    cases = [case for case in zoo(slice_name) if not bases or any(text in case.base for text in bases)]
+def run(slice_name: str, points: int, jobs: int, bases: list[str], real_pose: str) -> pd.DataFrame:
+    cases = [case for case in zoo(slice_name, real_pose) if not bases or any(text in case.base for text in bases)]
     if not cases:
         sys.exit(f"no base pair of the {slice_name} zoo holds {' or '.join(bases)}")
     by_base: dict[str, list] = {}
@@ -177,6 +179,12 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--slice", choices=("small", "full"), default="full")
     parser.add_argument("--base", action="append", default=[], help="only the base pairs whose names hold this text")
+    parser.add_argument(
+        "--real-pose",
+        choices=REAL_POSES,
+        default=REAL_POSES[0],
+        help="register the real base pairs by their reference poses (default), or by the tool's GICP from them",
+    )
     parser.add_argument("--out", type=Path, default=Path("diagnosis-results"))
     parser.add_argument("--points", type=int, default=POINTS, help=f"per cloud, at most (default {POINTS:,})")
     parser.add_argument("--jobs", type=int, default=2, help="worker processes (default 2)")
@@ -187,11 +195,12 @@ def main() -> None:
         write_outputs(table, args.out, f"{len(table)} cases of {args.tables_from}")
         return
     start = time.perf_counter()
-    table = run(args.slice, args.points, args.jobs, args.base)
+    table = run(args.slice, args.points, args.jobs, args.base, args.real_pose)
     wall = time.perf_counter() - start
     chosen = "".join(f", bases holding {text}" for text in args.base)
     header = (
-        f"{len(table)} cases ({args.slice} zoo{chosen}), at most {args.points:,} points per cloud, "
+        f"{len(table)} cases ({args.slice} zoo{chosen}, real base pairs registered by {args.real_pose} poses), "
+        f"at most {args.points:,} points per cloud, "
         f"{args.jobs} workers: "
         f"{wall:.0f} s wall, {table['cpu_seconds'].sum():.0f} s of CPU in the cases (faults, registration, explain); "
         f"{machine()}, load average {os.getloadavg()[0]:.1f} at the end"

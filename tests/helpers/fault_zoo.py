@@ -3,8 +3,11 @@ tests a slice): pairs with one known adversity, or none, and what ``explain`` pr
 
 A case is a *base pair* (two scans with their reference poses: real scans from the shared data,
 or a simulated scene seen by a preset) and one *fault* at one *level* (barely visible, visible,
-obvious). Faults of a scan are injected in its own sensor frame before the pair is registered
-by its reference poses: the points a faulty sensor would have reported (range scale and offset,
+obvious). A real base pair is registered by its reference poses (``real_pose`` "reference", the
+issue's definition), or by those refined by the tool's own registration of the fault-free pair
+("registered": GICP from the reference, as a user registers a pair; ``registered_base``).
+Faults of a scan are injected in its own sensor frame before the pair is registered by those
+poses: the points a faulty sensor would have reported (range scale and offset,
 one channel's elevation, motion during the sweep, a moving object, the own vehicle's body, a
 cut field of view). Faults of the registration are applied to the registered pair: scan 2
 placed off (translation, yaw, pitch and roll about its own origin), or by the pose of a moment
@@ -83,6 +86,10 @@ NAMING = {
 # the reference pose's own accuracy.
 CONTROL_ALLOWED = {"ego_vehicle", "field_of_view", "shadow"}
 REFERENCE_ACCURACY_M = {"real": 0.05, "simulated": 0.01}
+# How a real base pair is registered before its faults: by its reference poses, or by the tool's
+# registration of the fault-free pair started from them (the `register` rule's GICP, defaults).
+REAL_POSES = ("reference", "registered")
+REGISTRATION = {"method": "gicp", "guess": "truth"}
 SCAN_FAULTS = tuple(f for f in FAULTS if f != "time_offset")
 # The own vehicle's body shows only where the two sensors stood apart (from one place it is the
 # same in both scans): on the drives, not on the pairs from one place.
@@ -129,6 +136,7 @@ class Case:
     base: str
     fault: str  # a FAULTS key, or CONTROL
     level: str  # a LEVELS entry, "" for a control
+    real_pose: str = "reference"  # a REAL_POSES entry: how a real base pair is registered
 
     @property
     def name(self) -> str:
@@ -291,10 +299,24 @@ def bases() -> dict[str, BaseSpec]:
     return {**real_bases(), **sim_bases()}
 
 
+def registered_base(base: BasePair) -> BasePair:
+    """The base pair with scan 2's pose refined by the tool's registration (``REGISTRATION``:
+    GICP from the reference poses) of the fault-free pair, at full resolution; scan 1 keeps its
+    pose. Raises ValueError when the registration did not converge."""
+    pair = register_pair(base.scan1, base.scan2, REGISTRATION)
+    if not pair.registration["converged"]:
+        raise ValueError(f"{base.name}: GICP from the reference did not converge: {pair.registration.get('warning')}")
+    scan2 = dataclasses.replace(base.scan2, pose=base.scan1.pose @ pair.T_1_2)
+    return dataclasses.replace(base, scan2=scan2)
+
+
 @functools.cache
-def load_base(name: str, points: int | None) -> BasePair:
-    """A base pair, each scan subsampled to at most ``points`` (fixed seed)."""
+def load_base(name: str, points: int | None, real_pose: str = "reference") -> BasePair:
+    """A base pair (a real one registered as ``real_pose`` says, once), each scan subsampled to
+    at most ``points`` (fixed seed)."""
     base = bases()[name].load()
+    if real_pose == "registered" and bases()[name].source == "real":
+        base = registered_base(base)
     if points is None:
         return base
     rng = np.random.default_rng(0)
@@ -305,10 +327,11 @@ def load_base(name: str, points: int | None) -> BasePair:
     return dataclasses.replace(base, scan1=s1, scan2=s2)
 
 
-def cases_of(name: str) -> list[Case]:
+def cases_of(name: str, real_pose: str = "reference") -> list[Case]:
     """A base pair's control and its faults at every level."""
     faults = bases()[name].faults
-    return [Case(name, CONTROL, "")] + [Case(name, fault, level) for fault in faults for level in LEVELS]
+    levels = [(CONTROL, "")] + [(fault, level) for fault in faults for level in LEVELS]
+    return [Case(name, fault, level, real_pose) for fault, level in levels]
 
 
 # --- faults of a scan, in its sensor frame ------------------------------------------------
@@ -569,7 +592,7 @@ def default_study():
 def run_case(case: Case, points: int | None) -> dict:
     """One row of the benchmark's table: the case, what explain proposed and whether it named
     the fault (for a control: proposed nothing beyond ``CONTROL_ALLOWED`` and ended random)."""
-    spec, base = bases()[case.base], load_base(case.base, points)
+    spec, base = bases()[case.base], load_base(case.base, points, case.real_pose)
     start, cpu_start = time.perf_counter(), time.process_time()
     try:
         pair = faulted_pair(base, case)
@@ -611,6 +634,7 @@ def case_columns(case: Case, spec: BaseSpec) -> dict:
     return {
         "case": case.name,
         "base": case.base,
+        "real_pose": case.real_pose if spec.source == "real" else "truth",
         "source": spec.source,
         "sensor": spec.sensor,
         "kind": spec.kind,
@@ -648,9 +672,10 @@ def named(case: Case, source: str, steps: list[dict], final_verdict: str, strict
 SMALL_BASES = ("real-expd-vlp16", "sim-intersection-still-vlp16", "sim-canyon-drive-hdl32", "sim-canyon-apart-os1-128")
 
 
-def zoo(slice_name: str) -> list[Case]:
-    """The cases of a slice: ``full`` (every base pair) or ``small``."""
+def zoo(slice_name: str, real_pose: str = "reference") -> list[Case]:
+    """The cases of a slice: ``full`` (every base pair) or ``small``, the real base pairs
+    registered as ``real_pose`` says."""
     if slice_name == "full":
-        return [case for name in bases() for case in cases_of(name)]
+        return [case for name in bases() for case in cases_of(name, real_pose)]
     chosen = [name for name in SMALL_BASES if name in bases()]
-    return [case for name in chosen for case in cases_of(name) if case.level in ("", "visible")]
+    return [case for name in chosen for case in cases_of(name, real_pose) if case.level in ("", "visible")]

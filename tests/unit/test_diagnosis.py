@@ -11,7 +11,7 @@ import pytest
 from helpers import fault_zoo as zoo
 from lidarfield.hypotheses import apply_step
 from lidarfield.pair import RegisteredPair
-from lidarfield.poses import apply_pose
+from lidarfield.poses import apply_pose, invert_pose, pose_error
 from lidarfield.scan import Scan, still_sweep
 from lidarfield.sensors.models import PRESETS
 
@@ -102,6 +102,32 @@ def test_misregistration_moves_scan_2_about_its_own_origin():
     np.testing.assert_allclose(turned.T_1_2[:3, 3], [2.0, 0, 0], atol=1e-12)  # turned in place
     np.testing.assert_allclose(moved.xyz2 - truth.xyz2, np.tile([0.08, 0.06, 0], (50, 1)), atol=1e-12)
     np.testing.assert_allclose(apply_pose(turned.T_1_2, base.scan2.xyz), turned.xyz2, atol=1e-12)
+
+
+def test_a_registered_real_base_is_its_reference_refined_by_gicp_and_faulted_from_there():
+    """``--real-pose registered``: the OS1-128 frames' KITTI poses refined by the tool's GICP on
+    the fault-free pair (measured 2026-11-28: 2.0 cm and 0.08 deg), loaded once, every fault
+    injected relative to that pose; ``realign`` on the fault-free pair then moves a point at
+    most 7.8 cm (24 cm from the reference poses)."""
+    name = "real-os1-128-frames"
+    if name not in zoo.bases():
+        pytest.skip(f"real data not found at {zoo.SHARED_DATA} (set LIDARFIELD_DATA)")
+    reference, registered = (zoo.load_base(name, POINTS, real_pose) for real_pose in zoo.REAL_POSES)
+    assert zoo.load_base(name, POINTS, "registered") is registered  # registered once per base pair
+    T_reference, T_registered = (invert_pose(b.scan1.pose) @ b.scan2.pose for b in (reference, registered))
+    translation, rotation = pose_error(T_registered, T_reference)
+    assert 0.015 < translation < 0.025 and 0.05 < rotation < 0.11
+    np.testing.assert_array_equal(registered.scan2.xyz, reference.scan2.xyz)  # the same points, another pose
+    control = zoo.faulted_pair(registered, zoo.Case(name, zoo.CONTROL, "", "registered"))
+    np.testing.assert_allclose(control.T_1_2, T_registered, atol=1e-12)
+    moved = zoo.faulted_pair(registered, zoo.Case(name, "translation", "visible", "registered"))
+    np.testing.assert_allclose(moved.T_1_2[:3, 3] - T_registered[:3, 3], [0.08, 0.06, 0], atol=1e-12)
+    realign_moves = {}
+    for label, base in (("reference", reference), ("registered", registered)):
+        pair = zoo.faulted_pair(base, zoo.Case(name, zoo.CONTROL, ""))
+        realign_moves[label] = np.linalg.norm(apply_step(pair, {"realign": {}}).xyz2 - pair.xyz2, axis=1)
+    assert realign_moves["reference"].max() > 0.2 and np.median(realign_moves["reference"]) > 0.02
+    assert realign_moves["registered"].max() < 0.1 and np.median(realign_moves["registered"]) < 0.015
 
 
 # A slice of the zoo, at the benchmark's subsample: cases the full zoo names (docs/diagnosis.md,

@@ -29,6 +29,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from ..analysis.carried import carried_body
 from ..analysis.coverage import blind_sectors
 from ..analysis.field_stats import analyse_field
 from ..analysis.stopping_rule import (
@@ -44,7 +45,7 @@ from ..analysis.stopping_rule import (
 )
 from ..analysis.suggest import candidate_key, candidate_steps, suggestions
 from ..field.grid import FieldSettings
-from ..hypotheses import parse_step
+from ..hypotheses import apply_step, parse_step
 from ..hypotheses.steps import step_name
 from ..pair import RegisteredPair
 from ..storage.stage_ids import canonical_json
@@ -179,11 +180,18 @@ def explain_pair(
         sector = blind_sector_step(pair, settings, candidates, base_dir, grid_section, suggest, result, outcomes)
         if sector is not None:
             return sector, 0
+        table_of = stage_table_of(outcomes)
+        body = carried_body_step(pair, candidates, table_of, explain, result, outcomes, table)
+        return body or moved_objects_step(candidates, table_of, explain, result, table)
+
+    def stage_table_of(outcomes: dict) -> Callable[[list[dict]], dict[str, np.ndarray]]:
+        """The suggestion table of some candidates of the current stage (their outcomes in ``outcomes``)."""
 
         def table_of(steps: list[dict]) -> dict[str, np.ndarray]:
+            pair = current.stage.pair
             return suggestions(pair, settings, steps, base_dir, grid_section, suggest is None, outcomes=outcomes)
 
-        return moved_objects_step(candidates, table_of, explain, result, table)
+        return table_of
 
     while True:
         verdict = current.statistics["verdict"]
@@ -213,6 +221,11 @@ def explain_pair(
             current.stage.pair, settings, candidates, base_dir, grid_section, suggest is None, outcomes=outcomes
         )
         chosen = best_worth_it(table, explain)
+        if chosen is not None and table["corrects"][chosen]:
+            body = carried_body_step(
+                current.stage.pair, candidates, stage_table_of(outcomes), explain, result, outcomes, table
+            )
+            table, chosen = body or (table, chosen)
         if chosen is None:
             result.stop = STOP_NOTHING_HELPS
             found = before_stopping(candidates, outcomes, table)
@@ -256,6 +269,40 @@ def blind_sector_step(
         if np.count_nonzero(sector.points & ~kept) >= 0.5 * np.count_nonzero(sector.points):
             return table
     return None
+
+
+def carried_body_step(
+    pair: RegisteredPair,
+    candidates: list[dict],
+    table_of: Callable[[list[dict]], dict[str, np.ndarray]],
+    explain: ExplainSettings,
+    result: Explanation,
+    outcomes: dict,
+    table: dict[str, np.ndarray] | None = None,
+) -> tuple[dict[str, np.ndarray], int] | None:
+    """When the loop would stop, or apply a correction: most of what the ``ego_vehicle``
+    candidate removes stays put in both sensors' frames while they moved
+    (``carried.carried_body``) is the vehicle's own body. The field may not show it (a car's
+    roof under the sensor moves within its own plane), and a correction would fit it, not the
+    pose (a rigid ``realign`` aligning a truck's cargo body moves scan 2 by the pose change
+    itself). (table, row) of ``ego_vehicle``, from the stage's ``table`` when it has one, else
+    from ``table_of(candidates)``, when it removes at most ``max_removed_share`` of the points;
+    a finding of ``result``. None when it is no candidate or does not remove the body."""
+    body = [step for step in candidates if step_name(step) == "ego_vehicle"]
+    if not body:
+        return None
+    key = candidate_key(body[0])
+    keep1, keep2 = outcomes[key] if key in outcomes else apply_step(pair, body[0])
+    carried = carried_body(pair, keep1, keep2)
+    if not carried.is_vehicle:
+        return None
+    if table is None or "ego_vehicle" not in table["hypothesis"]:
+        table = table_of(body)
+    rows = np.flatnonzero(table["hypothesis"] == "ego_vehicle")
+    if not len(rows) or float(table["removed_share"][rows[0]]) > explain.max_removed_share:
+        return None
+    result.findings.append(carried.statement())
+    return table, int(rows[0])
 
 
 def moved_objects_step(

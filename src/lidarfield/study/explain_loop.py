@@ -11,13 +11,13 @@ the stage did not change of the points' neighbour distances is carried to it
 :mod:`lidarfield.analysis.stopping_rule`. Before it stops, it looks at what the field cannot
 show: a scan that returned nothing in a sector the other fills (``analysis.coverage``) is a
 finding, and a step of ``field_of_view`` when that removes the sector's points (whatever the
-verdict: the cut sector has no vector); then the vehicle's own body (most of what
-``ego_vehicle`` removes stays put in both sensors' frames while they moved: ``analysis.carried``)
-is a finding and a step of ``ego_vehicle``, also instead of a correction the ranking chose (a
-correction would fit the carried body, not the pose); then objects that moved (points of one
-cloud where the other scan's rays passed through) are a finding, and a step of
-``moving_objects`` when it removes them (``stopping_rule.explains_seen_through``, whatever the
-verdict: the free space is not in the field). What it found is a stack (normalised entries, as a config's
+verdict: the cut sector has no vector); then objects that moved (points of one cloud where
+the other scan's rays passed through) are a finding, and a step of ``moving_objects`` when it
+removes them (``stopping_rule.explains_seen_through``, whatever the verdict: the free space is
+not in the field); then the vehicle's own body (most of what ``ego_vehicle`` removes stays put
+in both sensors' frames while they moved: ``analysis.carried``) is a finding and a step of
+``ego_vehicle``, also in place of a correction the ranking chose (a correction would fit the
+carried body, not the pose). What it found is a stack (normalised entries, as a config's
 ``hypotheses:``), one row per step with the numbers behind the choice, and every stage's field.
 """
 
@@ -184,8 +184,8 @@ def explain_pair(
         if sector is not None:
             return sector, 0
         table_of = stage_table_of(outcomes)
-        body = carried_body_step(pair, candidates, table_of, explain, result, outcomes, table)
-        return body or moved_objects_step(candidates, table_of, explain, result, table)
+        moved = moved_objects_step(candidates, table_of, explain, result, table)
+        return moved or carried_body_step(pair, candidates, table_of, explain, result, outcomes, table)
 
     def stage_table_of(outcomes: dict) -> Callable[[list[dict]], dict[str, np.ndarray]]:
         """The suggestion table of some candidates of the current stage (their outcomes in ``outcomes``)."""

@@ -10,17 +10,18 @@ cloud has none within ``STATIC_M`` (a fixed surface there would have given the o
 return where this one is). A point passes both only if the motion between the sensors moved it
 by more than ``STATIC_M - OWN_M`` (5 cm: five times the zoo's simulated range noise, about two
 of a real lidar's, whose difference of two ranges has about 3 cm): from one place (the sensors
-within that of each other) nothing is carried, whatever the scans hold.
+within that of each other, as registered) nothing is carried, whatever the scans hold.
 
 A fixed plane that the motion maps onto itself (the ground or a ceiling under a drive on flat
 ground, a wall along it) is sampled by the same rays at the same places in both sensors' frames
 too, and in frame 1 its rings are shifted by the move, so part of it passes: of the points
 within 3 m of the sensor on the real HDL-32E pair (0.49 m apart, indoors: a room's floor and
-ceiling) 25% are carried; of a roof rack's pole or a truck's cargo body 95-100%, of the real
-ExpD van's body 93-98% (a car's roof under the sensor, itself such a plane but for its edges,
-9-96%). So what ``ego_vehicle`` removes is the vehicle when at least ``MIN_CARRIED_SHARE`` of
-it is carried (and ``MIN_CARRIED_POINTS``).
-Measured in docs/diagnosis.md ("The own body on a drive").
+ceiling) 25% are carried; of a roof rack's pole or a truck's cargo body on the zoo's drives
+95-100%, of the real ExpD van's body 97% (a car's roof under the sensor, itself such a plane but
+for its edges, 12-96%). So what ``ego_vehicle`` removes is the vehicle when at least
+``MIN_CARRIED_SHARE`` of it is carried (and ``MIN_CARRIED_POINTS``). A pair from one place
+registered more than 5 cm off looks carried wherever its scans agree in their own frames.
+Measured in docs/diagnosis.md ("The own body named from the points it carries").
 """
 
 from __future__ import annotations

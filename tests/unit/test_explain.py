@@ -240,11 +240,17 @@ def test_explain_finds_field_of_view_first_on_the_real_vlp16_pair(expd, tmp_path
     assert names[0] == "field_of_view", names
     assert record["steps"][0]["whitened_reduction"] > 0.4  # measured 0.45
     assert record["steps"][0]["verdict_before"] == "patterned"
-    # Every step it took was worth it, and it went on while the field was patterned. The scans
-    # were taken 3 m apart: voxels that mix surfaces change their mix with the viewpoint, and
-    # so the field can stay patterned (docs/field.md).
+    # Every step it took was worth it, and it went on while the field was patterned, or for
+    # what the field cannot show: the van's body, which stays put in both sensors' frames (89%
+    # of what ego_vehicle removes, measured 2026-11-28: field_of_view, then ego_vehicle on a
+    # random field). The scans were taken 3 m apart: voxels that mix surfaces change their mix
+    # with the viewpoint, and so the field can stay patterned (docs/field.md).
     assert all(step["whitened_reduction"] >= 0.05 for step in record["steps"])
-    assert all(step["verdict_after"] == "patterned" for step in record["steps"][:-1])
+    assert all(
+        step["verdict_after"] == "patterned" or following["hypothesis"] == "ego_vehicle"
+        for step, following in zip(record["steps"], record["steps"][1:])
+    )
+    assert any("the vehicle's own body" in finding for finding in record["findings"])
     assert record["stop"] in ("verdict random", "no candidate is worth it")
     assert printed.splitlines()[1].split()[:2] == ["1", "field_of_view"]
     assert f"stopped: {record['stop']}" in printed

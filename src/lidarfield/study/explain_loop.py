@@ -289,7 +289,7 @@ def carried_body_step(
     roof under the sensor moves within its own plane), and a correction would fit it, not the
     pose (a rigid ``realign`` aligning a truck's cargo body moves scan 2 by the pose change
     itself). (table, row) of ``ego_vehicle``, from the stage's ``table`` when it has one, else
-    from ``table_of(candidates)``, when it removes at most ``max_removed_share`` of the points;
+    from ``table_of`` of that candidate alone, when it removes at most ``max_removed_share`` of the points;
     a finding of ``result``. None when it is no candidate or does not remove the body."""
     body = [step for step in candidates if step_name(step) == "ego_vehicle"]
     if not body:

@@ -240,11 +240,17 @@ def test_explain_finds_field_of_view_first_on_the_real_vlp16_pair(expd, tmp_path
     assert names[0] == "field_of_view", names
     assert record["steps"][0]["whitened_reduction"] > 0.4  # measured 0.45
     assert record["steps"][0]["verdict_before"] == "patterned"
-    # Every step it took was worth it, and it went on while the field was patterned. The scans
-    # were taken 3 m apart: voxels that mix surfaces change their mix with the viewpoint, and
-    # so the field can stay patterned (docs/field.md).
+    # Every step it took was worth it, and it went on while the field was patterned, or for
+    # what the field cannot show: the van's body, which stays put in both sensors' frames (89%
+    # of what ego_vehicle removes, measured 2026-11-28: field_of_view, then ego_vehicle on a
+    # random field). The scans were taken 3 m apart: voxels that mix surfaces change their mix
+    # with the viewpoint, and so the field can stay patterned (docs/field.md).
     assert all(step["whitened_reduction"] >= 0.05 for step in record["steps"])
-    assert all(step["verdict_after"] == "patterned" for step in record["steps"][:-1])
+    assert all(
+        step["verdict_after"] == "patterned" or following["hypothesis"] == "ego_vehicle"
+        for step, following in zip(record["steps"], record["steps"][1:])
+    )
+    assert any("the vehicle's own body" in finding for finding in record["findings"])
     assert record["stop"] in ("verdict random", "no candidate is worth it")
     assert printed.splitlines()[1].split()[:2] == ["1", "field_of_view"]
     assert f"stopped: {record['stop']}" in printed
@@ -298,20 +304,24 @@ def ego_car_explanation(ego_car):
 def test_explain_on_the_ego_car_pair_removes_the_body_realigns_and_ends_random(ego_car, ego_car_explanation):
     """The body is the largest discrepancy in metres (its points sit at one place in each
     sensor's frame, so at two places in frame 1), the misregistration in units of the field's
-    noise (realign takes 99.9% of its whitened energy, 5% of its raw energy): realign comes first,
-    and the body does not pull it (its refit is on what both sensors saw): it lands within a few
-    mm and hundredths of a degree of the truth (measured 3.5 mm and 0.009 deg, as when the body
-    went first), ego_vehicle follows, and then the field is random: the change of viewpoint on what both sensors saw
+    noise (realign takes 99.9% of its whitened energy, 5% of its raw energy). The body's points
+    stay put in both sensors' own frames (a misregistration moves scan 2 with its sensor, so it
+    does not change that), so it goes before the correction the ranking would apply
+    (``carried``): ego_vehicle first, then realign lands within a few mm and hundredths of a
+    degree of the truth (3.5 mm and 0.009 deg when it came first, the body left in), and then
+    the field is random: the change of viewpoint on what both sensors saw
     is in the field's covariance (docs/field.md), and the moving car, in one voxel whose content
     spans the cone (z about 2), makes no pattern. The car shows in the free space instead: before
     it stops, the loop finds scan 2's car where sensor 1's rays passed through, and
     moving_objects removes it (counted from the simulator's object labels) and nothing static."""
     truth, off, _ = ego_car
     names = [row["hypothesis"] for row in ego_car_explanation.steps]
-    assert names == ["realign", "ego_vehicle", "moving_objects"], names
+    assert names == ["ego_vehicle", "realign", "moving_objects"], names
     assert [s.statistics["verdict"] for s in ego_car_explanation.stages[2:]] == ["random", "random"]
     assert ego_car_explanation.stop == "verdict random"
-    assert any("points of objects that moved" in text for text in ego_car_explanation.findings)
+    findings = ego_car_explanation.findings
+    assert any("points of objects that moved" in text for text in findings)
+    assert any("stay put in both sensors' frames" in text for text in findings)
     given, last = (ego_car_explanation.stages[k].stage.pair for k in (2, 3))
     car = [np.count_nonzero(pair.attributes2["object"] > 0) for pair in (given, last)]
     assert car[0] > 50 and car[1] <= 0.1 * car[0], car

@@ -15,11 +15,13 @@ takes the field's pattern away. The loop (``study.explain_loop``) applies the be
 candidate that is worth it, and stops when the field's verdict is no longer ``patterned``
 (``random``, or ``undetermined`` with too few valid voxels to judge), when no candidate is
 worth it, or after ``max_steps``; before it stops, a scan that returned nothing in a sector
-the other fills (``coverage``) has ``field_of_view`` applied when its model says so, and
-objects that moved have ``moving_objects`` applied when it explains the points seen through
+the other fills (``coverage``) has ``field_of_view`` applied when its model says so, objects
+that moved have ``moving_objects`` applied when it explains the points seen through
 (:func:`explains_seen_through`): a moved object is evidenced by free space, not by the field
 (its voxels hold its own spread, so its vectors are small in units of their noise, and the
-voxels its removal empties leave the reduction).
+voxels its removal empties leave the reduction), and the vehicle's own body has
+``ego_vehicle`` applied when most of what it removes is carried (``carried``; also in place of
+a correction the ranking chose: a correction would fit the body).
 The defaults are the config's ``explain`` section (the schema).
 """
 

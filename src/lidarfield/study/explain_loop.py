@@ -11,10 +11,13 @@ the stage did not change of the points' neighbour distances is carried to it
 :mod:`lidarfield.analysis.stopping_rule`. Before it stops, it looks at what the field cannot
 show: a scan that returned nothing in a sector the other fills (``analysis.coverage``) is a
 finding, and a step of ``field_of_view`` when that removes the sector's points (whatever the
-verdict: the cut sector has no vector); then objects that moved (points of one cloud where the
-other scan's rays passed through) are a finding, and a step of ``moving_objects`` when it
+verdict: the cut sector has no vector); then objects that moved (points of one cloud where
+the other scan's rays passed through) are a finding, and a step of ``moving_objects`` when it
 removes them (``stopping_rule.explains_seen_through``, whatever the verdict: the free space is
-not in the field). What it found is a stack (normalised entries, as a config's
+not in the field); then the vehicle's own body (most of what ``ego_vehicle`` removes stays put
+in both sensors' frames while they moved: ``analysis.carried``) is a finding and a step of
+``ego_vehicle``, also in place of a correction the ranking chose (a correction would fit the
+carried body, not the pose). What it found is a stack (normalised entries, as a config's
 ``hypotheses:``), one row per step with the numbers behind the choice, and every stage's field.
 """
 
@@ -29,6 +32,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from ..analysis.carried import carried_body
 from ..analysis.coverage import blind_sectors
 from ..analysis.field_stats import analyse_field
 from ..analysis.stopping_rule import (
@@ -44,7 +48,7 @@ from ..analysis.stopping_rule import (
 )
 from ..analysis.suggest import candidate_key, candidate_steps, suggestions
 from ..field.grid import FieldSettings
-from ..hypotheses import parse_step
+from ..hypotheses import apply_step, parse_step
 from ..hypotheses.steps import step_name
 from ..pair import RegisteredPair
 from ..storage.stage_ids import canonical_json
@@ -179,11 +183,18 @@ def explain_pair(
         sector = blind_sector_step(pair, settings, candidates, base_dir, grid_section, suggest, result, outcomes)
         if sector is not None:
             return sector, 0
+        table_of = stage_table_of(outcomes)
+        moved = moved_objects_step(candidates, table_of, explain, result, table)
+        return moved or carried_body_step(pair, candidates, table_of, explain, result, outcomes, table)
+
+    def stage_table_of(outcomes: dict) -> Callable[[list[dict]], dict[str, np.ndarray]]:
+        """The suggestion table of some candidates of the current stage (their outcomes in ``outcomes``)."""
 
         def table_of(steps: list[dict]) -> dict[str, np.ndarray]:
+            pair = current.stage.pair
             return suggestions(pair, settings, steps, base_dir, grid_section, suggest is None, outcomes=outcomes)
 
-        return moved_objects_step(candidates, table_of, explain, result, table)
+        return table_of
 
     while True:
         verdict = current.statistics["verdict"]
@@ -213,6 +224,11 @@ def explain_pair(
             current.stage.pair, settings, candidates, base_dir, grid_section, suggest is None, outcomes=outcomes
         )
         chosen = best_worth_it(table, explain)
+        if chosen is not None and table["corrects"][chosen]:
+            body = carried_body_step(
+                current.stage.pair, candidates, stage_table_of(outcomes), explain, result, outcomes, table
+            )
+            table, chosen = body or (table, chosen)
         if chosen is None:
             result.stop = STOP_NOTHING_HELPS
             found = before_stopping(candidates, outcomes, table)
@@ -256,6 +272,40 @@ def blind_sector_step(
         if np.count_nonzero(sector.points & ~kept) >= 0.5 * np.count_nonzero(sector.points):
             return table
     return None
+
+
+def carried_body_step(
+    pair: RegisteredPair,
+    candidates: list[dict],
+    table_of: Callable[[list[dict]], dict[str, np.ndarray]],
+    explain: ExplainSettings,
+    result: Explanation,
+    outcomes: dict,
+    table: dict[str, np.ndarray] | None = None,
+) -> tuple[dict[str, np.ndarray], int] | None:
+    """When the loop would stop, or apply a correction: most of what the ``ego_vehicle``
+    candidate removes stays put in both sensors' frames while they moved
+    (``carried.carried_body``) is the vehicle's own body. The field may not show it (a car's
+    roof under the sensor moves within its own plane), and a correction would fit it, not the
+    pose (a rigid ``realign`` aligning a truck's cargo body moves scan 2 by the pose change
+    itself). (table, row) of ``ego_vehicle``, from the stage's ``table`` when it has one, else
+    from ``table_of`` of that candidate alone, when it removes at most ``max_removed_share`` of the points;
+    a finding of ``result``. None when it is no candidate or does not remove the body."""
+    body = [step for step in candidates if step_name(step) == "ego_vehicle"]
+    if not body:
+        return None
+    key = candidate_key(body[0])
+    keep1, keep2 = outcomes[key] if key in outcomes else apply_step(pair, body[0])
+    carried = carried_body(pair, keep1, keep2)
+    if not carried.is_vehicle:
+        return None
+    if table is None or "ego_vehicle" not in table["hypothesis"]:
+        table = table_of(body)
+    rows = np.flatnonzero(table["hypothesis"] == "ego_vehicle")
+    if not len(rows) or float(table["removed_share"][rows[0]]) > explain.max_removed_share:
+        return None
+    result.findings.append(carried.statement())
+    return table, int(rows[0])
 
 
 def moved_objects_step(

@@ -364,10 +364,16 @@ def faulty_channel(model) -> int:
     return int(np.argmin(np.abs(np.asarray(model.elevation_deg) + 5.0)))
 
 
-def elevation_fault(xyz: np.ndarray, channel: np.ndarray, which: int, offset_deg: float) -> np.ndarray:
-    """Channel ``which``'s points reported ``offset_deg`` higher, at their range and azimuth."""
+def faulted_channel_mask(scan: Scan) -> np.ndarray:
+    """The points of the channel ``channel_elevation`` faults: the first lidar's
+    ``faulty_channel``."""
+    mask, _, model = lidar_parts(scan)[0]
+    return mask & (channels(scan) == faulty_channel(model))
+
+
+def elevation_fault(xyz: np.ndarray, chosen: np.ndarray, offset_deg: float) -> np.ndarray:
+    """The ``chosen`` points reported ``offset_deg`` higher, at their range and azimuth."""
     out = xyz.copy()
-    chosen = channel == which
     r, az, el = spherical(xyz[chosen])
     out[chosen] = from_spherical(r, az, el + np.radians(offset_deg))
     return out
@@ -515,10 +521,10 @@ def faulted_pair(base: BasePair, case: Case) -> RegisteredPair:
         scale, offset = (1.0 + m, 0.0) if case.fault == "range_scale" else (1.0, m)
         s2 = _with_xyz(s2, in_each_lidar(s2, lambda k, own, mask, model: range_fault(own, scale, offset)))
     elif case.fault == "channel_elevation":  # of the first lidar
-        channel = channels(s2)
+        chosen = faulted_channel_mask(s2)
 
         def one_channel(k, own, mask, model):
-            return elevation_fault(own, channel[mask], faulty_channel(model), m) if k == 0 else own
+            return elevation_fault(own, chosen[mask], m) if k == 0 else own
 
         s2 = _with_xyz(s2, in_each_lidar(s2, one_channel))
     elif case.fault == "motion_distortion":

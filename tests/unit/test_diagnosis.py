@@ -29,7 +29,7 @@ def test_elevation_fault_moves_one_channel_only_and_keeps_range_and_azimuth():
     rng = np.random.default_rng(2)
     xyz = rng.normal(size=(400, 3)) * 8
     channel = rng.integers(0, 4, size=400)
-    faulty = zoo.elevation_fault(xyz, channel, 2, 0.3)
+    faulty = zoo.elevation_fault(xyz, channel == 2, 0.3)
     np.testing.assert_array_equal(faulty[channel != 2], xyz[channel != 2])
     (r0, az0, el0), (r1, az1, el1) = zoo.spherical(xyz[channel == 2]), zoo.spherical(faulty[channel == 2])
     np.testing.assert_allclose(r1, r0, rtol=1e-12)

@@ -54,6 +54,7 @@ def test_available_and_described():
         "realign",
         "range_calibration",
         "deskew",
+        "elevation_calibration",
         "plugin",
     ]
     described = describe_hypotheses()
@@ -89,7 +90,7 @@ def test_defaults_filled_and_study_grid_injected_into_shadow():
         (
             {"ego_vehicel": {}},
             "hypothesis 1 (ego_vehicel): unknown hypothesis; available: ego_vehicle, field_of_view, shadow, crop, "
-            "outliers, moving_objects, realign, range_calibration, deskew, plugin",
+            "outliers, moving_objects, realign, range_calibration, deskew, elevation_calibration, plugin",
         ),
         (
             {"shadow": {"jump": 1}},

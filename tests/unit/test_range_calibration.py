@@ -118,7 +118,9 @@ def test_names_what_is_missing(faulty):
     with pytest.raises(HypothesisError, match=r"range_calibration: no overlap: 0 points of cloud 2"):
         apply_step(apart, {"range_calibration": {}})
     bare = RegisteredPair(faulty.xyz1, faulty.xyz2, faulty.T_1_2)
-    with pytest.raises(HypothesisError, match="per_ring needs a ring attribute or a sensor model; cloud 2 has neither"):
+    with pytest.raises(
+        HypothesisError, match="per laser needs a ring attribute or a sensor model; cloud 2 has neither"
+    ):
         apply_step(bare, {"range_calibration": {"per_ring": True}})
     with pytest.raises(HypothesisError, match="need cloud 1 or 2, got 3"):
         apply_step(faulty, {"range_calibration": {"cloud": 3}})

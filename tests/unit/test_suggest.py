@@ -72,6 +72,7 @@ def test_default_candidates_are_the_builtins_not_yet_applied():
         "realign",
         "range_calibration",
         "deskew",
+        "elevation_calibration",
     ]  # corrections last
     shadow = candidate_steps(None, [], ".", grid)[2]["shadow"]
     assert shadow["grid"]["azimuth_bins"] == 12 and shadow["origins"] == [1, 2]  # the study's grid, defaults
@@ -91,6 +92,7 @@ def test_study_candidates_per_stage(tmp_path):
         "realign",
         "range_calibration",
         "deskew",
+        "elevation_calibration",
     ]
     assert [next(iter(s)) for s in study.candidates(2)] == [
         "ego_vehicle",
@@ -100,6 +102,7 @@ def test_study_candidates_per_stage(tmp_path):
         "realign",
         "range_calibration",
         "deskew",
+        "elevation_calibration",
     ]
     config = tmp_path / "study.yaml"
     config.write_text(

@@ -38,8 +38,9 @@ binned once) and compared with the stage's field:
   that thins the whole field (statistical outliers of every surface's edges) does not.
 - ``fitted_null``: the whitened reduction fitting the correction's free parameters to noise
   alone would give: its ``parameters`` (``fitted``: realign's rigid motion 6, a range
-  calibration 2, or 1 + one offset per ring with ``per_ring``; 0 for what fits nothing, as
-  ``deskew`` with the scan's recorded motion, and for a removal) over the whitened energy
+  calibration 2, or 1 + one offset per ring with ``per_ring``, an elevation calibration one
+  per laser it found off; 0 for what fits nothing, as ``deskew`` with the scan's recorded
+  motion or an elevation calibration that found no laser off, and for a removal) over the whitened energy
   before. A least-squares fit of p parameters takes about p from a chi^2 of noise, so a
   correction with more parameters always explains more of a field; ranked and stopped on its
   reduction beyond this, a per-laser calibration (33 parameters on an HDL-32E, 129 on an
@@ -65,7 +66,9 @@ Candidates are the config's ``suggest`` list, or by default every built-in hypot
 has not applied up to that stage, with its defaults: the removing ones and every correcting one
 (``CORRECTING``: a correction joins by being registered there). The per-laser calibration
 (``range_calibration`` with ``per_ring``) is not among them: on the zoo's real pairs it named no
-fault more and doubled explain's time (docs/diagnosis.md); a config's ``suggest`` can list it. A
+fault more and doubled explain's time (docs/diagnosis.md); a config's ``suggest`` can list it.
+``elevation_calibration`` is: it fits only the lasers its screen finds off, so it costs one
+pairing where none is, and its null counts the lasers it fitted. A
 default candidate that cannot apply to the pair (``NotApplicableError``:
 ``field_of_view`` without sensor models; for a correcting one any ``HypothesisError``, e.g.
 ``realign`` with too few points) is skipped with a logged line; a configured one is an error

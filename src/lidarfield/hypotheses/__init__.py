@@ -4,7 +4,8 @@ A hypothesis is a pure function ``(pair, params) -> (keep1, keep2)`` of a
 :class:`~lidarfield.pair.RegisteredPair` and a frozen dataclass of typed parameters, returning
 one boolean keep-mask per cloud, or an :class:`~.outcome.Outcome` that also corrects: the
 corrected coordinates of a cloud, sensor 2's corrected pose, and what it fitted (see
-:mod:`.outcome`; ``realign`` and ``range_calibration`` are the built-in ones). A stack entry
+:mod:`.outcome`; ``realign``, ``range_calibration``, ``deskew`` and ``elevation_calibration``
+are the built-in ones). A stack entry
 is a one-key mapping ``{name: {params}}``;
 :func:`validate_stack` checks every entry before anything runs and returns the normalised
 entries (defaults filled in, the study's grid filled into ``shadow``), which are what stage ids
@@ -26,6 +27,7 @@ from . import (
     crop,
     deskew,
     ego_vehicle,
+    elevation_calibration,
     field_of_view,
     moving_objects,
     outliers,
@@ -64,11 +66,12 @@ BUILTINS: dict[str, Hypothesis] = {
         _builtin(realign, "realign"),
         _builtin(range_calibration, "range_calibration"),
         _builtin(deskew, "deskew"),
+        _builtin(elevation_calibration, "elevation_calibration"),
     )
 }
 # The built-ins that correct (move a cloud) rather than remove; "what to try next" ranks them
 # after the removals among its default candidates (analysis.suggest).
-CORRECTING = frozenset({"realign", "range_calibration", "deskew"})
+CORRECTING = frozenset({"realign", "range_calibration", "deskew", "elevation_calibration"})
 PLUGIN = Hypothesis("plugin", plugin.run_plugin, plugin.Params, plugin.__doc__.strip().splitlines()[0])
 
 

@@ -54,17 +54,33 @@ TOLERANCE_M = 1e-4  # converged when no corrected range of the sample changes by
 
 
 @dataclass(frozen=True)
-class Params:
-    cloud: int = field(default=2, metadata=doc("the cloud whose ranges are calibrated: 1 or 2"))
-    per_ring: bool = field(
-        default=False, metadata=doc("one range offset per ring (the cloud's ring attribute), one common scale")
-    )
+class PlaneFit:
+    """The parameters of a fit that pairs a cloud's points with the other cloud's planes: this
+    one's and ``elevation_calibration``'s."""
+
     max_correspondence_m: float = field(
         default=0.5, metadata=doc("pairs of points farther apart than this are not used (m)")
     )
     max_points: int = field(default=20000, metadata=doc("at most this many points of the cloud in the fit"))
     normal_k: int = field(default=12, metadata=doc("the other cloud's normals from this many nearest points"))
     max_iterations: int = field(default=20, metadata=doc("pairing and solving iterations at most"))
+
+    def __post_init__(self):
+        if not self.max_correspondence_m > 0 or self.max_points < MIN_POINTS or self.max_iterations < 1:
+            raise ValueError(
+                f"need max_correspondence_m > 0, max_points >= {MIN_POINTS} and max_iterations >= 1, got "
+                f"{self.max_correspondence_m}, {self.max_points} and {self.max_iterations}"
+            )
+        if self.normal_k < 3:
+            raise ValueError(f"need normal_k >= 3, got {self.normal_k}")
+
+
+@dataclass(frozen=True)
+class Params(PlaneFit):
+    cloud: int = field(default=2, metadata=doc("the cloud whose ranges are calibrated: 1 or 2"))
+    per_ring: bool = field(
+        default=False, metadata=doc("one range offset per ring (the cloud's ring attribute), one common scale")
+    )
     max_scale_change: float = field(
         default=0.05, metadata=doc("a fitted scale further than this from 1 is no range calibration (an error)")
     )
@@ -75,32 +91,68 @@ class Params:
     def __post_init__(self):
         if self.cloud not in (1, 2):
             raise ValueError(f"need cloud 1 or 2, got {self.cloud}")
-        if not self.max_correspondence_m > 0 or self.max_points < MIN_POINTS or self.max_iterations < 1:
-            raise ValueError(
-                f"need max_correspondence_m > 0, max_points >= {MIN_POINTS} and max_iterations >= 1, got "
-                f"{self.max_correspondence_m}, {self.max_points} and {self.max_iterations}"
-            )
-        if self.normal_k < 3:
-            raise ValueError(f"need normal_k >= 3, got {self.normal_k}")
+        super().__post_init__()
         if not self.max_scale_change > 0 or not self.max_offset_m > 0:
             raise ValueError(
                 f"need max_scale_change > 0 and max_offset_m > 0, got {self.max_scale_change} and {self.max_offset_m}"
             )
 
 
-def range_calibration(pair: RegisteredPair, params: Params) -> Outcome:
-    """The chosen cloud's ranges corrected by a fitted scale and offset; nothing removed."""
-    from scipy.spatial import cKDTree
+class Planes:
+    """The other cloud's planes: its k-d tree, and its points' normals computed where asked."""
 
-    name = "range_calibration"
-    xyz, other = (pair.xyz2, pair.xyz1) if params.cloud == 2 else (pair.xyz1, pair.xyz2)
-    origin = pair.point_origins(params.cloud)  # each point's own lidar
+    def __init__(self, other: np.ndarray, params: PlaneFit):
+        from scipy.spatial import cKDTree
+
+        self.other, self.params = other, params
+        self.tree = cKDTree(other, balanced_tree=False, compact_nodes=False)  # faster to build, as fast to query
+        self.normals = np.full((len(other), 3), np.nan)
+
+    def pair(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The rows of ``points`` whose nearest point ``q`` of the other cloud is within
+        ``max_correspondence_m`` and on a plane, with ``n`` (that plane's normal) and ``q``."""
+        distance, nearest = self.tree.query(points, distance_upper_bound=self.params.max_correspondence_m)
+        paired = np.isfinite(distance)
+        index = nearest[paired]
+        _fill_normals(self.normals, self.other, self.tree, np.unique(index), self.params.normal_k)
+        n = self.normals[index]
+        planar = np.isfinite(n).all(axis=1)
+        return np.flatnonzero(paired)[planar], n[planar], self.other[index[planar]]
+
+
+def check_clouds(name: str, params, xyz: np.ndarray, other: np.ndarray) -> None:
+    """A HypothesisError when the chosen cloud ``xyz`` or the ``other`` is too small to fit."""
     for cloud, points, need in (
         (params.cloud, xyz, MIN_POINTS),
         (3 - params.cloud, other, max(MIN_POINTS, params.normal_k)),
     ):
         if len(points) < need:
             raise HypothesisError(f"{name}: too few points: cloud {cloud} has {len(points)}, it needs at least {need}")
+
+
+def check_overlap(name: str, params, pairs: int) -> None:
+    """A HypothesisError when fewer than ``MIN_POINTS`` points were paired with a plane."""
+    if pairs < MIN_POINTS:
+        raise HypothesisError(
+            f"{name}: no overlap: {pairs} points of cloud {params.cloud} have a point of cloud "
+            f"{3 - params.cloud} on a plane within max_correspondence_m = {params.max_correspondence_m} m, "
+            f"it needs at least {MIN_POINTS}"
+        )
+
+
+def evenly_spaced(rows: np.ndarray, most: int) -> np.ndarray:
+    """At most ``most`` of ``rows``, evenly spaced (the fit's sample)."""
+    if len(rows) <= most:
+        return rows
+    return rows[np.linspace(0, len(rows) - 1, most).round().astype(np.int64)]
+
+
+def range_calibration(pair: RegisteredPair, params: Params) -> Outcome:
+    """The chosen cloud's ranges corrected by a fitted scale and offset; nothing removed."""
+    name = "range_calibration"
+    xyz, other = (pair.xyz2, pair.xyz1) if params.cloud == 2 else (pair.xyz1, pair.xyz2)
+    origin = pair.point_origins(params.cloud)  # each point's own lidar
+    check_clouds(name, params, xyz, other)
     ring = cloud_channels(pair, params.cloud) if params.per_ring else None
 
     d = xyz - origin
@@ -108,13 +160,9 @@ def range_calibration(pair: RegisteredPair, params: Params) -> Outcome:
     measurable = r > 1e-9
     u = np.zeros_like(d)
     u[measurable] = d[measurable] / r[measurable, None]
-    candidates = np.flatnonzero(measurable)
-    if len(candidates) > params.max_points:
-        candidates = candidates[np.linspace(0, len(candidates) - 1, params.max_points).round().astype(np.int64)]
+    candidates = evenly_spaced(np.flatnonzero(measurable), params.max_points)
     groups, group_of = _groups(ring, candidates)
-
-    tree = cKDTree(other, balanced_tree=False, compact_nodes=False)  # faster to build, as fast to query
-    normals = np.full((len(other), 3), np.nan)  # the other cloud's normals, computed where needed
+    planes = Planes(other, params)
     rs, us, origins = r[candidates], u[candidates], np.broadcast_to(origin, xyz.shape)[candidates]
     r_max = float(rs.max())
     theta = np.concatenate([[1.0], np.zeros(len(groups))])  # alpha, then beta per group
@@ -122,20 +170,8 @@ def range_calibration(pair: RegisteredPair, params: Params) -> Outcome:
     while iterations < params.max_iterations and not converged:
         iterations += 1
         corrected = origins + (theta[0] * rs - theta[1:][group_of])[:, None] * us
-        distance, nearest = tree.query(corrected, distance_upper_bound=params.max_correspondence_m)
-        paired = np.isfinite(distance)
-        index = nearest[paired]
-        _fill_normals(normals, other, tree, np.unique(index), params.normal_k)
-        n = normals[index]
-        planar = np.isfinite(n).all(axis=1)
-        use = np.flatnonzero(paired)[planar]
-        if len(use) < MIN_POINTS:
-            raise HypothesisError(
-                f"{name}: no overlap: {len(use)} points of cloud {params.cloud} have a point of cloud "
-                f"{3 - params.cloud} on a plane within max_correspondence_m = {params.max_correspondence_m} m, "
-                f"it needs at least {MIN_POINTS}"
-            )
-        n, q = n[planar], other[index[planar]]
+        use, n, q = planes.pair(corrected)
+        check_overlap(name, params, len(use))
         nu = np.einsum("ij,ij->i", n, us[use])
         # the Jacobian's rows: r (n . u) for alpha, -(n . u) for the point's group's beta
         a, b, g = rs[use] * nu, -nu, group_of[use]
@@ -208,20 +244,22 @@ def range_calibration(pair: RegisteredPair, params: Params) -> Outcome:
     return Outcome(keep1, keep2, xyz1=new_xyz, fitted=fitted)
 
 
-def cloud_channels(pair: RegisteredPair, cloud: int) -> np.ndarray:
+def cloud_channels(pair: RegisteredPair, cloud: int, name: str = "range_calibration") -> np.ndarray:
     """Each point's channel (laser) of cloud 1 or 2, whose range offset ``per_ring`` fits: its
     ``ring`` attribute, else the channel of its own lidar's model nearest its elevation about
     that lidar, numbered from the lowest. A return's elevation lies within a few hundredths of a
     degree of its beam's, and beams are at least 0.3 deg apart, so the elevation names the laser
     where the scan does not record it. A rig's lidars are numbered one after another (each
-    lidar's rings or channels past the last of the one before): two lidars' ring 0 are two lasers."""
-    name, attributes = "range_calibration", pair.attributes1 if cloud == 1 else pair.attributes2
+    lidar's rings or channels past the last of the one before): two lidars' ring 0 are two lasers.
+    ``name``: the hypothesis that asks (``elevation_calibration`` numbers its lasers the same way),
+    for its error messages."""
+    attributes = pair.attributes1 if cloud == 1 else pair.attributes2
     ring = attributes.get("ring")
     if ring is not None and not np.isfinite(ring).all():
-        raise HypothesisError(f"{name}: per_ring: cloud {cloud} has points without a ring")
+        raise HypothesisError(f"{name}: per laser: cloud {cloud} has points without a ring")
     views = pair.lidars(cloud)
     if ring is None and any(view.sensor is None for view in views):
-        raise HypothesisError(f"{name}: per_ring needs a ring attribute or a sensor model; cloud {cloud} has neither")
+        raise HypothesisError(f"{name}: per laser needs a ring attribute or a sensor model; cloud {cloud} has neither")
     xyz = pair.xyz1 if cloud == 1 else pair.xyz2
     channel, first = np.zeros(len(xyz), dtype=np.int64), 0
     for view in views:

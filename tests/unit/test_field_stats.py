@@ -9,8 +9,10 @@ import numpy as np
 
 from helpers.clouds import voxel_centre_clouds
 from lidarfield.analysis.field_stats import field_statistics, summary_json_safe, weighted_rigid_transform
+from lidarfield.analysis.tags import vector_tags
 from lidarfield.field.grid import FieldSettings, SphericalGrid
 from lidarfield.field.kernel import discrepancy_field
+from lidarfield.field.rigid_fit import field_rigid_part
 
 GRID = SphericalGrid()  # the grid voxel_centre_clouds fills: 36 x 10 deg, 5 x 8 deg from -20 to +20
 
@@ -62,6 +64,27 @@ def test_rigid_part_recovers_a_small_yaw():
     assert abs(stats["rigid_rotation_deg"] - 2.0) < 0.05
     assert np.allclose(stats["rigid_translation_m"], 0.0, atol=1e-6)
     assert stats["rigid_energy_share"] > 0.999999
+
+
+def test_the_rigid_part_given_is_the_one_the_statistics_and_tags_read():
+    """analyse_field fits the rigid part once and hands it to the tags and the statistics: with
+    the field's own part they are those computed without it, to the bit; with another field's
+    part, that part is what they report (it is read, not fitted again)."""
+    xyz1 = voxel_centre_clouds(per_voxel=40, seed=2)
+    field = discrepancy_field(xyz1, xyz1 @ yaw(2.0).T, FieldSettings(GRID))
+    settings = FieldSettings(GRID)
+    own = field_rigid_part(field)
+    assert json.dumps(field_statistics(field, settings, own)) == json.dumps(field_statistics(field, settings))
+    for tag, flags in vector_tags(field, own).items():
+        assert np.array_equal(flags, vector_tags(field)[tag]), tag
+    assert vector_tags(field)["rigid"].all()  # a yaw: every vector is the rigid part's
+    shifted = discrepancy_field(xyz1, xyz1 + [0.01, 0.0, 0.0], FieldSettings(GRID))
+    other = field_rigid_part(shifted)
+    stats = field_statistics(field, settings, other)
+    np.testing.assert_allclose(stats["rigid_translation_m"], [-0.01, 0.0, 0.0], atol=1e-9)
+    assert stats["rigid_rotation_deg"] < 1e-6
+    far = (own[0], np.ones_like(own[1]))  # residuals of 1 m: no vector is its rigid part's
+    assert not vector_tags(field, far)["rigid"].any()
 
 
 def test_rigid_part_of_a_translation_is_its_inverse():

@@ -175,6 +175,9 @@ def test_a_ring_with_mixed_returns_is_matched_by_its_median_elevation():
     elevation[:400] += 2 * np.radians(2.0)
     rings = measured_rings(elevation, true.astype(float))
     assert np.degrees(rings.elevation[rings.names == 3][0]) == pytest.approx(-9.0, abs=0.05)
+    # each ring's spread (computed when asked for) against a plain per-ring reference
+    plain = [np.median(np.abs(elevation[true == n] - np.median(elevation[true == n]))) for n in rings.names]
+    assert np.array_equal(rings.spread, plain) and rings.spread[rings.names == 3][0] > np.radians(0.01)
     mean = np.degrees(elevation[true == 3].mean())
     assert abs(mean + 9.0) > 1.0  # nearer the channel above than its own
     assert np.array_equal(fs.channel_rows(elevation, channels, true.astype(float)), true)

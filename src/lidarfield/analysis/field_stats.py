@@ -36,7 +36,7 @@ from ..defaults import default
 from ..field.grid import FieldSettings
 from ..field.kernel import NORMAL_READ_COLUMN, SURFACE_COLUMNS, WHITENED_COLUMNS
 from ..field.pair_field import pair_field
-from ..field.rigid_fit import field_rigid_part
+from ..field.rigid_fit import RigidFit, field_rigid_part
 from ..pair import RegisteredPair
 from ..poses import weighted_rigid_transform  # noqa: F401 (re-exported: the tests' Kabsch)
 from .randomness import neighbour_pairs, randomness_tests
@@ -69,15 +69,21 @@ def analyse_field(pair: RegisteredPair, settings: FieldSettings) -> tuple[dict[s
     """The field of a pair (``pair_field``) with its tag columns, and its statistics (with the
     edges used and why)."""
     columns, binning, ids = pair_field(pair, settings)
-    columns.update(voxel_tags(columns, pair, binning.settings, ids))
-    return columns, {**field_statistics(columns, binning.settings), **binning.statistics()}
+    rigid = field_rigid_part(columns)  # fitted once: the tags and the statistics both read it
+    columns.update(voxel_tags(columns, pair, binning.settings, ids, rigid))
+    return columns, {**field_statistics(columns, binning.settings, rigid), **binning.statistics()}
 
 
-def field_statistics(columns: dict[str, np.ndarray], settings: FieldSettings | None = None) -> dict:
+def field_statistics(
+    columns: dict[str, np.ndarray],
+    settings: FieldSettings | None = None,
+    rigid: tuple[RigidFit, np.ndarray] | None = None,
+) -> dict:
     """The summary figures of a field (the columns of ``field.discrepancy_field``).
 
     ``settings`` gives ``z_min`` (default 3) and the grid whose neighbours the coherence test
     uses; without it ``p_coherence`` is NaN and the verdict rests on the directions alone.
+    ``rigid``: the field's ``field_rigid_part``, when the caller has it.
     """
     valid = np.asarray(columns["valid"], dtype=bool)
     uvw = np.column_stack([columns[c][valid] for c in ("u", "v", "w")]).astype(np.float64)
@@ -94,7 +100,7 @@ def field_statistics(columns: dict[str, np.ndarray], settings: FieldSettings | N
     else:
         for key in ("max_magnitude", "mean_magnitude", "rms_magnitude", "p95_magnitude", "paper_max_metric"):
             stats[key] = math.nan
-    fit, residual = field_rigid_part(columns)
+    fit, residual = rigid or field_rigid_part(columns)
     stats["rigid_translation_m"] = [float(c) for c in fit.translation]
     stats["rigid_rotation_deg"] = fit.rotation_deg
     stats["rigid_energy_share"] = rigid_energy_share(uvw, residual[valid], weight)

@@ -38,7 +38,7 @@ import numpy as np
 from ..errors import HypothesisError
 from ..field.grid import FieldSettings, SphericalGrid
 from ..field.kernel import WHITENED_COLUMNS
-from ..field.rigid_fit import field_rigid_part
+from ..field.rigid_fit import RigidFit, field_rigid_part
 from ..pair import RegisteredPair
 
 TAGS = ("fov_edge", "near_sensor", "depth_edge", "radial", "rigid", "count_imbalance")
@@ -77,9 +77,11 @@ def voxel_tags(
     pair: RegisteredPair,
     settings: FieldSettings,
     ids: tuple[np.ndarray, np.ndarray] | None = None,
+    rigid: tuple[RigidFit, np.ndarray] | None = None,
 ) -> dict[str, np.ndarray]:
     """``{tag_column(tag): bool (V,)}`` for the field ``columns`` of ``pair`` (binned about
-    sensor 1); ``ids``: each cloud's voxel ids, when the caller has them."""
+    sensor 1); ``ids``: each cloud's voxel ids, and ``rigid``: the field's
+    ``field_rigid_part``, when the caller has them."""
     valid = np.asarray(columns["valid"], dtype=bool)
     voxel = np.asarray(columns["voxel"], dtype=np.int64)
     ids = ids or tuple(settings.grid.assign(xyz) for xyz in (pair.xyz1, pair.xyz2))
@@ -94,17 +96,21 @@ def voxel_tags(
         "fov_edge": point_tag(_near_fov_edge(pair)),
         "near_sensor": point_tag([_near_a_sensor(xyz, pair) for xyz in (pair.xyz1, pair.xyz2)]),
         "depth_edge": point_tag(_on_depth_edge(pair, settings)),
-        **vector_tags(columns),
+        **vector_tags(columns, rigid),
         "count_imbalance": _imbalanced(columns["n1"], columns["n2"]),
     }
     return {tag_column(tag): tags[tag] & valid for tag in TAGS}
 
 
-def vector_tags(columns: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+def vector_tags(
+    columns: dict[str, np.ndarray], rigid_part: tuple[RigidFit, np.ndarray] | None = None
+) -> dict[str, np.ndarray]:
     """``{"rigid": bool (V,), "radial": bool (V,)}``: the tags of the vectors alone (no points
-    needed), for a field with the surface columns; invalid voxels carry none."""
+    needed), for a field with the surface columns; invalid voxels carry none. ``rigid_part``:
+    the field's ``field_rigid_part``, when the caller has it."""
     valid = np.asarray(columns["valid"], dtype=bool)
-    rigid = _rigid(columns, valid)
+    _, residual = rigid_part or field_rigid_part(columns)
+    rigid = _rigid(columns, valid, residual)
     return {"rigid": rigid, "radial": _radial(columns) & ~rigid & valid}
 
 
@@ -168,8 +174,7 @@ def _radial(columns: dict[str, np.ndarray]) -> np.ndarray:
     return np.abs(cosine) >= math.cos(math.radians(RADIAL_DEG))
 
 
-def _rigid(columns: dict[str, np.ndarray], valid: np.ndarray) -> np.ndarray:
-    _, residual = field_rigid_part(columns)
+def _rigid(columns: dict[str, np.ndarray], valid: np.ndarray, residual: np.ndarray) -> np.ndarray:
     magnitude = np.asarray(columns["magnitude"], dtype=np.float64)
     with np.errstate(invalid="ignore"):
         return valid & (magnitude > 0) & (np.linalg.norm(residual, axis=1) <= RIGID_RESIDUAL_SHARE * magnitude)

@@ -32,7 +32,7 @@ def explained(pair, study, out: Path, background: bool):
         explanation = explain_pair(
             pair, study.grid, study.grid_section, ExplainSettings(max_steps=2), None, ".", "pair", figures
         )
-        write_explanation(explanation, study.grid, study.grid_section, out, plots, figures.paths())
+        write_explanation(explanation, study.grid, study.grid_section, out, plots, figures.paths)
     return explanation
 
 

@@ -221,7 +221,7 @@ def explain_into(pair: RegisteredPair, study: Study, out_dir: Path) -> Explanati
     name, plots = out_dir.resolve().name, study.config["plots"]
     with StageFigures(name, study.grid, out_dir, plots, background=candidate_threads() > 1) as figures:
         explanation = explain_with_study(pair, study, name, on_stage=figures)
-        write_explanation(explanation, study.grid, study.grid_section, out_dir, plots, figures.paths())
+        write_explanation(explanation, study.grid, study.grid_section, out_dir, plots, figures.paths)
     return explanation
 
 

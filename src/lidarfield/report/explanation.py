@@ -19,6 +19,7 @@ import logging
 import multiprocessing
 import shutil
 from collections import Counter
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -66,20 +67,26 @@ def write_explanation(
     grid_section: dict,
     out_dir: str | Path,
     plots: dict | None,
-    figures: list[list[Path]] | None = None,
+    figures: Callable[[], list[list[Path]]] | None = None,
 ) -> list[Path]:
     """Write an explanation's folder (see the module docstring); returns the files written.
-    ``figures``: each stage's, already drawn into it (``StageFigures``); None: drawn here."""
+    ``figures``: returns each stage's, drawn into it (``StageFigures.paths``), called once the
+    page's pair figures are drawn (the last stage's may be drawn meanwhile by another process);
+    None: drawn here."""
     out_dir = Path(out_dir)
+    rows = explanation.summary_rows()
+    pair_images = [pair_figure_png(stem, rows, DPI) for stem, _ in PAIR_FIGURES]
     if figures is None:
-        figures = draw_explanation(explanation, settings, fresh_figures_dir(out_dir), plots)
+        drawn = draw_explanation(explanation, settings, fresh_figures_dir(out_dir), plots)
+    else:
+        drawn = figures()
     written = [out_dir / name for name in (STACK_FILE, STEPS_FILE, RECORD_FILE, PAGE_FILE)]
     stack = stack_config(explanation, grid_section)
     write_text(written[0], stack)
     write_text(written[1], steps_csv(explanation.steps))
     write_text(written[2], json.dumps(summary_json_safe(explanation.record()), indent=1, allow_nan=False) + "\n")
-    write_text(written[3], explain_page(explanation, stack, figures, out_dir))
-    return written + [path for paths in figures for path in paths]
+    write_text(written[3], explain_page(explanation, stack, pair_images, drawn, out_dir))
+    return written + [path for paths in drawn for path in paths]
 
 
 def fresh_figures_dir(out_dir: Path) -> Path:
@@ -205,11 +212,12 @@ def _received(child, receive) -> list[Path]:
     return result
 
 
-def explain_page(explanation: Explanation, stack: str, figures: list[list[Path]], out_dir: Path) -> str:
-    """The page: the steps' table, the stack found, the pair figures stage by stage, and each
-    step's figures."""
+def explain_page(
+    explanation: Explanation, stack: str, pair_images: list[bytes], figures: list[list[Path]], out_dir: Path
+) -> str:
+    """The page: the steps' table, the stack found, the pair figures stage by stage
+    (``pair_images``, PNG, in ``PAIR_FIGURES``' order), and each step's figures."""
     name = explanation.pair_name
-    rows = explanation.summary_rows()
     body = [
         f"<h1>explain · {esc(name)}</h1>",
         f'<p class="note">lidarfield {esc(__version__)}. From the registered pair, the loop applied the best '
@@ -229,7 +237,7 @@ def explain_page(explanation: Explanation, stack: str, figures: list[list[Path]]
         f"<pre>{esc(stack)}</pre>",
         "<h2>Stage by stage</h2>",
         '<div class="figures">',
-        *(image(pair_figure_png(stem, rows, DPI), f"{name}: {caption}") for stem, caption in PAIR_FIGURES),
+        *(image(png, f"{name}: {caption}") for png, (_, caption) in zip(pair_images, PAIR_FIGURES)),
         "</div>",
         "<h2>Each step</h2>",
     ]

@@ -3,6 +3,7 @@ simulated traffic counted from the simulator's object labels."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from pathlib import Path
 
@@ -316,3 +317,26 @@ def test_empty_and_tiny_clouds_are_kept_whole(sizes):
     pair = RegisteredPair(xyz1, xyz2, np.eye(4), SENSOR, SENSOR, registration={"method": "truth"})
     keep1, keep2 = apply_step(pair, {"moving_objects": {}})
     assert keep1.all() and keep2.all() and (len(keep1), len(keep2)) == sizes
+
+
+def test_seen_through_is_remembered_for_the_same_pair_and_parameters_only(traffic_pair, monkeypatch):
+    """Issue 38: a stage's suggestions ask ``seen_through`` twice; the second answer is the first
+    (not computed again), and a pair corrected into a new object (sensor 2 1 m off) or other
+    parameters get their own, as computed afresh."""
+    computed = []
+    evidence = mo.pair_evidence
+    monkeypatch.setattr(mo, "pair_evidence", lambda *args: computed.append(1) or evidence(*args))
+    first = mo.seen_through(traffic_pair, mo.Params())
+    assert mo.seen_through(traffic_pair, mo.Params()) is first and len(computed) == 1
+    assert not first[0].flags.writeable  # shared by its callers: read-only
+    T = traffic_pair.T_1_2.copy()
+    T[:3, 3] += [1.0, 0.0, 0.0]
+    moved = dataclasses.replace(traffic_pair, xyz2=traffic_pair.xyz2 + [1.0, 0.0, 0.0], T_1_2=T)
+    wide = mo.Params(margin_m=0.5)
+    for pair, params in ((moved, mo.Params()), (traffic_pair, wide)):
+        remembered = mo.seen_through(pair, params)
+        mo.LAST_SEEN.clear()
+        afresh = mo.seen_through(pair, params)
+        for a, b in zip(remembered, afresh):
+            np.testing.assert_array_equal(a, b)
+        assert any((a != before).any() for a, before in zip(afresh, first))  # not the first's

@@ -82,6 +82,10 @@ hypothesis left unchanged, as a no-op ``crop`` appended to a stack does) is reus
 (``known``) instead of running the candidate again; after an edit of the code no row written
 before it is reused. Plugin candidates are always run: their source can change under the same
 parameters.
+
+The candidates a stage runs are independent: they are evaluated by a pool of threads
+(``candidate_threads``: the usable cores, one in a workflow job), each row then completed and
+ranked in the candidates' order, so the table is the serial one bit for bit.
 """
 
 from __future__ import annotations
@@ -93,6 +97,8 @@ import json
 import logging
 import math
 import time
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -105,6 +111,7 @@ from ..field.kernel import field_from_voxel_ids
 from ..field.pair_field import scan_patterns
 from ..hypotheses import BUILTINS, CORRECTING, apply_step, validate_step
 from ..hypotheses.outcome import Outcome, displacement
+from ..hypotheses.outliers import neighbour_threads
 from ..hypotheses.steps import step_name
 from ..io.parquet_table import read_metadata, read_table, write_table
 from ..pair import RegisteredPair
@@ -176,6 +183,7 @@ def suggestions(
     defaults: bool = False,
     known: dict[tuple[str, str], dict] | None = None,
     outcomes: dict[tuple[str, str], Outcome] | None = None,
+    workers: int | None = None,
 ) -> dict[str, np.ndarray]:
     """The suggestion table (``SUGGESTION_COLUMNS``, one row per candidate, sorted by rank).
 
@@ -195,7 +203,18 @@ def suggestions(
     patterns = scan_patterns(pair)
     before = field_from_voxel_ids(ids1, pair.xyz1, ids2, pair.xyz2, settings, patterns=patterns)
     shares = tag_energy_shares(before)
-    total = len(pair.xyz1) + len(pair.xyz2)
+    todo = [(k, spec) for k, (spec, row) in enumerate(zip(candidates, reused), start=1) if row is None]
+    stage = StagePoints(pair, settings, ids1, ids2, patterns, before, shares)
+
+    def evaluate(task: tuple[int, dict]) -> tuple[dict | None, Outcome | None]:
+        return candidate_row(stage, *task, base_dir, study_grid, defaults)
+
+    threads = min(len(todo), candidate_threads() if workers is None else workers)
+    if threads > 1:  # the candidates are independent; numpy, scipy and Open3D release the GIL
+        with ThreadPoolExecutor(threads) as pool:
+            evaluated = dict(zip((k for k, _ in todo), pool.map(evaluate, todo)))
+    else:
+        evaluated = {k: evaluate((k, spec)) for k, spec in todo}
     seen = None  # the points seen through, found once, for the first candidate that removes any
     rows = []
     for k, (spec, row) in enumerate(zip(candidates, reused), start=1):
@@ -203,77 +222,117 @@ def suggestions(
             log.info("candidate %s %s reused: the same points and grid", row["hypothesis"], row["params"])
             rows.append(row)
             continue
-        start = time.perf_counter()
-        try:
-            outcome = apply_step(pair, spec, base_dir, study_grid)
-        except HypothesisError as e:
-            cannot_apply = isinstance(e, NotApplicableError) or step_name(spec) in CORRECTING
-            if not (defaults and cannot_apply):
-                raise HypothesisError(f"suggest entry {k}: {e}") from None
-            log.info("candidate %s skipped: it does not apply to this pair (%s)", step_name(spec), e)
+        row, outcome = evaluated[k]
+        if row is None:
             continue
         if outcomes is not None and candidate_key(spec)[0]:
             outcomes[candidate_key(spec)] = outcome
-        keep1, keep2 = outcome
-        removed1, removed2 = int(np.count_nonzero(~keep1)), int(np.count_nonzero(~keep2))
-        moved = [displacement(pair.xyz1, outcome.xyz1), displacement(pair.xyz2, outcome.xyz2)]
-        tag = next((t for t, name in TAG_CORRECTIONS.items() if name == step_name(spec)), "")
-        if outcome.xyz1 is not None or outcome.xyz2 is not None:  # a correction: the moved points' field
-            xyz1 = pair.xyz1 if outcome.xyz1 is None else outcome.xyz1
-            xyz2 = pair.xyz2 if outcome.xyz2 is None else outcome.xyz2
-            xyz1, xyz2 = xyz1[keep1], xyz2[keep2]
-            corrected = pair if outcome.T_1_2 is None else dataclasses.replace(pair, T_1_2=outcome.T_1_2)
-            after = field_from_voxel_ids(
-                settings.grid.assign(xyz1),
-                xyz1,
-                settings.grid.assign(xyz2),
-                xyz2,
-                settings,
-                patterns=scan_patterns(corrected),
-            )
-        elif removed1 or removed2:
-            after = field_from_voxel_ids(
-                ids1[keep1], pair.xyz1[keep1], ids2[keep2], pair.xyz2[keep2], settings, patterns=patterns
-            )
-        else:  # the same points: the same field (as a no-op ego_vehicle or crop often is)
-            after = before
-        row = {
-            "hypothesis": step_name(spec),
-            "params": canonical_json(spec[step_name(spec)]),
-            "removed1": removed1,
-            "removed2": removed2,
-            "removed_share": (removed1 + removed2) / total if total else math.nan,
-            "corrects": outcome.corrects,
-            "displacement_median_m": max(m[0] for m in moved),
-            "displacement_max_m": max(m[1] for m in moved),
-            "fitted": canonical_json(outcome.fitted),
-            "suggested_by": tag,
-            "tag_share": shares.get(tag, math.nan),
-            **compare_fields(before, after, fitted_parameters(outcome.fitted)),
-        }
-        if not (removed1 or removed2):  # a correction moves points between voxels, it removes none
-            row["removal_null"] = 0.0
-        if outcome.corrects:
-            row |= {"seen_through_removed": math.nan, "seen_through_null": math.nan}
-        elif removed1 or removed2:
+        if row["seen_through_removed"] is None:  # a removal of some points
             seen = seen_through_points(pair) if seen is None else seen
-            row |= seen_through_columns(seen, ids1, ids2, keep1, keep2)
-        else:
-            row |= {"seen_through_removed": 0.0, "seen_through_null": 0.0}
-        log.info(
-            "candidate %s %s: energy reduction %.3f (whitened %.3f), %d + %d points removed, moved up to %.3f m "
-            "(%.2f s)",
-            row["hypothesis"],
-            row["params"],
-            row["energy_reduction"],
-            row["whitened_reduction"],
-            removed1,
-            removed2,
-            row["displacement_max_m"],
-            time.perf_counter() - start,
-        )
+            row |= seen_through_columns(seen, ids1, ids2, *outcome)
         rows.append(row)
     return rank_table(rows)
+
+
+@dataclass(frozen=True)
+class StagePoints:
+    """What every candidate of a stage is compared with: the pair binned once (voxel ids of
+    each cloud on the stage's own grid), its scan patterns, its field and the tags' shares."""
+
+    pair: RegisteredPair
+    settings: FieldSettings
+    ids1: np.ndarray
+    ids2: np.ndarray
+    patterns: object
+    before: dict[str, np.ndarray]
+    shares: dict[str, float]
+
+
+def candidate_row(
+    stage: StagePoints,
+    k: int,
+    spec: dict,
+    base_dir: str | Path,
+    study_grid: dict | None,
+    defaults: bool,
+) -> tuple[dict | None, Outcome | None]:
+    """Suggest entry ``k`` (``spec``) applied to the stage: its row (all ``SUGGESTION_COLUMNS``
+    but ``rank``; ``seen_through_*`` None for a removal of some points, which needs the points
+    seen through) and its outcome; (None, None) for a default candidate that cannot apply."""
+    pair, settings, ids1, ids2 = stage.pair, stage.settings, stage.ids1, stage.ids2
+    start = time.perf_counter()
+    try:
+        outcome = apply_step(pair, spec, base_dir, study_grid)
+    except HypothesisError as e:
+        cannot_apply = isinstance(e, NotApplicableError) or step_name(spec) in CORRECTING
+        if not (defaults and cannot_apply):
+            raise HypothesisError(f"suggest entry {k}: {e}") from None
+        log.info("candidate %s skipped: it does not apply to this pair (%s)", step_name(spec), e)
+        return None, None
+    keep1, keep2 = outcome
+    removed1, removed2 = int(np.count_nonzero(~keep1)), int(np.count_nonzero(~keep2))
+    moved = [displacement(pair.xyz1, outcome.xyz1), displacement(pair.xyz2, outcome.xyz2)]
+    tag = next((t for t, name in TAG_CORRECTIONS.items() if name == step_name(spec)), "")
+    if outcome.xyz1 is not None or outcome.xyz2 is not None:  # a correction: the moved points' field
+        xyz1 = pair.xyz1 if outcome.xyz1 is None else outcome.xyz1
+        xyz2 = pair.xyz2 if outcome.xyz2 is None else outcome.xyz2
+        xyz1, xyz2 = xyz1[keep1], xyz2[keep2]
+        corrected = pair if outcome.T_1_2 is None else dataclasses.replace(pair, T_1_2=outcome.T_1_2)
+        after = field_from_voxel_ids(
+            settings.grid.assign(xyz1),
+            xyz1,
+            settings.grid.assign(xyz2),
+            xyz2,
+            settings,
+            patterns=scan_patterns(corrected),
+        )
+    elif removed1 or removed2:
+        after = field_from_voxel_ids(
+            ids1[keep1], pair.xyz1[keep1], ids2[keep2], pair.xyz2[keep2], settings, patterns=stage.patterns
+        )
+    else:  # the same points: the same field (as a no-op ego_vehicle or crop often is)
+        after = stage.before
+    total = len(pair.xyz1) + len(pair.xyz2)
+    row = {
+        "hypothesis": step_name(spec),
+        "params": canonical_json(spec[step_name(spec)]),
+        "removed1": removed1,
+        "removed2": removed2,
+        "removed_share": (removed1 + removed2) / total if total else math.nan,
+        "corrects": outcome.corrects,
+        "displacement_median_m": max(m[0] for m in moved),
+        "displacement_max_m": max(m[1] for m in moved),
+        "fitted": canonical_json(outcome.fitted),
+        "suggested_by": tag,
+        "tag_share": stage.shares.get(tag, math.nan),
+        **compare_fields(stage.before, after, fitted_parameters(outcome.fitted)),
+    }
+    if not (removed1 or removed2):  # a correction moves points between voxels, it removes none
+        row["removal_null"] = 0.0
+    if outcome.corrects:
+        row |= {"seen_through_removed": math.nan, "seen_through_null": math.nan}
+    elif removed1 or removed2:
+        row |= {"seen_through_removed": None, "seen_through_null": None}
+    else:
+        row |= {"seen_through_removed": 0.0, "seen_through_null": 0.0}
+    log.info(
+        "candidate %s %s: energy reduction %.3f (whitened %.3f), %d + %d points removed, moved up to %.3f m (%.2f s)",
+        row["hypothesis"],
+        row["params"],
+        row["energy_reduction"],
+        row["whitened_reduction"],
+        removed1,
+        removed2,
+        row["displacement_max_m"],
+        time.perf_counter() - start,
+    )
+    return row, outcome
+
+
+def candidate_threads() -> int:
+    """Threads evaluating a stage's candidates: ``OMP_NUM_THREADS`` if set (a workflow job's
+    is 1), else the usable cores."""
+    return neighbour_threads()
 
 
 def rank_table(rows: list[dict]) -> dict[str, np.ndarray]:

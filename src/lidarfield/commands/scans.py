@@ -8,13 +8,14 @@ from __future__ import annotations
 
 import json
 import logging
+from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
 
 from ..analysis.stopping_rule import explain_settings
-from ..analysis.suggest import points_digest, rows_by_candidate, suggestions, write_suggestions
+from ..analysis.suggest import candidate_threads, points_digest, rows_by_candidate, suggestions, write_suggestions
 from ..errors import ConfigError, InputError
 from ..io import read_scan, write_scan
 from ..io.atomic import write_text
@@ -199,24 +200,36 @@ def explain_scans(
     """``lidarfield explain``: two scans read and registered as ``lidarfield run`` does, the loop
     on the grid, ``suggest`` and ``explain`` settings of the config (the schema's defaults
     without one; its ``hypotheses`` are not used), and the explanation's folder written."""
-    from ..report.explanation import write_explanation  # the figures: matplotlib, only here
     from ..study.config import load_config, validate_config
 
     out_dir = check_out_dir(out_dir, EXPLAIN_MARKER, "lidarfield explain")
     study = validate_config({}, require_pairs=False) if config_path is None else load_config(config_path, None, False)
     settings = registration_settings(register, transform)
     _, pair = read_and_register(scan1, scan2, settings, sensor, poses)
-    explanation = explain_with_study(pair, study, out_dir.resolve().name)
-    out_dir.mkdir(parents=True, exist_ok=True)
+    out_dir.mkdir(parents=True, exist_ok=True)  # marked first: the figures are drawn as the loop goes
     run = {"scan1": str(scan1), "scan2": str(scan2), "config": config_path and str(config_path), "register": settings}
     write_text(out_dir / EXPLAIN_MARKER, json.dumps({**run, "sensor": sensor, "poses": poses}, indent=1) + "\n")
-    write_explanation(explanation, study.grid, study.grid_section, out_dir, study.config["plots"])
+    return explain_into(pair, study, out_dir)
+
+
+def explain_into(pair: RegisteredPair, study: Study, out_dir: Path) -> Explanation:
+    """The loop on a registered pair (``explain_with_study``) and its folder written into
+    ``out_dir``: each stage's figures drawn as soon as it is decided, by a second process
+    while the loop goes on when more than one core is usable (``candidate_threads``)."""
+    from ..report.explanation import StageFigures, write_explanation  # the figures: matplotlib, only here
+
+    name, plots = out_dir.resolve().name, study.config["plots"]
+    with StageFigures(name, study.grid, out_dir, plots, background=candidate_threads() > 1) as figures:
+        explanation = explain_with_study(pair, study, name, on_stage=figures)
+        write_explanation(explanation, study.grid, study.grid_section, out_dir, plots, figures.paths)
     return explanation
 
 
-def explain_with_study(pair: RegisteredPair, study: Study, pair_name: str) -> Explanation:
+def explain_with_study(
+    pair: RegisteredPair, study: Study, pair_name: str, on_stage: Callable[[list], None] | None = None
+) -> Explanation:
     """The loop on a registered pair with a study config's grid, ``suggest`` and ``explain``
-    settings: what ``lidarfield explain`` runs once it has
+    settings (``on_stage``: ``explain_pair``'s): what ``lidarfield explain`` runs once it has
     registered the scans, and what the diagnosis benchmark runs on each case."""
     return explain_pair(
         pair,
@@ -226,6 +239,7 @@ def explain_with_study(pair: RegisteredPair, study: Study, pair_name: str) -> Ex
         study.suggest,
         study.base_dir,
         pair_name,
+        on_stage,
     )
 
 

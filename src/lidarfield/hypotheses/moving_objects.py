@@ -38,6 +38,7 @@ The free-space test is :mod:`lidarfield.field.free_space`; the ground and the ob
 from __future__ import annotations
 
 import math
+import weakref
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -206,11 +207,26 @@ def carried_points(pair: RegisteredPair, candidates: tuple[np.ndarray, np.ndarra
 def seen_through(pair: RegisteredPair, params: Params) -> tuple[np.ndarray, np.ndarray]:
     """Per cloud, its points that lie where the other scan's rays passed through
     (:func:`pair_evidence`) and that the vehicle does not carry (:func:`carried_points`): the
-    evidence that something moved, which no static scene gives."""
+    evidence that something moved, which no static scene gives. Read-only masks, remembered
+    for the last pair object (``LAST_SEEN``)."""
+    last = LAST_SEEN.get("pair")
+    if last is not None and last[0]() is pair and last[1] == params:
+        return last[2]
     check_origins(pair)
     evidence = pair_evidence(pair, params)
     carried = carried_points(pair, evidence, params.margin_m)
-    return evidence[0] & ~carried[0], evidence[1] & ~carried[1]
+    seen = evidence[0] & ~carried[0], evidence[1] & ~carried[1]
+    for mask in seen:
+        mask.setflags(write=False)
+    LAST_SEEN["pair"] = (weakref.ref(pair), params, seen)
+    return seen
+
+
+# The last seen_through: a stage's suggestions ask it twice with the defaults, for the
+# moving_objects candidate and for every removal's seen-through columns (analysis.suggest).
+# Kept for the same pair object (a stage's pair is not changed in place: a correction makes a
+# new one) and parameters only; a weak reference, so it holds no pair alive.
+LAST_SEEN: dict[str, tuple] = {}
 
 
 def moving_objects(pair: RegisteredPair, params: Params) -> Outcome:

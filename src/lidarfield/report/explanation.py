@@ -12,11 +12,14 @@ often the loop chose it.
 from __future__ import annotations
 
 import csv
+import functools
 import io
 import json
 import logging
+import multiprocessing
 import shutil
 from collections import Counter
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -59,19 +62,37 @@ STAGE_CAPTIONS = {
 
 
 def write_explanation(
-    explanation: Explanation, settings: FieldSettings, grid_section: dict, out_dir: str | Path, plots: dict | None
+    explanation: Explanation,
+    settings: FieldSettings,
+    grid_section: dict,
+    out_dir: str | Path,
+    plots: dict | None,
+    figures: Callable[[], list[list[Path]]] | None = None,
 ) -> list[Path]:
-    """Write an explanation's folder (see the module docstring); returns the files written."""
+    """Write an explanation's folder (see the module docstring); returns the files written.
+    ``figures``: returns each stage's, drawn into it (``StageFigures.paths``), called once the
+    page's pair figures are drawn (the last stage's may be drawn meanwhile by another process);
+    None: drawn here."""
     out_dir = Path(out_dir)
-    shutil.rmtree(out_dir / FIGURES_DIR, ignore_errors=True)  # an earlier explanation's steps
-    figures = draw_explanation(explanation, settings, out_dir / FIGURES_DIR, plots)
+    rows = explanation.summary_rows()
+    pair_images = [pair_figure_png(stem, rows, DPI) for stem, _ in PAIR_FIGURES]
+    if figures is None:
+        drawn = draw_explanation(explanation, settings, fresh_figures_dir(out_dir), plots)
+    else:
+        drawn = figures()
     written = [out_dir / name for name in (STACK_FILE, STEPS_FILE, RECORD_FILE, PAGE_FILE)]
     stack = stack_config(explanation, grid_section)
     write_text(written[0], stack)
     write_text(written[1], steps_csv(explanation.steps))
     write_text(written[2], json.dumps(summary_json_safe(explanation.record()), indent=1, allow_nan=False) + "\n")
-    write_text(written[3], explain_page(explanation, stack, figures, out_dir))
-    return written + [path for paths in figures for path in paths]
+    write_text(written[3], explain_page(explanation, stack, pair_images, drawn, out_dir))
+    return written + [path for paths in drawn for path in paths]
+
+
+def fresh_figures_dir(out_dir: Path) -> Path:
+    """The folder's ``figures/``, without an earlier explanation's steps."""
+    shutil.rmtree(out_dir / FIGURES_DIR, ignore_errors=True)
+    return out_dir / FIGURES_DIR
 
 
 def steps_csv(steps: list[dict]) -> str:
@@ -93,22 +114,110 @@ def stage_data(pair_name: str, explained: ExplainedStage, settings: FieldSetting
 def draw_explanation(
     explanation: Explanation, settings: FieldSettings, figures_dir: Path, plots: dict | None
 ) -> list[list[Path]]:
-    """Per stage its figures (``plots.stage.draw_stage``): stage 0's field from above; each step
+    """Per stage its figures (``draw_explained_stage``)."""
+    stages = explanation.stages
+    return [
+        draw_explained_stage(stages, k, explanation.pair_name, settings, figures_dir, plots) for k in range(len(stages))
+    ]
+
+
+def draw_explained_stage(
+    stages: list[ExplainedStage],
+    k: int,
+    pair_name: str,
+    settings: FieldSettings,
+    figures_dir: Path,
+    plots: dict | None,
+) -> list[Path]:
+    """Stage ``k``'s figures (``plots.stage.draw_stage``): stage 0's field from above; a step's
     before / after it on the same axes and, when it removed points, what it removed."""
-    data = [stage_data(explanation.pair_name, explained, settings) for explained in explanation.stages]
-    drawn = []
-    for k, stage in enumerate(data):
-        names = ["field_top"] if k == 0 else ["before_after"] + (["removed_top"] if len(stage.removed["cloud"]) else [])
-        chosen = {**figure_settings(plots), "figures": names, "interactive": False}
-        drawn.append(draw_stage(stage, data[k - 1] if k else None, figures_dir / explanation.stages[k].label, chosen))
-    return drawn
+    stage = stage_data(pair_name, stages[k], settings)
+    names = ["field_top"] if k == 0 else ["before_after"] + (["removed_top"] if len(stage.removed["cloud"]) else [])
+    chosen = {**figure_settings(plots), "figures": names, "interactive": False}
+    previous = stage_data(pair_name, stages[k - 1], settings) if k else None
+    return draw_stage(stage, previous, figures_dir / stages[k].label, chosen)
 
 
-def explain_page(explanation: Explanation, stack: str, figures: list[list[Path]], out_dir: Path) -> str:
-    """The page: the steps' table, the stack found, the pair figures stage by stage, and each
-    step's figures."""
+class StageFigures:
+    """Each stage's figures drawn as soon as the loop has decided the stage (``explain_pair``'s
+    ``on_stage``), into a fresh ``figures/`` of ``out_dir``; ``paths()``: what
+    ``write_explanation`` takes. With ``background``, each stage is drawn by a forked child
+    process while the loop ranks the next step's candidates (the figures are the same files:
+    the same code on the same data); else here, one after the other. A context manager: on
+    leaving it, a child still drawing is stopped."""
+
+    def __init__(self, pair_name: str, settings: FieldSettings, out_dir: Path, plots: dict | None, background: bool):
+        self.draw = functools.partial(
+            draw_explained_stage,
+            pair_name=pair_name,
+            settings=settings,
+            figures_dir=fresh_figures_dir(out_dir),
+            plots=plots,
+        )
+        self.fork = multiprocessing.get_context("fork") if background and can_fork() else None
+        self.drawn: list = []  # per stage: its paths, or (child, the end of the pipe its paths come from)
+
+    def __call__(self, stages: list[ExplainedStage]) -> None:
+        k = len(stages) - 1
+        if self.fork is None:
+            self.drawn.append(self.draw(stages, k))
+            return
+        receive, send = self.fork.Pipe(duplex=False)
+        child = self.fork.Process(target=_send_result, args=(send, self.draw, stages, k), daemon=True)
+        child.start()
+        send.close()
+        self.drawn.append((child, receive))
+
+    def paths(self) -> list[list[Path]]:
+        """Each stage's figures, once drawn; a child's error raised here."""
+        self.drawn = [_received(*drawn) if isinstance(drawn, tuple) else drawn for drawn in self.drawn]
+        return self.drawn
+
+    def __enter__(self) -> StageFigures:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        for drawn in self.drawn:
+            if isinstance(drawn, tuple):
+                drawn[0].terminate()
+                drawn[0].join()
+
+
+def can_fork() -> bool:
+    """Whether a child process can start as a copy of this one (no pickling of the stages)."""
+    return "fork" in multiprocessing.get_all_start_methods()
+
+
+def _send_result(send, function, *args) -> None:
+    """In a child: ``function(*args)``, or the error it raised, sent through ``send``."""
+    try:
+        result = function(*args)
+    except BaseException as e:  # to the parent, which raises it
+        send.send((False, e))
+    else:
+        send.send((True, result))
+    finally:
+        send.close()
+
+
+def _received(child, receive) -> list[Path]:
+    try:
+        ok, result = receive.recv()
+    except EOFError:  # it died before it could send
+        child.join()
+        ok, result = False, RuntimeError(f"the process drawing the figures ended with exit code {child.exitcode}")
+    child.join()
+    if not ok:
+        raise result
+    return result
+
+
+def explain_page(
+    explanation: Explanation, stack: str, pair_images: list[bytes], figures: list[list[Path]], out_dir: Path
+) -> str:
+    """The page: the steps' table, the stack found, the pair figures stage by stage
+    (``pair_images``, PNG, in ``PAIR_FIGURES``' order), and each step's figures."""
     name = explanation.pair_name
-    rows = explanation.summary_rows()
     body = [
         f"<h1>explain · {esc(name)}</h1>",
         f'<p class="note">lidarfield {esc(__version__)}. From the registered pair, the loop applied the best '
@@ -128,7 +237,7 @@ def explain_page(explanation: Explanation, stack: str, figures: list[list[Path]]
         f"<pre>{esc(stack)}</pre>",
         "<h2>Stage by stage</h2>",
         '<div class="figures">',
-        *(image(pair_figure_png(stem, rows, DPI), f"{name}: {caption}") for stem, caption in PAIR_FIGURES),
+        *(image(png, f"{name}: {caption}") for png, (_, caption) in zip(pair_images, PAIR_FIGURES)),
         "</div>",
         "<h2>Each step</h2>",
     ]

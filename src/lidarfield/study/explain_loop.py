@@ -152,15 +152,19 @@ def explain_pair(
     suggest: list[dict] | None = None,
     base_dir: str | Path = ".",
     pair_name: str = "pair",
+    on_stage: Callable[[list[ExplainedStage]], None] | None = None,
 ) -> Explanation:
     """Apply the best suggestion worth it, recompute, repeat (see the module docstring).
 
     ``suggest``: the config's normalised candidates (None: the default ones, which skip what
     cannot apply to the pair); a candidate whose hypothesis the stack already has is never
-    tried again.
+    tried again. ``on_stage``: called with the stages so far each time one is decided (stage 0
+    first), e.g. to draw its figures while the loop goes on.
     """
     current = explained_stage(initial_stage(pair), settings)
     result = Explanation(pair_name, [current])
+    if on_stage is not None:
+        on_stage(result.stages)
 
     def take(table: dict[str, np.ndarray], chosen: int, outcomes: dict) -> None:
         """Apply row ``chosen`` of ``table``: the outcome its suggestion computed (``outcomes``)
@@ -175,6 +179,8 @@ def explain_pair(
         result.stages.append(following)
         log.info("step %d: %s", level, format_step(result.steps[-1]))
         current = following
+        if on_stage is not None:
+            on_stage(result.stages)
 
     def before_stopping(candidates: list[dict], outcomes: dict, table: dict[str, np.ndarray] | None = None):
         """What the field cannot show, before the loop stops: (table, row) of a step, or None;

@@ -278,7 +278,7 @@ def co_visible(
     out &= (r >= image.min_range_m) & (r <= max_range_m) & (r > 0)
     # Hidden: the rays nearest its direction (its azimuth cell, the beams on either side) all
     # stopped short of it; a wider window would see past a pole's edge into its shadow.
-    below, above = np.maximum(row - 1, 0), np.minimum(row + 1, len(image.channels) - 1)
+    below, above = beside_rows(image, row)
     out &= image.extreme(below, above, column, 0, farthest=True) >= r - margin
     # Seen through: every return of its window farther by more than the margin. The window is
     # at least a channel and a column on each side, so a return that near settles most points at once.
@@ -287,6 +287,28 @@ def co_visible(
         points = unsettled[at]
         out[points] = image.extreme(first, last, column[points], columns) <= r[points] + margin[points]
     return out
+
+
+def hidden(xyz: np.ndarray, image: RangeImage, margin_m: float, beam_width_deg: float) -> np.ndarray:
+    """Mask of the points (given in the frame of the sensor of ``image``) that it could not see
+    for something nearer in their direction (the z-buffer test): within its elevation limits
+    (widened by half the beam's width), and the rays nearest their direction (their azimuth
+    cell, their nearest channel and those on either side) returned, all nearer than the point
+    by more than the margin. Unlike ``not co_visible``, a direction with no return says nothing
+    (a sector the sensor did not scan, a ray that went out of range): only an occluder hides."""
+    r = ranges(xyz)
+    row, column, elevation, _ = image.cells(xyz)
+    half_beam = math.radians(beam_width_deg) / 2
+    lo, hi = image.elevation_limits
+    below, above = beside_rows(image, row)
+    farthest = image.extreme(below, above, column, 0, farthest=True)
+    inside = (elevation >= lo - half_beam) & (elevation <= hi + half_beam)
+    return inside & np.isfinite(farthest) & (farthest < r - margins(r, margin_m, beam_width_deg))
+
+
+def beside_rows(image: RangeImage, row: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The rows of the beams on either side of channels ``row`` (the same row at the edges)."""
+    return np.maximum(row - 1, 0), np.minimum(row + 1, len(image.channels) - 1)
 
 
 def _windows(image: RangeImage, row: np.ndarray, angle: np.ndarray):
@@ -301,6 +323,31 @@ def _windows(image: RangeImage, row: np.ndarray, angle: np.ndarray):
 def sensor_image(xyz: np.ndarray, model: SensorModel, ring: np.ndarray | None = None) -> RangeImage:
     """The range image of a cloud in its sensor's frame on its model's channels and azimuth step."""
     return range_image(xyz, math.radians(model.azimuth_resolution_deg), sensor_channels(model), model.min_range_m, ring)
+
+
+def density_image(xyz: np.ndarray, model: SensorModel, ring: np.ndarray | None = None) -> RangeImage:
+    """The range image of a cloud in its sensor's frame on its model's channels, with columns
+    no narrower than its returns fill: a cloud thinned to n points holds about n / channels
+    returns a channel, so its cells are 2 pi channels / n wide where that is wider than the
+    model's azimuth step (on the step, most cells of a thinned cloud are empty: nothing seen
+    there, though the sensor saw the surface)."""
+    channels = sensor_channels(model)
+    filled = 2 * math.pi * len(channels) / max(len(xyz), 1)
+    return range_image(xyz, max(math.radians(model.azimuth_resolution_deg), filled), channels, model.min_range_m, ring)
+
+
+def occluded_points(pair: RegisteredPair, sensor: int) -> np.ndarray | None:
+    """Mask of the points of the cloud other than ``sensor``'s (1 or 2) that every lidar of scan
+    ``sensor`` had hidden behind something nearer (:func:`hidden`, the default margin), from
+    their models and range images (:func:`density_image`); None when a lidar's model is missing."""
+    if any(view.sensor is None for view in pair.lidars(sensor)):
+        return None
+    images = lidar_images(pair, sensor, lambda own, view, ring: density_image(own, view.sensor, ring))
+
+    def seen(own: np.ndarray, view: LidarView, image: RangeImage) -> np.ndarray:
+        return ~hidden(own, image, MARGIN_M, BEAM_WIDTH_DEG)
+
+    return ~any_lidar(pair.xyz2 if sensor == 1 else pair.xyz1, images, seen)
 
 
 def lidar_images(pair: RegisteredPair, cloud: int, image_of=None) -> list[tuple[LidarView, RangeImage]]:

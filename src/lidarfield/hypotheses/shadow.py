@@ -22,8 +22,8 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from ..errors import ConfigError
-from ..field.free_space import ranges
+from ..errors import ConfigError, NotApplicableError
+from ..field.free_space import occluded_points, ranges
 from ..field.grid import SENSORLESS_ELEVATION_DEG, SphericalGrid, grid_from_config
 from ..pair import RegisteredPair
 from .geometry import in_sensor_frame
@@ -35,6 +35,7 @@ ANGULAR_KEYS = ("azimuth_bins", "azimuth_offset_deg", "elevation_deg", "elevatio
 # Explicit edges (a grid's channel-aware or given ones): in a grid only where set, so the
 # canonical JSON of a uniform grid, and the stage ids, stay what they were.
 EDGE_KEYS = ("elevation_edges_deg", "azimuth_edges_deg")
+RULES = ("first_cluster", "occlusion")
 
 
 @dataclass(frozen=True)
@@ -47,6 +48,14 @@ class Params:
     )
     origins: tuple[int, ...] = field(
         default=(1, 2), metadata=doc("the sensors about which cells are formed (1, 2 or both); removals are united")
+    )
+    rule: str = field(
+        default="first_cluster",
+        metadata=doc(
+            "first_cluster: the segmentation above (DESIGN); occlusion: remove each point the other origin's "
+            "lidars had hidden behind something nearer (their range image's rays in its direction all returned "
+            "nearer by more than a margin; needs the sensor models; jump_m, min_points and grid play no part)"
+        ),
     )
     grid: dict | None = field(
         default=None,
@@ -69,6 +78,8 @@ class Params:
             or len(set(self.origins)) != len(self.origins)
         ):
             raise ValueError(f"origins must list sensor 1, sensor 2 or both, got {list(self.origins)}")
+        if self.rule not in RULES:
+            raise ValueError(f"rule must be one of {', '.join(RULES)}, got {self.rule!r}")
         if self.grid is not None:
             unknown = sorted(set(self.grid) - set(ANGULAR_KEYS + EDGE_KEYS) - {"kind"})
             if unknown or self.grid.get("kind", "spherical") != "spherical":
@@ -174,10 +185,20 @@ def first_cluster_keep_loop(cells: np.ndarray, r: np.ndarray, jump_m: float, min
 
 
 def shadow(pair: RegisteredPair, params: Params) -> tuple[np.ndarray, np.ndarray]:
-    """Keep-masks of the first radial cluster rule about each origin in ``params.origins``."""
-    grid = params.angular_grid()
+    """Keep-masks of ``params.rule`` about each origin in ``params.origins``."""
     keep1 = np.ones(len(pair.xyz1), dtype=bool)
     keep2 = np.ones(len(pair.xyz2), dtype=bool)
+    if params.rule == "occlusion":
+        for origin in params.origins:
+            hidden = occluded_points(pair, origin)
+            if hidden is None:
+                raise NotApplicableError(
+                    f"shadow: scan {origin} has no sensor model, so its channels are unknown: give the sensor "
+                    "(--sensor, or 'sensor' in the pair's config) or use rule first_cluster"
+                )
+            (keep2 if origin == 1 else keep1)[hidden] = False
+        return keep1, keep2
+    grid = params.angular_grid()
     for lidar in (view for origin in params.origins for view in pair.lidars(origin)):
         for xyz, keep in ((pair.xyz1, keep1), (pair.xyz2, keep2)):
             local = in_sensor_frame(xyz, lidar.pose)

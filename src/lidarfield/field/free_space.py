@@ -289,19 +289,20 @@ def co_visible(
     return out
 
 
-def hidden(xyz: np.ndarray, image: RangeImage, margin_m: float, beam_width_deg: float) -> np.ndarray:
+def hidden(xyz: np.ndarray, image: RangeImage, margin_m: float, beam_width_deg: float, columns: int = 0) -> np.ndarray:
     """Mask of the points (given in the frame of the sensor of ``image``) that it could not see
     for something nearer in their direction (the z-buffer test): within its elevation limits
     (widened by half the beam's width), and the rays nearest their direction (their azimuth
-    cell, their nearest channel and those on either side) returned, all nearer than the point
-    by more than the margin. Unlike ``not co_visible``, a direction with no return says nothing
-    (a sector the sensor did not scan, a ray that went out of range): only an occluder hides."""
+    cell and ``columns`` on each side, their nearest channel and those on either side)
+    returned, all nearer than the point by more than the margin. Unlike ``not co_visible``, a
+    direction with no return says nothing (a sector the sensor did not scan, a ray that went
+    out of range, a return thinned away): only an occluder hides."""
     r = ranges(xyz)
     row, column, elevation, _ = image.cells(xyz)
     half_beam = math.radians(beam_width_deg) / 2
     lo, hi = image.elevation_limits
     below, above = beside_rows(image, row)
-    farthest = image.extreme(below, above, column, 0, farthest=True)
+    farthest = image.extreme(below, above, column, columns, farthest=True)
     inside = (elevation >= lo - half_beam) & (elevation <= hi + half_beam)
     return inside & np.isfinite(farthest) & (farthest < r - margins(r, margin_m, beam_width_deg))
 
@@ -325,27 +326,27 @@ def sensor_image(xyz: np.ndarray, model: SensorModel, ring: np.ndarray | None = 
     return range_image(xyz, math.radians(model.azimuth_resolution_deg), sensor_channels(model), model.min_range_m, ring)
 
 
-def density_image(xyz: np.ndarray, model: SensorModel, ring: np.ndarray | None = None) -> RangeImage:
-    """The range image of a cloud in its sensor's frame on its model's channels, with columns
-    no narrower than its returns fill: a cloud thinned to n points holds about n / channels
-    returns a channel, so its cells are 2 pi channels / n wide where that is wider than the
-    model's azimuth step (on the step, most cells of a thinned cloud are empty: nothing seen
-    there, though the sensor saw the surface)."""
-    channels = sensor_channels(model)
-    filled = 2 * math.pi * len(channels) / max(len(xyz), 1)
-    return range_image(xyz, max(math.radians(model.azimuth_resolution_deg), filled), channels, model.min_range_m, ring)
+def thinned_columns(image: RangeImage, returns: int) -> int:
+    """The columns on each side within which a row of ``image``, made of ``returns`` points,
+    holds a return on average: half the mean gap between a row's returns, in columns (0 at the
+    model's density; a cloud thinned to a fifth leaves four cells in five empty, and an empty
+    cell beside a ray that returned nearer is no evidence that the sensor saw past it)."""
+    return int(image.nearest.size / max(returns, 1) // 2)
 
 
 def occluded_points(pair: RegisteredPair, sensor: int) -> np.ndarray | None:
     """Mask of the points of the cloud other than ``sensor``'s (1 or 2) that every lidar of scan
-    ``sensor`` had hidden behind something nearer (:func:`hidden`, the default margin), from
-    their models and range images (:func:`density_image`); None when a lidar's model is missing."""
+    ``sensor`` had hidden behind something nearer (:func:`hidden`, the default margin, over
+    :func:`thinned_columns`), from their models and range images; None when a lidar's model is
+    missing."""
     if any(view.sensor is None for view in pair.lidars(sensor)):
         return None
-    images = lidar_images(pair, sensor, lambda own, view, ring: density_image(own, view.sensor, ring))
+    own = pair.xyz1 if sensor == 1 else pair.xyz2
+    images = lidar_images(pair, sensor)
+    columns = {id(view): thinned_columns(image, len(own[view.points])) for view, image in images}
 
-    def seen(own: np.ndarray, view: LidarView, image: RangeImage) -> np.ndarray:
-        return ~hidden(own, image, MARGIN_M, BEAM_WIDTH_DEG)
+    def seen(xyz: np.ndarray, view: LidarView, image: RangeImage) -> np.ndarray:
+        return ~hidden(xyz, image, MARGIN_M, BEAM_WIDTH_DEG, columns[id(view)])
 
     return ~any_lidar(pair.xyz2 if sensor == 1 else pair.xyz1, images, seen)
 

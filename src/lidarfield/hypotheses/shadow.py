@@ -11,6 +11,13 @@ origins are united: a point that one sensor sees past an object's edge, where th
 blocked, is dropped. A scan of several lidars (:mod:`lidarfield.sensors.rig`) gives one origin per
 lidar: its points are binned about each lidar's own origin and axes.
 
+That is ``rule: first_cluster``, the default (the DESIGN's). ``rule: occlusion`` is the z-buffer
+test instead (:func:`~lidarfield.field.free_space.occluded_points`): for each origin, the other
+cloud's points that every lidar of that scan had hidden behind something nearer are removed.
+It removes what lies behind a corner where the first radial cluster keeps it for being
+continuous in range with the facade in a cell (the street canyon's gaps between buildings,
+docs/diagnosis.md); ``explain``'s default candidate uses it.
+
 :func:`first_cluster_keep` is the vectorised kernel (one sort, then cumulative tricks);
 :func:`first_cluster_keep_loop` is the plain per-cell reference it is tested against.
 """

@@ -61,7 +61,8 @@ class Params:
         metadata=doc(
             "first_cluster: the segmentation above (DESIGN); occlusion: remove each point the other origin's "
             "lidars had hidden behind something nearer (their range image's rays in its direction all returned "
-            "nearer by more than a margin; needs the sensor models; jump_m, min_points and grid play no part)"
+            "nearer by more than a margin; needs the sensor models; jump_m, min_points and grid play no part)",
+            written_when_set=True,
         ),
     )
     grid: dict | None = field(

@@ -200,6 +200,15 @@ def test_hidden_is_the_z_buffer_test_on_known_geometry():
     ).any()
 
 
+def test_occlusion_from_one_place_removes_nothing(pole_scene):
+    """From one place a change of viewpoint hides nothing: what one scan hides of the other's
+    there moved, for moving_objects. Both scans of the pole scene put at sensor 1's place."""
+    pair, _ = pole_scene
+    assert (~_shadow_keep(pair, [1, 2], rule="occlusion")[1]).sum() > 1000
+    one_place = dataclasses.replace(pair, T_1_2=np.eye(4))
+    assert all(keep.all() for keep in _shadow_keep(one_place, [1, 2], rule="occlusion"))
+
+
 def test_occlusion_needs_the_sensor_models_and_rule_is_checked(pole_scene):
     pair, _ = pole_scene
     _, params = parse_step({"shadow": {"rule": "occlusion", "origins": [2]}})

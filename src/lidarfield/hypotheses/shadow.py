@@ -30,7 +30,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from ..errors import ConfigError, NotApplicableError
-from ..field.free_space import occluded_points, ranges
+from ..field.free_space import MARGIN_M, occluded_points, ranges
 from ..field.grid import SENSORLESS_ELEVATION_DEG, SphericalGrid, grid_from_config
 from ..pair import RegisteredPair
 from .geometry import in_sensor_frame
@@ -197,6 +197,10 @@ def shadow(pair: RegisteredPair, params: Params) -> tuple[np.ndarray, np.ndarray
     keep1 = np.ones(len(pair.xyz1), dtype=bool)
     keep2 = np.ones(len(pair.xyz2), dtype=bool)
     if params.rule == "occlusion":
+        if np.linalg.norm(pair.origin2) <= MARGIN_M:
+            # From one place a change of viewpoint hides nothing: what one scan hides of the
+            # other's there moved (moving_objects reads it from the returns behind it).
+            return keep1, keep2
         for origin in params.origins:
             hidden = occluded_points(pair, origin)
             if hidden is None:

@@ -134,6 +134,9 @@ NAMED = [
     ("sim-intersection-still-rig", "translation", "visible"),
     ("sim-intersection-still-rig", "range_offset", "visible"),
     ("sim-intersection-still-rig", "moving_object", "visible"),
+    # shadow by occlusion removed the car body (hidden behind the other scan's own body) before
+    # ego_vehicle came: what the vehicle carries is left to ego_vehicle
+    ("sim-intersection-drive-os1-128", "ego_body", "visible"),
 ]
 CONTROLS = [
     "sim-intersection-still-vlp16",

@@ -34,6 +34,7 @@ from ..field.free_space import MARGIN_M, occluded_points, ranges
 from ..field.grid import SENSORLESS_ELEVATION_DEG, SphericalGrid, grid_from_config
 from ..pair import RegisteredPair
 from .geometry import in_sensor_frame
+from .moving_objects import carried_points
 from .params import doc
 
 # The keys of a grid section that shape the angular cells (range shells play no part: the
@@ -209,7 +210,10 @@ def shadow(pair: RegisteredPair, params: Params) -> tuple[np.ndarray, np.ndarray
                     "(--sensor, or 'sensor' in the pair's config) or use rule first_cluster"
                 )
             (keep2 if origin == 1 else keep1)[hidden] = False
-        return keep1, keep2
+        # What the vehicle carries (the other scan has a point there in its own sensor's frame)
+        # is its own body, hidden behind the other scan's own body: ego_vehicle's, no viewpoint's.
+        carried = carried_points(pair, (~keep1, ~keep2), MARGIN_M)
+        return keep1 | carried[0], keep2 | carried[1]
     grid = params.angular_grid()
     for lidar in (view for origin in params.origins for view in pair.lidars(origin)):
         for xyz, keep in ((pair.xyz1, keep1), (pair.xyz2, keep2)):

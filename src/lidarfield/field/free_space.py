@@ -334,15 +334,19 @@ def thinned_columns(image: RangeImage, returns: int) -> int:
     return int(image.nearest.size / max(returns, 1) // 2)
 
 
-def occluded_points(pair: RegisteredPair, sensor: int) -> np.ndarray | None:
+def occluded_points(pair: RegisteredPair, sensor: int, occluders: np.ndarray | None = None) -> np.ndarray | None:
     """Mask of the points of the cloud other than ``sensor``'s (1 or 2) that every lidar of scan
     ``sensor`` had hidden behind something nearer (:func:`hidden`, the default margin, over
-    :func:`thinned_columns`), from their models and range images; None when a lidar's model is
-    missing."""
+    :func:`thinned_columns`), from their models and the range images of their returns
+    (``occluders``: a mask of those to take, default all); None when a lidar's model is missing."""
     if any(view.sensor is None for view in pair.lidars(sensor)):
         return None
-    own = pair.xyz1 if sensor == 1 else pair.xyz2
-    images = lidar_images(pair, sensor)
+    source = pair
+    if occluders is not None:
+        every = np.ones(len(pair.xyz2 if sensor == 1 else pair.xyz1), dtype=bool)
+        source = pair.subset(occluders, every) if sensor == 1 else pair.subset(every, occluders)
+    own = source.xyz1 if sensor == 1 else source.xyz2
+    images = lidar_images(source, sensor)
     columns = {id(view): thinned_columns(image, len(own[view.points])) for view, image in images}
 
     def seen(xyz: np.ndarray, view: LidarView, image: RangeImage) -> np.ndarray:

@@ -33,7 +33,8 @@ from ..errors import ConfigError, NotApplicableError
 from ..field.free_space import MARGIN_M, occluded_points, ranges
 from ..field.grid import SENSORLESS_ELEVATION_DEG, SphericalGrid, grid_from_config
 from ..pair import RegisteredPair
-from .geometry import in_sensor_frame
+from . import ego_vehicle
+from .geometry import in_sensor_frame, own_frame_points
 from .moving_objects import carried_points
 from .params import doc
 
@@ -202,17 +203,20 @@ def shadow(pair: RegisteredPair, params: Params) -> tuple[np.ndarray, np.ndarray
             # From one place a change of viewpoint hides nothing: what one scan hides of the
             # other's there moved (moving_objects reads it from the returns behind it).
             return keep1, keep2
+        # What the vehicle carries (within ego_vehicle's radius of its sensor, where the other
+        # scan has a point in its own sensor's frame) is its own body: neither hidden by a change
+        # of viewpoint nor hiding by one (the ground behind it is ego_vehicle's). Farther, a wall
+        # along the motion looks the same from both places.
+        near = [ranges(own) <= ego_vehicle.Params().radius_m for own in own_frame_points(pair)]
+        carried = carried_points(pair, (near[0], near[1]), MARGIN_M)
         for origin in params.origins:
-            hidden = occluded_points(pair, origin)
+            hidden = occluded_points(pair, origin, ~carried[origin - 1])
             if hidden is None:
                 raise NotApplicableError(
                     f"shadow: scan {origin} has no sensor model, so its channels are unknown: give the sensor "
                     "(--sensor, or 'sensor' in the pair's config) or use rule first_cluster"
                 )
             (keep2 if origin == 1 else keep1)[hidden] = False
-        # What the vehicle carries (the other scan has a point there in its own sensor's frame)
-        # is its own body, hidden behind the other scan's own body: ego_vehicle's, no viewpoint's.
-        carried = carried_points(pair, (~keep1, ~keep2), MARGIN_M)
         return keep1 | carried[0], keep2 | carried[1]
     grid = params.angular_grid()
     for lidar in (view for origin in params.origins for view in pair.lidars(origin)):

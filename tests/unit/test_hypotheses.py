@@ -78,6 +78,9 @@ def test_defaults_filled_and_study_grid_injected_into_shadow():
             },
         }
     }
+    # The rule is written only where set (stage ids written before it stay), and read back.
+    occlusion = validate_stack([{"shadow": {"rule": "occlusion"}}], ".", STUDY_GRID)
+    assert occlusion[0]["shadow"]["rule"] == "occlusion" and validate_stack(occlusion, ".", STUDY_GRID) == occlusion
     # Idempotent, and a grid of its own wins over the study's, key by key.
     assert validate_stack(stack, ".", {**STUDY_GRID, "azimuth_bins": 72}) == stack
     own = validate_step({"shadow": {"grid": {"elevation_bins": 4}}}, ".", STUDY_GRID)
@@ -95,7 +98,7 @@ def test_defaults_filled_and_study_grid_injected_into_shadow():
         (
             {"shadow": {"jump": 1}},
             "unknown parameter(s) jump; expected: jump_m (number), min_points (integer), origins (list of integers), "
-            "grid (mapping or null)",
+            "rule (string), grid (mapping or null)",
         ),
         ({"shadow": {"jump_m": "far"}}, "parameter 'jump_m': expected number, got 'far'"),
         ({"shadow": {"min_points": 2.5}}, "parameter 'min_points': expected integer, got 2.5"),

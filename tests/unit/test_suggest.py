@@ -163,7 +163,9 @@ def test_the_suggest_job_skips_default_candidates_that_cannot_apply(tmp_path, ca
     assert run_in_process([*argv, "--default-candidates"]) == 0
     table, _ = read_table(tmp_path / "suggestions.parquet")
     # range_calibration cannot apply: its fit would throw the vehicle kilometres away; deskew has
-    # no motion (no velocity given, no scan stamps)
+    # no motion (no velocity given, no scan stamps); field_of_view needs the sensor models the pair
+    # has not; shadow by occlusion (the default candidate's rule) too, but from one place (this
+    # pair's scans) it removes nothing whatever the models
     assert set(table["hypothesis"]) == {"ego_vehicle", "shadow", "crop", "outliers", "realign"}
     assert table["hypothesis"][0] == "ego_vehicle" and table["energy_reduction"][0] > 0.95
     (tmp_path / "suggestions.parquet").unlink()

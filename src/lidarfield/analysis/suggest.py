@@ -152,17 +152,26 @@ SUGGESTION_COLUMNS = (
 TAG_CORRECTIONS = {"rigid": "realign", "radial": "range_calibration"}
 
 
+# The parameters of a default candidate where they are not its hypothesis' defaults. ``shadow``
+# by occlusion: the question a candidate asks is whether the field's pattern is content one
+# sensor could not see from its place, and the z-buffer test answers it point by point, where
+# the first radial cluster keeps what lies behind a corner continuous in range with the facade
+# (the street canyon's gaps between buildings, docs/diagnosis.md); a stack keeps the DESIGN's rule.
+DEFAULT_CANDIDATE_PARAMS = {"shadow": {"rule": "occlusion"}}
+
+
 def candidate_steps(
     suggest: list[dict] | None, applied: list[dict], base_dir: str | Path = ".", study_grid: dict | None = None
 ) -> list[dict]:
     """The normalised candidates of a stage whose stack so far is ``applied``: ``suggest``
-    validated, or every built-in not in ``applied`` with its defaults: the removing ones, then
+    validated, or every built-in not in ``applied`` with its defaults (``DEFAULT_CANDIDATE_PARAMS``
+    where given): the removing ones, then
     the correcting ones (``CORRECTING``, in ``BUILTINS`` order)."""
     if suggest is None:
         done = {step_name(step) for step in applied}
         fresh = [name for name in BUILTINS if name not in done]
-        suggest = [{name: {}} for name in fresh if name not in CORRECTING]
-        suggest += [{name: {}} for name in fresh if name in CORRECTING]
+        suggest = [{name: DEFAULT_CANDIDATE_PARAMS.get(name, {})} for name in fresh if name not in CORRECTING]
+        suggest += [{name: DEFAULT_CANDIDATE_PARAMS.get(name, {})} for name in fresh if name in CORRECTING]
     if not isinstance(suggest, list):
         raise HypothesisError(f"suggest: a list of {{name: {{parameters}}}} entries, got {suggest!r}")
     candidates = []

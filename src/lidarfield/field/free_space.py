@@ -278,7 +278,7 @@ def co_visible(
     out &= (r >= image.min_range_m) & (r <= max_range_m) & (r > 0)
     # Hidden: the rays nearest its direction (its azimuth cell, the beams on either side) all
     # stopped short of it; a wider window would see past a pole's edge into its shadow.
-    below, above = np.maximum(row - 1, 0), np.minimum(row + 1, len(image.channels) - 1)
+    below, above = beside_rows(image, row)
     out &= image.extreme(below, above, column, 0, farthest=True) >= r - margin
     # Seen through: every return of its window farther by more than the margin. The window is
     # at least a channel and a column on each side, so a return that near settles most points at once.
@@ -287,6 +287,29 @@ def co_visible(
         points = unsettled[at]
         out[points] = image.extreme(first, last, column[points], columns) <= r[points] + margin[points]
     return out
+
+
+def hidden(xyz: np.ndarray, image: RangeImage, margin_m: float, beam_width_deg: float, columns: int = 0) -> np.ndarray:
+    """Mask of the points (given in the frame of the sensor of ``image``) that it could not see
+    for something nearer in their direction (the z-buffer test): within its elevation limits
+    (widened by half the beam's width), and the rays nearest their direction (their azimuth
+    cell and ``columns`` on each side, their nearest channel and those on either side)
+    returned, all nearer than the point by more than the margin. Unlike ``not co_visible``, a
+    direction with no return says nothing (a sector the sensor did not scan, a ray that went
+    out of range, a return thinned away): only an occluder hides."""
+    r = ranges(xyz)
+    row, column, elevation, _ = image.cells(xyz)
+    half_beam = math.radians(beam_width_deg) / 2
+    lo, hi = image.elevation_limits
+    below, above = beside_rows(image, row)
+    farthest = image.extreme(below, above, column, columns, farthest=True)
+    inside = (elevation >= lo - half_beam) & (elevation <= hi + half_beam)
+    return inside & np.isfinite(farthest) & (farthest < r - margins(r, margin_m, beam_width_deg))
+
+
+def beside_rows(image: RangeImage, row: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The rows of the beams on either side of channels ``row`` (the same row at the edges)."""
+    return np.maximum(row - 1, 0), np.minimum(row + 1, len(image.channels) - 1)
 
 
 def _windows(image: RangeImage, row: np.ndarray, angle: np.ndarray):
@@ -301,6 +324,35 @@ def _windows(image: RangeImage, row: np.ndarray, angle: np.ndarray):
 def sensor_image(xyz: np.ndarray, model: SensorModel, ring: np.ndarray | None = None) -> RangeImage:
     """The range image of a cloud in its sensor's frame on its model's channels and azimuth step."""
     return range_image(xyz, math.radians(model.azimuth_resolution_deg), sensor_channels(model), model.min_range_m, ring)
+
+
+def thinned_columns(image: RangeImage, returns: int) -> int:
+    """The columns on each side within which a row of ``image``, made of ``returns`` points,
+    holds a return on average: half the mean gap between a row's returns, in columns (0 at the
+    model's density; a cloud thinned to a fifth leaves four cells in five empty, and an empty
+    cell beside a ray that returned nearer is no evidence that the sensor saw past it)."""
+    return int(image.nearest.size / max(returns, 1) // 2)
+
+
+def occluded_points(pair: RegisteredPair, sensor: int, occluders: np.ndarray | None = None) -> np.ndarray | None:
+    """Mask of the points of the cloud other than ``sensor``'s (1 or 2) that every lidar of scan
+    ``sensor`` had hidden behind something nearer (:func:`hidden`, the default margin, over
+    :func:`thinned_columns`), from their models and the range images of their returns
+    (``occluders``: a mask of those to take, default all); None when a lidar's model is missing."""
+    if any(view.sensor is None for view in pair.lidars(sensor)):
+        return None
+    source = pair
+    if occluders is not None:
+        every = np.ones(len(pair.xyz2 if sensor == 1 else pair.xyz1), dtype=bool)
+        source = pair.subset(occluders, every) if sensor == 1 else pair.subset(every, occluders)
+    own = source.xyz1 if sensor == 1 else source.xyz2
+    images = lidar_images(source, sensor)
+    columns = {id(view): thinned_columns(image, len(own[view.points])) for view, image in images}
+
+    def seen(xyz: np.ndarray, view: LidarView, image: RangeImage) -> np.ndarray:
+        return ~hidden(xyz, image, MARGIN_M, BEAM_WIDTH_DEG, columns[id(view)])
+
+    return ~any_lidar(pair.xyz2 if sensor == 1 else pair.xyz1, images, seen)
 
 
 def lidar_images(pair: RegisteredPair, cloud: int, image_of=None) -> list[tuple[LidarView, RangeImage]]:

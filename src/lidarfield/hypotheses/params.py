@@ -17,9 +17,11 @@ from ..checks import is_integer, is_number
 from ..errors import HypothesisError
 
 
-def doc(text: str) -> dict:
-    """Field metadata holding a parameter's documentation."""
-    return {"doc": text}
+def doc(text: str, written_when_set: bool = False) -> dict:
+    """Field metadata holding a parameter's documentation. ``written_when_set``: a parameter
+    added to a published hypothesis is left out of the normalised entry at its default, so the
+    entries, and the stage ids made of them, that were written before it stay what they were."""
+    return {"doc": text, "written_when_set": written_when_set}
 
 
 def type_label(hint: Any) -> str:
@@ -70,8 +72,13 @@ def parse_params(cls: type, raw: dict | None, where: str):
 
 
 def params_to_dict(params) -> dict:
-    """The JSON-able mapping of a parameters instance (tuples as lists)."""
-    return {f.name: _plain(getattr(params, f.name)) for f in dataclasses.fields(params)}
+    """The JSON-able mapping of a parameters instance (tuples as lists; a ``written_when_set``
+    parameter only away from its default)."""
+    return {
+        f.name: _plain(getattr(params, f.name))
+        for f in dataclasses.fields(params)
+        if not (f.metadata.get("written_when_set") and getattr(params, f.name) == _default(f))
+    }
 
 
 def describe(cls: type) -> list[tuple[str, str, Any, str]]:

@@ -11,6 +11,13 @@ origins are united: a point that one sensor sees past an object's edge, where th
 blocked, is dropped. A scan of several lidars (:mod:`lidarfield.sensors.rig`) gives one origin per
 lidar: its points are binned about each lidar's own origin and axes.
 
+That is ``rule: first_cluster``, the default (the DESIGN's). ``rule: occlusion`` is the z-buffer
+test instead (:func:`~lidarfield.field.free_space.occluded_points`): for each origin, the other
+cloud's points that every lidar of that scan had hidden behind something nearer are removed.
+It removes what lies behind a corner where the first radial cluster keeps it for being
+continuous in range with the facade in a cell (the street canyon's gaps between buildings,
+docs/diagnosis.md); ``explain``'s default candidate uses it.
+
 :func:`first_cluster_keep` is the vectorised kernel (one sort, then cumulative tricks);
 :func:`first_cluster_keep_loop` is the plain per-cell reference it is tested against.
 """
@@ -22,11 +29,13 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from ..errors import ConfigError
-from ..field.free_space import ranges
+from ..errors import ConfigError, NotApplicableError
+from ..field.free_space import MARGIN_M, occluded_points, ranges
 from ..field.grid import SENSORLESS_ELEVATION_DEG, SphericalGrid, grid_from_config
 from ..pair import RegisteredPair
-from .geometry import in_sensor_frame
+from . import ego_vehicle
+from .geometry import in_sensor_frame, own_frame_points
+from .moving_objects import carried_points
 from .params import doc
 
 # The keys of a grid section that shape the angular cells (range shells play no part: the
@@ -35,6 +44,7 @@ ANGULAR_KEYS = ("azimuth_bins", "azimuth_offset_deg", "elevation_deg", "elevatio
 # Explicit edges (a grid's channel-aware or given ones): in a grid only where set, so the
 # canonical JSON of a uniform grid, and the stage ids, stay what they were.
 EDGE_KEYS = ("elevation_edges_deg", "azimuth_edges_deg")
+RULES = ("first_cluster", "occlusion")
 
 
 @dataclass(frozen=True)
@@ -47,6 +57,15 @@ class Params:
     )
     origins: tuple[int, ...] = field(
         default=(1, 2), metadata=doc("the sensors about which cells are formed (1, 2 or both); removals are united")
+    )
+    rule: str = field(
+        default="first_cluster",
+        metadata=doc(
+            "first_cluster: the segmentation above (DESIGN); occlusion: remove each point the other origin's "
+            "lidars had hidden behind something nearer (their range image's rays in its direction all returned "
+            "nearer by more than a margin; needs the sensor models; jump_m, min_points and grid play no part)",
+            written_when_set=True,
+        ),
     )
     grid: dict | None = field(
         default=None,
@@ -69,6 +88,8 @@ class Params:
             or len(set(self.origins)) != len(self.origins)
         ):
             raise ValueError(f"origins must list sensor 1, sensor 2 or both, got {list(self.origins)}")
+        if self.rule not in RULES:
+            raise ValueError(f"rule must be one of {', '.join(RULES)}, got {self.rule!r}")
         if self.grid is not None:
             unknown = sorted(set(self.grid) - set(ANGULAR_KEYS + EDGE_KEYS) - {"kind"})
             if unknown or self.grid.get("kind", "spherical") != "spherical":
@@ -174,10 +195,30 @@ def first_cluster_keep_loop(cells: np.ndarray, r: np.ndarray, jump_m: float, min
 
 
 def shadow(pair: RegisteredPair, params: Params) -> tuple[np.ndarray, np.ndarray]:
-    """Keep-masks of the first radial cluster rule about each origin in ``params.origins``."""
-    grid = params.angular_grid()
+    """Keep-masks of ``params.rule`` about each origin in ``params.origins``."""
     keep1 = np.ones(len(pair.xyz1), dtype=bool)
     keep2 = np.ones(len(pair.xyz2), dtype=bool)
+    if params.rule == "occlusion":
+        if np.linalg.norm(pair.origin2) <= MARGIN_M:
+            # From one place a change of viewpoint hides nothing: what one scan hides of the
+            # other's there moved (moving_objects reads it from the returns behind it).
+            return keep1, keep2
+        # What the vehicle carries (within ego_vehicle's radius of its sensor, where the other
+        # scan has a point in its own sensor's frame) is its own body: neither hidden by a change
+        # of viewpoint nor hiding by one (the ground behind it is ego_vehicle's). Farther, a wall
+        # along the motion looks the same from both places.
+        near = [ranges(own) <= ego_vehicle.Params().radius_m for own in own_frame_points(pair)]
+        carried = carried_points(pair, (near[0], near[1]), MARGIN_M)
+        for origin in params.origins:
+            hidden = occluded_points(pair, origin, ~carried[origin - 1])
+            if hidden is None:
+                raise NotApplicableError(
+                    f"shadow: scan {origin} has no sensor model, so its channels are unknown: give the sensor "
+                    "(--sensor, or 'sensor' in the pair's config) or use rule first_cluster"
+                )
+            (keep2 if origin == 1 else keep1)[hidden] = False
+        return keep1 | carried[0], keep2 | carried[1]
+    grid = params.angular_grid()
     for lidar in (view for origin in params.origins for view in pair.lidars(origin)):
         for xyz, keep in ((pair.xyz1, keep1), (pair.xyz2, keep2)):
             local = in_sensor_frame(xyz, lidar.pose)

@@ -188,8 +188,11 @@ def test_run_writes_every_stage_and_prints_the_table(tmp_path, paper_scans, caps
     first = pd.read_parquet(out / "stages" / ids[0] / "suggestions.parquet")
     removals = {"ego_vehicle", "field_of_view", "shadow", "crop", "outliers", "moving_objects"}
     # the corrections that apply: deskew too, the simulated scans record their motion (still:
-    # it moves nothing and reduces nothing)
-    assert set(first["hypothesis"]) == removals | {"realign", "range_calibration", "deskew"}
+    # it moves nothing and reduces nothing); elevation_calibration finds no laser off here
+    corrections = {"realign", "range_calibration", "elevation_calibration", "deskew"}
+    assert set(first["hypothesis"]) == removals | corrections
+    calibration = first[first["hypothesis"] == "elevation_calibration"].iloc[0]
+    assert calibration["displacement_max_m"] == 0
     deskew = first[first["hypothesis"] == "deskew"].iloc[0]
     assert deskew["energy_reduction"] == 0 and deskew["displacement_max_m"] == 0
     assert first["hypothesis"][0] in ("field_of_view", "shadow") and first["energy_reduction"][0] > 0.5
@@ -199,9 +202,7 @@ def test_run_writes_every_stage_and_prints_the_table(tmp_path, paper_scans, caps
         "crop",
         "outliers",
         "moving_objects",
-        "realign",
-        "range_calibration",
-        "deskew",
+        *corrections,
     }
     assert (summary["n1"][1:].to_numpy() + summary["removed1"][1:].to_numpy() == summary["n1"][:-1].to_numpy()).all()
     assert all(

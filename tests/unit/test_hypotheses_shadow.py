@@ -212,7 +212,21 @@ def test_occlusion_from_one_place_removes_nothing(pole_scene):
 def test_occlusion_needs_the_sensor_models_and_rule_is_checked(pole_scene):
     pair, _ = pole_scene
     _, params = parse_step({"shadow": {"rule": "occlusion", "origins": [2]}})
-    with pytest.raises(NotApplicableError, match="scan 2 has no sensor model"):
-        shadow(dataclasses.replace(pair, sensor2=None), params)
-    with pytest.raises(HypothesisError, match="rule must be one of first_cluster, occlusion"):
+    no_model = dataclasses.replace(pair, sensor2=None)
+    with pytest.raises(NotApplicableError, match="a scan has no sensor model"):
+        shadow(no_model, params)
+    with pytest.raises(HypothesisError, match="rule must be one of first_cluster, occlusion, auto"):
         parse_step({"shadow": {"rule": "zbuffer"}})
+
+
+def test_auto_is_occlusion_with_the_sensor_models_and_the_first_cluster_without(pole_scene):
+    """explain's default candidate: the z-buffer test where the channels are known, the DESIGN's
+    segmentation where a scan has no sensor model (text scans run without --sensor)."""
+    pair, _ = pole_scene
+    with_models = _shadow_keep(pair, [1, 2], rule="auto")
+    assert all((a == b).all() for a, b in zip(with_models, _shadow_keep(pair, [1, 2], rule="occlusion")))
+    no_model = dataclasses.replace(pair, sensor2=None)
+    auto = _shadow_keep(no_model, [1, 2], rule="auto")
+    first = _shadow_keep(no_model, [1, 2], rule="first_cluster")
+    assert all((a == b).all() for a, b in zip(auto, first))
+    assert (~first[0]).sum() + (~first[1]).sum() > 100

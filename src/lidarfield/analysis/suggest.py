@@ -157,7 +157,8 @@ TAG_CORRECTIONS = {"rigid": "realign", "radial": "range_calibration"}
 # sensor could not see from its place, and the z-buffer test answers it point by point, where
 # the first radial cluster keeps what lies behind a corner continuous in range with the facade
 # (the street canyon's gaps between buildings, docs/diagnosis.md); a stack keeps the DESIGN's rule.
-DEFAULT_CANDIDATE_PARAMS = {"shadow": {"rule": "occlusion"}}
+# (``auto``: the first radial cluster where a scan has no sensor model to test occlusion with.)
+DEFAULT_CANDIDATE_PARAMS = {"shadow": {"rule": "auto"}}
 
 
 def candidate_steps(

@@ -44,7 +44,7 @@ ANGULAR_KEYS = ("azimuth_bins", "azimuth_offset_deg", "elevation_deg", "elevatio
 # Explicit edges (a grid's channel-aware or given ones): in a grid only where set, so the
 # canonical JSON of a uniform grid, and the stage ids, stay what they were.
 EDGE_KEYS = ("elevation_edges_deg", "azimuth_edges_deg")
-RULES = ("first_cluster", "occlusion")
+RULES = ("first_cluster", "occlusion", "auto")
 
 
 @dataclass(frozen=True)
@@ -63,7 +63,8 @@ class Params:
         metadata=doc(
             "first_cluster: the segmentation above (DESIGN); occlusion: remove each point the other origin's "
             "lidars had hidden behind something nearer (their range image's rays in its direction all returned "
-            "nearer by more than a margin; needs the sensor models; jump_m, min_points and grid play no part)",
+            "nearer by more than a margin; needs the sensor models; jump_m, min_points and grid play no part); "
+            "auto: occlusion where the scans' sensor models are known, first_cluster where not",
             written_when_set=True,
         ),
     )
@@ -196,31 +197,42 @@ def first_cluster_keep_loop(cells: np.ndarray, r: np.ndarray, jump_m: float, min
 
 def shadow(pair: RegisteredPair, params: Params) -> tuple[np.ndarray, np.ndarray]:
     """Keep-masks of ``params.rule`` about each origin in ``params.origins``."""
+    if params.rule != "first_cluster":
+        masks = occlusion_keep(pair, params)
+        if masks is not None:
+            return masks
+        if params.rule == "occlusion":
+            raise NotApplicableError(
+                "shadow: a scan has no sensor model, so its channels are unknown: give the sensor "
+                "(--sensor, or 'sensor' in the pair's config) or use rule first_cluster or auto"
+            )
     keep1 = np.ones(len(pair.xyz1), dtype=bool)
     keep2 = np.ones(len(pair.xyz2), dtype=bool)
-    if params.rule == "occlusion":
-        if np.linalg.norm(pair.origin2) <= MARGIN_M:
-            # From one place a change of viewpoint hides nothing: what one scan hides of the
-            # other's there moved (moving_objects reads it from the returns behind it).
-            return keep1, keep2
-        # What the vehicle carries (within ego_vehicle's radius of its sensor, where the other
-        # scan has a point in its own sensor's frame) is its own body: neither hidden by a change
-        # of viewpoint nor hiding by one (the ground behind it is ego_vehicle's). Farther, a wall
-        # along the motion looks the same from both places.
-        near = [ranges(own) <= ego_vehicle.Params().radius_m for own in own_frame_points(pair)]
-        carried = carried_points(pair, (near[0], near[1]), MARGIN_M)
-        for origin in params.origins:
-            hidden = occluded_points(pair, origin, ~carried[origin - 1])
-            if hidden is None:
-                raise NotApplicableError(
-                    f"shadow: scan {origin} has no sensor model, so its channels are unknown: give the sensor "
-                    "(--sensor, or 'sensor' in the pair's config) or use rule first_cluster"
-                )
-            (keep2 if origin == 1 else keep1)[hidden] = False
-        return keep1 | carried[0], keep2 | carried[1]
     grid = params.angular_grid()
     for lidar in (view for origin in params.origins for view in pair.lidars(origin)):
         for xyz, keep in ((pair.xyz1, keep1), (pair.xyz2, keep2)):
             local = in_sensor_frame(xyz, lidar.pose)
             keep &= first_cluster_keep(grid.assign(local), ranges(local), params.jump_m, params.min_points)
     return keep1, keep2
+
+
+def occlusion_keep(pair: RegisteredPair, params: Params) -> tuple[np.ndarray, np.ndarray] | None:
+    """Keep-masks of ``rule: occlusion``; None where an origin's scan has no sensor model."""
+    keep1 = np.ones(len(pair.xyz1), dtype=bool)
+    keep2 = np.ones(len(pair.xyz2), dtype=bool)
+    if np.linalg.norm(pair.origin2) <= MARGIN_M:
+        # From one place a change of viewpoint hides nothing: what one scan hides of the
+        # other's there moved (moving_objects reads it from the returns behind it).
+        return keep1, keep2
+    # What the vehicle carries (within ego_vehicle's radius of its sensor, where the other
+    # scan has a point in its own sensor's frame) is its own body: neither hidden by a change
+    # of viewpoint nor hiding by one (the ground behind it is ego_vehicle's). Farther, a wall
+    # along the motion looks the same from both places.
+    near = [ranges(own) <= ego_vehicle.Params().radius_m for own in own_frame_points(pair)]
+    carried = carried_points(pair, (near[0], near[1]), MARGIN_M)
+    for origin in params.origins:
+        hidden = occluded_points(pair, origin, ~carried[origin - 1])
+        if hidden is None:
+            return None
+        (keep2 if origin == 1 else keep1)[hidden] = False
+    return keep1 | carried[0], keep2 | carried[1]

@@ -30,7 +30,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..hypotheses.geometry import own_frame_points
+from ..hypotheses.geometry import near_in_own_frames
 from ..pair import RegisteredPair
 
 OWN_M = 0.05  # within this in both sensors' own frames: the same point of the body
@@ -44,16 +44,13 @@ def carried_points(pair: RegisteredPair, candidates: tuple[np.ndarray, np.ndarra
     within ``OWN_M`` of it in their own sensors' frames and none within ``STATIC_M`` in frame 1."""
     from scipy.spatial import cKDTree
 
-    own, world = own_frame_points(pair), (pair.xyz1, pair.xyz2)
-    carried = []
+    world = (pair.xyz1, pair.xyz2)
+    carried = near_in_own_frames(pair, candidates, OWN_M)
     for k in (0, 1):
-        mask = np.zeros(len(world[k]), dtype=bool)
-        if candidates[k].any() and len(world[1 - k]):
-            near_own, _ = cKDTree(own[1 - k]).query(own[k][candidates[k]], distance_upper_bound=OWN_M)
-            near_world, _ = cKDTree(world[1 - k]).query(world[k][candidates[k]], distance_upper_bound=STATIC_M)
-            mask[candidates[k]] = np.isfinite(near_own) & ~np.isfinite(near_world)
-        carried.append(mask)
-    return carried[0], carried[1]
+        if carried[k].any():
+            near_world, _ = cKDTree(world[1 - k]).query(world[k][carried[k]], distance_upper_bound=STATIC_M)
+            carried[k][carried[k]] = ~np.isfinite(near_world)
+    return carried
 
 
 @dataclass(frozen=True)

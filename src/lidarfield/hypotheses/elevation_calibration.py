@@ -69,7 +69,6 @@ MAD_SCALE = 1.4826  # the MAD of a normal distribution times this is its standar
 
 @dataclass(frozen=True)
 class Params(PlaneFit):
-    cloud: int = field(default=2, metadata=doc("the cloud whose lasers' elevations are calibrated: 1 or 2"))
     screen_z: float = field(
         default=5.0,
         metadata=doc(
@@ -82,8 +81,6 @@ class Params(PlaneFit):
     )
 
     def __post_init__(self):
-        if self.cloud not in (1, 2):
-            raise ValueError(f"need cloud 1 or 2, got {self.cloud}")
         super().__post_init__()
         if not self.screen_z > 0 or not self.max_offset_deg > 0:
             raise ValueError(f"need screen_z > 0 and max_offset_deg > 0, got {self.screen_z} and {self.max_offset_deg}")

@@ -20,6 +20,25 @@ def own_frame_points(pair: RegisteredPair) -> tuple[np.ndarray, np.ndarray]:
     return pair.xyz1, in_sensor_frame(pair.xyz2, pair.T_1_2)
 
 
+def near_in_own_frames(
+    pair: RegisteredPair, candidates: tuple[np.ndarray, np.ndarray], radius_m: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """Per cloud, which of its ``candidates`` (masks) have a point of the other cloud within
+    ``radius_m`` once each cloud is in its own sensor's frame: what stays put with the sensor."""
+    from scipy.spatial import cKDTree
+
+    own = own_frame_points(pair)
+    near = []
+    for k in (0, 1):
+        mask = np.zeros(len(own[k]), dtype=bool)
+        other = own[1 - k]
+        if candidates[k].any() and len(other):
+            distance, _ = cKDTree(other).query(own[k][candidates[k]], distance_upper_bound=radius_m)
+            mask[candidates[k]] = np.isfinite(distance)
+        near.append(mask)
+    return near[0], near[1]
+
+
 def elevation_deg(xyz: np.ndarray) -> np.ndarray:
     return np.degrees(np.arctan2(xyz[:, 2], np.hypot(xyz[:, 0], xyz[:, 1])))
 

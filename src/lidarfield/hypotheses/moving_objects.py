@@ -17,7 +17,7 @@ What stays put in the sensor's frame is no moving object but the vehicle that ca
 sensors (a truck's cargo body, a roof rack: between two poses of a drive it moves with them, so
 in frame 1 it is where the other sensor's rays passed): a point of one cloud that has a point of
 the other cloud within ``margin_m`` when both are taken in their own sensor's frame is no
-evidence (:func:`carried_points`; ``ego_vehicle`` is the hypothesis for it). From one place
+evidence (:func:`~.geometry.near_in_own_frames`; ``ego_vehicle`` is the hypothesis for it). From one place
 (sensor 2 within ``margin_m`` of sensor 1) the frames are one and that test says nothing new: a
 point with the other cloud's return beside it is not in its free space anyway.
 
@@ -58,7 +58,7 @@ from ..field.free_space import (
 from ..pair import RegisteredPair
 from ..sensors.models import SensorModel
 from ..sensors.rig import LidarView
-from .geometry import own_frame_points
+from .geometry import near_in_own_frames
 from .outcome import Outcome
 from .params import doc
 from .voxel_objects import connected_voxels, off_ground, overlapping_objects, packed, voxel_grid
@@ -187,26 +187,9 @@ def pair_evidence(pair: RegisteredPair, params: Params) -> tuple[np.ndarray, np.
     return any_lidar(pair.xyz1, images[1], evidence), any_lidar(pair.xyz2, images[0], evidence)
 
 
-def carried_points(pair: RegisteredPair, candidates: tuple[np.ndarray, np.ndarray], radius_m: float):
-    """Per cloud, which of its ``candidates`` (masks) have a point of the other cloud within
-    ``radius_m`` once each cloud is in its own sensor's frame: what the vehicle carries."""
-    from scipy.spatial import cKDTree
-
-    own = own_frame_points(pair)
-    carried = []
-    for k in (0, 1):
-        mask = np.zeros(len(own[k]), dtype=bool)
-        other = own[1 - k]
-        if candidates[k].any() and len(other):
-            distance, _ = cKDTree(other).query(own[k][candidates[k]], distance_upper_bound=radius_m)
-            mask[candidates[k]] = np.isfinite(distance)
-        carried.append(mask)
-    return carried[0], carried[1]
-
-
 def seen_through(pair: RegisteredPair, params: Params) -> tuple[np.ndarray, np.ndarray]:
     """Per cloud, its points that lie where the other scan's rays passed through
-    (:func:`pair_evidence`) and that the vehicle does not carry (:func:`carried_points`): the
+    (:func:`pair_evidence`) and that the vehicle does not carry (:func:`~.geometry.near_in_own_frames`): the
     evidence that something moved, which no static scene gives. Read-only masks, remembered
     for the last pair object (``LAST_SEEN``)."""
     last = LAST_SEEN.get("pair")
@@ -214,7 +197,7 @@ def seen_through(pair: RegisteredPair, params: Params) -> tuple[np.ndarray, np.n
         return last[2]
     check_origins(pair)
     evidence = pair_evidence(pair, params)
-    carried = carried_points(pair, evidence, params.margin_m)
+    carried = near_in_own_frames(pair, evidence, params.margin_m)
     seen = evidence[0] & ~carried[0], evidence[1] & ~carried[1]
     for mask in seen:
         mask.setflags(write=False)

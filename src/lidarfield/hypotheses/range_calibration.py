@@ -64,8 +64,11 @@ class PlaneFit:
     max_points: int = field(default=20000, metadata=doc("at most this many points of the cloud in the fit"))
     normal_k: int = field(default=12, metadata=doc("the other cloud's normals from this many nearest points"))
     max_iterations: int = field(default=20, metadata=doc("pairing and solving iterations at most"))
+    cloud: int = field(default=2, metadata=doc("the cloud calibrated against the other cloud's planes: 1 or 2"))
 
     def __post_init__(self):
+        if self.cloud not in (1, 2):
+            raise ValueError(f"need cloud 1 or 2, got {self.cloud}")
         if not self.max_correspondence_m > 0 or self.max_points < MIN_POINTS or self.max_iterations < 1:
             raise ValueError(
                 f"need max_correspondence_m > 0, max_points >= {MIN_POINTS} and max_iterations >= 1, got "
@@ -77,7 +80,6 @@ class PlaneFit:
 
 @dataclass(frozen=True)
 class Params(PlaneFit):
-    cloud: int = field(default=2, metadata=doc("the cloud whose ranges are calibrated: 1 or 2"))
     per_ring: bool = field(
         default=False, metadata=doc("one range offset per ring (the cloud's ring attribute), one common scale")
     )
@@ -89,8 +91,6 @@ class Params(PlaneFit):
     )
 
     def __post_init__(self):
-        if self.cloud not in (1, 2):
-            raise ValueError(f"need cloud 1 or 2, got {self.cloud}")
         super().__post_init__()
         if not self.max_scale_change > 0 or not self.max_offset_m > 0:
             raise ValueError(

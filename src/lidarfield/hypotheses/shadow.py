@@ -34,8 +34,7 @@ from ..field.free_space import MARGIN_M, occluded_points, ranges
 from ..field.grid import SENSORLESS_ELEVATION_DEG, SphericalGrid, grid_from_config
 from ..pair import RegisteredPair
 from . import ego_vehicle
-from .geometry import in_sensor_frame, own_frame_points
-from .moving_objects import carried_points
+from .geometry import in_sensor_frame, near_in_own_frames, own_frame_points
 from .params import doc
 
 # The keys of a grid section that shape the angular cells (range shells play no part: the
@@ -229,7 +228,7 @@ def occlusion_keep(pair: RegisteredPair, params: Params) -> tuple[np.ndarray, np
     # of viewpoint nor hiding by one (the ground behind it is ego_vehicle's). Farther, a wall
     # along the motion looks the same from both places.
     near = [ranges(own) <= ego_vehicle.Params().radius_m for own in own_frame_points(pair)]
-    carried = carried_points(pair, (near[0], near[1]), MARGIN_M)
+    carried = near_in_own_frames(pair, (near[0], near[1]), MARGIN_M)
     for origin in params.origins:
         hidden = occluded_points(pair, origin, ~carried[origin - 1])
         if hidden is None:

@@ -158,7 +158,16 @@ TAG_CORRECTIONS = {"rigid": "realign", "radial": "range_calibration"}
 # the first radial cluster keeps what lies behind a corner continuous in range with the facade
 # (the street canyon's gaps between buildings, docs/diagnosis.md); a stack keeps the DESIGN's rule.
 # (``auto``: the first radial cluster where a scan has no sensor model to test occlusion with.)
-DEFAULT_CANDIDATE_PARAMS = {"shadow": {"rule": "auto"}}
+# ``range_calibration`` with sensor 2's pose fitted with it: a range error is partly a pose error on real scenes
+# (a scale moves the ground as a vertical shift), so fitted alone on a pair whose pose is itself
+# off, or after a ``realign`` that took that part, it fits the wrong thing (docs/diagnosis.md).
+# The same for ``deskew``: a skew's mean over the sweep is a shift, which the pose fitted on the
+# skewed scan took.
+DEFAULT_CANDIDATE_PARAMS = {
+    "shadow": {"rule": "auto"},
+    "range_calibration": {"with_pose": True},
+    "deskew": {"with_pose": True},
+}
 
 
 def candidate_steps(

@@ -295,3 +295,17 @@ def test_a_rigs_lidars_have_lasers_of_their_own(expd):
     assert np.array_equal(channel[len(ring) :], channel[: len(ring)] + 16)  # its own model, in its own frame
     rings = replace(bare, attributes2={LIDAR: lidar, "ring": np.tile(ring, 2).astype(np.float64)})
     assert np.array_equal(cloud_channels(rings, 2), np.concatenate([ring, ring + 16]))
+
+
+def test_a_fit_with_the_pose_that_finds_no_calibration_is_not_proposed(faulty, truth):
+    """Fitted with the pose, a pair without a range fault gives a scale and an offset within
+    their standard errors (the joint fit is the pose alone, which realign fits): not worth it,
+    ranked last; the fault's are tens of standard errors off."""
+    from lidarfield.analysis.stopping_rule import MIN_CALIBRATION_SIGNIFICANCE, calibration_seen
+
+    none = apply_step(truth, {"range_calibration": {"with_pose": True}}).fitted
+    fault = apply_step(faulty, {"range_calibration": {"with_pose": True}}).fitted
+    assert not calibration_seen(none) and calibration_seen(fault)
+    assert abs(none["scale"] - 1) < MIN_CALIBRATION_SIGNIFICANCE * none["scale_se"]
+    assert abs(fault["offset_m"]) > 10 * fault["offset_se_m"]
+    assert calibration_seen(apply_step(truth, {"range_calibration": {}}).fitted)  # alone: no pose, no test

@@ -161,17 +161,16 @@ TAG_CORRECTIONS = {"rigid": "realign", "radial": "range_calibration"}
 # the first radial cluster keeps what lies behind a corner continuous in range with the facade
 # (the street canyon's gaps between buildings, docs/diagnosis.md); a stack keeps the DESIGN's rule.
 # (``auto``: the first radial cluster where a scan has no sensor model to test occlusion with.)
-# ``range_calibration`` with sensor 2's pose fitted with it: a range error is partly a pose
-# error on real scenes (a scale moves the ground as a vertical shift), so its scale and offset
-# fitted alone are biased wherever the pose is off (by the reference, or by a ``realign`` that
-# took that part: docs/diagnosis.md); fitted with it they are not, and a right pose costs only
-# its 6 parameters' null. ``deskew`` both ways: a skew's mean
-# over the sweep is a shift, which a pose fitted on the skewed scan took (scan matching) and one
-# measured apart from it did not (odometry, GNSS): the pair cannot say which, so both are
-# candidates, ranked beyond their parameters (the recorded motion fits none, the pose 6).
+# ``range_calibration`` and ``deskew`` each both alone and with sensor 2's pose fitted with it:
+# a range error is partly a pose error on real scenes (a scale moves the ground as a vertical
+# shift), and a skew's mean over the sweep is a shift, so where the pose was fitted on the
+# faulty scan (scan matching), or by a ``realign`` before, it took that part and the correction
+# alone fits the wrong thing (docs/diagnosis.md); where it was measured apart from the scan (the
+# truth, odometry, GNSS) it did not, and the pose's 6 parameters only fit noise. The pair cannot
+# say which: both are candidates, ranked beyond their parameters (``fitted_null``).
 DEFAULT_CANDIDATE_PARAMS = {
     "shadow": [{"rule": "auto"}],
-    "range_calibration": [{"with_pose": True}],
+    "range_calibration": [{}, {"with_pose": True}],
     "deskew": [{}, {"with_pose": True}],
 }
 

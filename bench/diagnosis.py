@@ -80,7 +80,7 @@ def run(slice_name: str, points: int, jobs: int, bases: list[str], real_pose: st
     print(file=sys.stderr)
     order = {case.name: k for k, case in enumerate(cases)}
     table = pd.DataFrame(rows).sort_values("case", key=lambda c: c.map(order)).reset_index(drop=True)
-    for column in ("named", "named_strict"):  # a case not built (its error said) named nothing
+    for column in ("named", "named_strict", "named_displacement"):  # a case not built (its error said) named nothing
         table[column] = table[column].fillna(False).astype(bool)
     return table
 

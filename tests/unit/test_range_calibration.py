@@ -15,10 +15,11 @@ from lidarfield.analysis.field_stats import analyse_field
 from lidarfield.cli import main
 from lidarfield.errors import HypothesisError
 from lidarfield.field.grid import field_settings_from_config
-from lidarfield.hypotheses import BUILTINS, CORRECTING, apply_step
+from lidarfield.hypotheses import BUILTINS, CORRECTING, apply_step, validate_step
 from lidarfield.hypotheses.range_calibration import cloud_channels
 from lidarfield.io import write_scan
 from lidarfield.pair import RegisteredPair
+from lidarfield.poses import pose_from_xyzrpy
 from lidarfield.registration import register_pair
 from lidarfield.study.stack import apply_stack
 
@@ -83,6 +84,34 @@ def test_range_calibration_is_the_first_suggestion_for_a_range_fault(faulty):
     assert table["hypothesis"][0] == "range_calibration" and table["suggested_by"][0] == "radial"
     fitted = json.loads(table["fitted"][0])
     assert abs(fitted["scale"] - SCALE) < 0.0005 and abs(fitted["offset_m"] - OFFSET) < 0.005
+
+
+def test_with_the_pose_it_fits_a_range_fault_on_a_pair_whose_pose_is_off(faulty):
+    """Scan 2 placed 4 cm and 0.1 deg off as well: alone, the fit takes part of the pose for a
+    range error (measured: scale 1.0011 for 1.003); fitted with sensor 2's pose, it finds the
+    fault as on the pair at its true pose (1.00331 and 28.5 mm both) and restores the pose."""
+    off = pose_from_xyzrpy([0.03, -0.02, 0.02, 0.0, np.radians(0.1), 0.0])
+    moved = replace(faulty, xyz2=faulty.xyz2 @ off[:3, :3].T + off[:3, 3], T_1_2=off @ faulty.T_1_2)
+    alone = apply_step(moved, {"range_calibration": {}}).fitted
+    assert abs(alone["scale"] - SCALE) > 0.0015, alone
+    outcome = apply_step(moved, {"range_calibration": {"with_pose": True}})
+    at_truth = apply_step(faulty, {"range_calibration": {"with_pose": True}}).fitted
+    c = outcome.fitted
+    assert abs(c["scale"] - SCALE) < 0.0005 and abs(c["offset_m"] - OFFSET) < 0.005, c
+    assert abs(c["scale"] - at_truth["scale"]) < 1e-5 and abs(c["offset_m"] - at_truth["offset_m"]) < 1e-4
+    assert c["parameters"] == 8 and abs(c["pose"]["angle_deg"] - 0.1) < 0.01 and at_truth["pose"]["angle_deg"] < 0.01
+    assert np.abs(outcome.T_1_2 - faulty.T_1_2).max() < 0.001  # the pose put back, to a millimetre
+    # cloud 2 is the corrected ranges about sensor 2, then the pose's motion
+    rotation, shift = outcome.T_1_2[:3, :3] @ moved.T_1_2[:3, :3].T, outcome.T_1_2[:3, 3]
+    r = np.linalg.norm(moved.xyz2 - moved.origin2, axis=1)
+    u = (moved.xyz2 - moved.origin2) / r[:, None]
+    expected = ((r - c["offset_m"]) / c["scale"])[:, None] * u @ rotation.T + shift
+    assert np.allclose(outcome.xyz2, expected, atol=1e-6)
+
+
+def test_with_the_pose_it_needs_cloud_2():
+    with pytest.raises(HypothesisError, match="with_pose"):
+        validate_step({"range_calibration": {"with_pose": True, "cloud": 1}})
 
 
 def test_no_fault_fits_the_identity(truth):
@@ -266,3 +295,17 @@ def test_a_rigs_lidars_have_lasers_of_their_own(expd):
     assert np.array_equal(channel[len(ring) :], channel[: len(ring)] + 16)  # its own model, in its own frame
     rings = replace(bare, attributes2={LIDAR: lidar, "ring": np.tile(ring, 2).astype(np.float64)})
     assert np.array_equal(cloud_channels(rings, 2), np.concatenate([ring, ring + 16]))
+
+
+def test_a_fit_with_the_pose_that_finds_no_calibration_is_not_proposed(faulty, truth):
+    """Fitted with the pose, a pair without a range fault gives a scale and an offset within
+    their standard errors (the joint fit is the pose alone, which realign fits): not worth it,
+    ranked last; the fault's are tens of standard errors off."""
+    from lidarfield.analysis.stopping_rule import MIN_CALIBRATION_SIGNIFICANCE, calibration_seen
+
+    none = apply_step(truth, {"range_calibration": {"with_pose": True}}).fitted
+    fault = apply_step(faulty, {"range_calibration": {"with_pose": True}}).fitted
+    assert not calibration_seen(none) and calibration_seen(fault)
+    assert abs(none["scale"] - 1) < MIN_CALIBRATION_SIGNIFICANCE * none["scale_se"]
+    assert abs(fault["offset_m"]) > 10 * fault["offset_se_m"]
+    assert calibration_seen(apply_step(truth, {"range_calibration": {}}).fitted)  # alone: no pose, no test

@@ -71,9 +71,14 @@ def test_default_candidates_are_the_builtins_not_yet_applied():
         "moving_objects",
         "realign",
         "range_calibration",
+        "range_calibration",
+        "deskew",
         "deskew",
         "elevation_calibration",
-    ]  # corrections last
+    ]  # corrections last; range_calibration and deskew alone and with the pose (suggest.DEFAULT_CANDIDATE_PARAMS)
+    steps = candidate_steps(None, [], ".", grid)
+    assert [s["deskew"]["with_pose"] for s in steps if "deskew" in s] == [False, True]
+    assert [s["range_calibration"]["with_pose"] for s in steps if "range_calibration" in s] == [False, True]
     shadow = candidate_steps(None, [], ".", grid)[2]["shadow"]
     assert shadow["grid"]["azimuth_bins"] == 12 and shadow["origins"] == [1, 2]  # the study's grid, defaults
     with pytest.raises(HypothesisError, match="suggest entry 2"):
@@ -91,6 +96,8 @@ def test_study_candidates_per_stage(tmp_path):
         "moving_objects",
         "realign",
         "range_calibration",
+        "range_calibration",
+        "deskew",
         "deskew",
         "elevation_calibration",
     ]
@@ -101,6 +108,8 @@ def test_study_candidates_per_stage(tmp_path):
         "moving_objects",
         "realign",
         "range_calibration",
+        "range_calibration",
+        "deskew",
         "deskew",
         "elevation_calibration",
     ]

@@ -221,7 +221,7 @@ def test_run_reuses_the_suggestions_of_a_stage_whose_hypothesis_changed_no_point
     argv = ["run", *map(str, paper_scans), "--config", str(config), "--out", str(out), "--register", "truth"]
     with caplog.at_level("INFO", logger="lidarfield.analysis.suggest"):
         assert main(argv) == 0
-    assert "all 8 candidates reused" in caplog.text
+    assert "all 10 candidates reused" in caplog.text
     ids = list(pd.read_parquet(out / "summary.parquet")["stage"])
     files = [out / "stages" / stage_id / "suggestions.parquet" for stage_id in ids[1:]]
     before, after = (pd.read_parquet(path) for path in files)

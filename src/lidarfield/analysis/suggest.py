@@ -61,7 +61,9 @@ binned once) and compared with the stage's field:
   reads them.
 
 ``rank`` 1 is the largest whitened reduction beyond ``fitted_null`` (ties: fewer points removed,
-then the larger share of the energy in the tag that points to it; undefined reductions last).
+then the larger share of the energy in the tag that points to it; undefined reductions last,
+and with them a range calibration fitted with the pose whose scale and offset are both within
+``stopping_rule.MIN_CALIBRATION_SIGNIFICANCE`` standard errors: that fit is the pose alone).
 Candidates are the config's ``suggest`` list, or by default every built-in hypothesis the stack
 has not applied up to that stage, with its defaults: the removing ones and every correcting one
 (``CORRECTING``: a correction joins by being registered there). The per-laser calibration
@@ -116,6 +118,7 @@ from ..hypotheses.steps import step_name
 from ..io.parquet_table import read_metadata, read_table, write_table
 from ..pair import RegisteredPair
 from ..storage.stage_ids import canonical_json
+from .stopping_rule import calibration_seen
 from .tags import vector_tags, voxel_energy, whitened_energy
 
 log = logging.getLogger(__name__)
@@ -158,21 +161,32 @@ TAG_CORRECTIONS = {"rigid": "realign", "radial": "range_calibration"}
 # the first radial cluster keeps what lies behind a corner continuous in range with the facade
 # (the street canyon's gaps between buildings, docs/diagnosis.md); a stack keeps the DESIGN's rule.
 # (``auto``: the first radial cluster where a scan has no sensor model to test occlusion with.)
-DEFAULT_CANDIDATE_PARAMS = {"shadow": {"rule": "auto"}}
+# ``range_calibration`` and ``deskew`` each both alone and with sensor 2's pose fitted with it:
+# a range error is partly a pose error on real scenes (a scale moves the ground as a vertical
+# shift), and a skew's mean over the sweep is a shift, so where the pose was fitted on the
+# faulty scan (scan matching), or by a ``realign`` before, it took that part and the correction
+# alone fits the wrong thing (docs/diagnosis.md); where it was measured apart from the scan (the
+# truth, odometry, GNSS) it did not, and the pose's 6 parameters only fit noise. The pair cannot
+# say which: both are candidates, ranked beyond their parameters (``fitted_null``).
+DEFAULT_CANDIDATE_PARAMS = {
+    "shadow": [{"rule": "auto"}],
+    "range_calibration": [{}, {"with_pose": True}],
+    "deskew": [{}, {"with_pose": True}],
+}
 
 
 def candidate_steps(
     suggest: list[dict] | None, applied: list[dict], base_dir: str | Path = ".", study_grid: dict | None = None
 ) -> list[dict]:
     """The normalised candidates of a stage whose stack so far is ``applied``: ``suggest``
-    validated, or every built-in not in ``applied`` with its defaults (``DEFAULT_CANDIDATE_PARAMS``
-    where given): the removing ones, then
+    validated, or every built-in not in ``applied`` with its defaults (each entry of
+    ``DEFAULT_CANDIDATE_PARAMS`` where given): the removing ones, then
     the correcting ones (``CORRECTING``, in ``BUILTINS`` order)."""
     if suggest is None:
         done = {step_name(step) for step in applied}
         fresh = [name for name in BUILTINS if name not in done]
-        suggest = [{name: DEFAULT_CANDIDATE_PARAMS.get(name, {})} for name in fresh if name not in CORRECTING]
-        suggest += [{name: DEFAULT_CANDIDATE_PARAMS.get(name, {})} for name in fresh if name in CORRECTING]
+        ordered = [name for name in fresh if name not in CORRECTING] + [name for name in fresh if name in CORRECTING]
+        suggest = [{name: params} for name in ordered for params in DEFAULT_CANDIDATE_PARAMS.get(name, [{}])]
     if not isinstance(suggest, list):
         raise HypothesisError(f"suggest: a list of {{name: {{parameters}}}} entries, got {suggest!r}")
     candidates = []
@@ -471,7 +485,8 @@ def tag_energy_shares(columns: dict[str, np.ndarray]) -> dict[str, float]:
 
 def _rank_key(row: dict) -> tuple:
     reduction = row["whitened_reduction"] - row["fitted_null"]
-    defined = math.isfinite(reduction)
+    # a calibration fitted with the pose that found none is the pose alone: last, as undefined
+    defined = math.isfinite(reduction) and calibration_seen(json.loads(str(row["fitted"] or "{}")))
     share = row["tag_share"] if math.isfinite(row["tag_share"]) else 0.0
     return (not defined, -reduction if defined else 0.0, row["removed1"] + row["removed2"], -share)
 

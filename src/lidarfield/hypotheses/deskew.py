@@ -53,7 +53,7 @@ What it records (the stage's ``correction``): ``reference``, and per cloud (``cl
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -110,6 +110,12 @@ class Params:
         default="counter-clockwise",
         metadata=doc("without a time attribute: the sense of rotation seen from above, counter-clockwise or clockwise"),
     )
+    with_pose: bool = field(
+        default=False,
+        metadata=doc(
+            "refit sensor 2's pose (realign, its defaults) on the de-skewed clouds, where the de-skew moved points"
+        ),
+    )
 
     def __post_init__(self):
         if self.cloud not in (1, 2, "both"):
@@ -153,7 +159,28 @@ def deskew(pair: RegisteredPair, params: Params) -> Outcome:
             "time_max_s": float(s.max()) if len(s) else 0.0,
             "max_displacement_m": float(displacement.max()) if len(s) else 0.0,
         }
+    if params.with_pose and ("xyz1" in out or "xyz2" in out):
+        return _with_pose(pair, out, fitted)
     return Outcome(**out, fitted=fitted)
+
+
+def _with_pose(pair: RegisteredPair, out: dict, fitted: dict) -> Outcome:
+    """The de-skewed clouds with sensor 2's pose refitted on them (``realign``, its defaults).
+    A skew's mean over the sweep is a shift, which a pose fitted on the skewed scan took (the
+    reference's, or a ``realign`` before): de-skewed alone, the scan lands that shift off."""
+    from .realign import Params as RealignParams
+    from .realign import realign
+
+    deskewed = replace(pair, xyz1=out.get("xyz1", pair.xyz1), xyz2=out.get("xyz2", pair.xyz2))
+    aligned = realign(deskewed, RealignParams())
+    pose = {
+        k: aligned.fitted[k]
+        for k in ("translation_m", "rotation_deg", "angle_deg", "translation_se_m", "rotation_se_deg")
+    }
+    fitted = {**fitted, "pose": pose, "parameters": aligned.fitted["parameters"]}
+    return Outcome(
+        out["keep1"], out["keep2"], xyz1=out.get("xyz1"), xyz2=aligned.xyz2, T_1_2=aligned.T_1_2, fitted=fitted
+    )
 
 
 def sweep_motion(pair: RegisteredPair, cloud: int, params: Params) -> tuple[np.ndarray, np.ndarray, str]:

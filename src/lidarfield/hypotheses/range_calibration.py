@@ -39,11 +39,12 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from ..errors import HypothesisError
 from ..field.free_space import directions, nearest_channel, sensor_channels
 from ..pair import RegisteredPair
-from ..poses import in_sensor_frame
+from ..poses import in_sensor_frame, rotation_from_vector
 from .outcome import Outcome
 from .params import doc
 
@@ -89,9 +90,15 @@ class Params(PlaneFit):
     max_offset_m: float = field(
         default=1.0, metadata=doc("a fitted offset larger than this is no range calibration (an error, m)")
     )
+    with_pose: bool = field(
+        default=False,
+        metadata=doc("fit sensor 2's pose (a rigid motion about its origin) together with the calibration (cloud 2)"),
+    )
 
     def __post_init__(self):
         super().__post_init__()
+        if self.with_pose and self.cloud != 2:
+            raise ValueError("with_pose fits sensor 2's pose: it needs cloud 2")
         if not self.max_scale_change > 0 or not self.max_offset_m > 0:
             raise ValueError(
                 f"need max_scale_change > 0 and max_offset_m > 0, got {self.max_scale_change} and {self.max_offset_m}"
@@ -166,19 +173,30 @@ def range_calibration(pair: RegisteredPair, params: Params) -> Outcome:
     rs, us, origins = r[candidates], u[candidates], np.broadcast_to(origin, xyz.shape)[candidates]
     r_max = float(rs.max())
     theta = np.concatenate([[1.0], np.zeros(len(groups))])  # alpha, then beta per group
+    # With the pose: cloud 2 turned by R about sensor 2's origin c and moved by t, fitted with
+    # theta by Gauss-Newton (each step's rotation a small rotation vector, applied on the left).
+    R, t, c = np.eye(3), np.zeros(3), pair.T_1_2[:3, 3]
+    rigid = 6 if params.with_pose else 0
     iterations, converged = 0, False
     while iterations < params.max_iterations and not converged:
         iterations += 1
-        corrected = origins + (theta[0] * rs - theta[1:][group_of])[:, None] * us
-        use, n, q = planes.pair(corrected)
+        calibrated = origins + (theta[0] * rs - theta[1:][group_of])[:, None] * us
+        use, n, q = planes.pair(_moved(calibrated, R, c, t) if rigid else calibrated)
         check_overlap(name, params, len(use))
-        nu = np.einsum("ij,ij->i", n, us[use])
-        # the Jacobian's rows: r (n . u) for alpha, -(n . u) for the point's group's beta
+        nu = np.einsum("ij,ij->i", n, us[use] @ R.T if rigid else us[use])
+        # the Jacobian's rows: r (n . Ru) for alpha, -(n . Ru) for the point's group's beta;
+        # with the pose, (R (x - c)) x n for the rotation and n for the translation
         a, b, g = rs[use] * nu, -nu, group_of[use]
-        y = np.einsum("ij,ij->i", n, q - origins[use])
+        if rigid:
+            pose_columns = np.hstack([np.cross((calibrated[use] - c) @ R.T, n), n])
+            y = np.einsum("ij,ij->i", n, q - _moved(origins[use], R, c, t))
+        else:
+            pose_columns, y = np.empty((len(use), 0)), np.einsum("ij,ij->i", n, q - origins[use])
         residual = a * theta[0] + b * theta[1:][g] - y
         weight = _huber(residual)
-        information, gradient = _normal_equations(a, b, g, y, weight, len(theta))
+        # solved for the calibration itself and the pose's increment (the pose's columns are
+        # its derivative at the current pose, whose own residual is in y)
+        information, gradient = _normal_equations(a, b, g, y, weight, len(theta), pose_columns)
         try:
             new = np.linalg.solve(information, gradient)
         except np.linalg.LinAlgError:
@@ -186,17 +204,23 @@ def range_calibration(pair: RegisteredPair, params: Params) -> Outcome:
                 f"{name}: the ranges do not constrain a scale and offset: "
                 f"the {len(use)} pairs' normals and ranges are degenerate"
             ) from None
-        # the largest change of a corrected range in the sample
-        converged = bool(np.abs(new[0] - theta[0]) * r_max + np.abs(new[1:] - theta[1:]).max() < TOLERANCE_M)
+        step, new = new[len(theta) :], new[: len(theta)]
+        # the largest change of a corrected point of the sample
+        change = np.abs(new[0] - theta[0]) * r_max + np.abs(new[1:] - theta[1:]).max()
+        if rigid:
+            change += np.linalg.norm(step[:3]) * r_max + np.linalg.norm(step[3:])
+            R, t = rotation_from_vector(step[:3]) @ R, t + step[3:]
+        converged = bool(change < TOLERANCE_M)
         theta = new
 
-    residual = a * theta[0] + b * theta[1:][g] - y
+    residual = a * theta[0] + b * theta[1:][g] + pose_columns @ step - y
     m, p = len(residual), len(theta)
-    sigma2 = float(weight @ residual**2) / max(m - p, 1)
+    sigma2 = float(weight @ residual**2) / max(m - p - rigid, 1)
     try:
-        covariance = sigma2 * np.linalg.inv(information)
+        full_covariance = sigma2 * np.linalg.inv(information)
     except np.linalg.LinAlgError:
-        covariance = np.full((p, p), np.nan)
+        full_covariance = np.full((p + rigid, p + rigid), np.nan)
+    covariance = full_covariance[:p, :p]  # the calibration's, the pose's uncertainty taken into it
     alpha, betas = theta[0], theta[1:]
     scale, offsets = 1.0 / alpha, betas / alpha
     # first order: scale = 1/alpha, offset_g = beta_g / alpha
@@ -226,8 +250,10 @@ def range_calibration(pair: RegisteredPair, params: Params) -> Outcome:
         "sigma_m": float(np.sqrt(sigma2)),
         "iterations": iterations,
         "method": "point_to_plane_huber",
-        "parameters": p,
+        "parameters": p + rigid,
     }
+    if rigid:
+        fitted["pose"] = _pose_record(R, t, full_covariance[p:, p:])
     if ring is None:
         fitted.update(offset_m=float(offsets[0]), offset_se_m=number(se[1]))
         offset_of_point = np.full(len(xyz), offsets[0])
@@ -239,6 +265,10 @@ def range_calibration(pair: RegisteredPair, params: Params) -> Outcome:
     corrected_r = np.where(measurable, (r - offset_of_point) / scale, 0.0)
     new_xyz = np.where(measurable[:, None], origin + corrected_r[:, None] * u, xyz)
     keep1, keep2 = np.ones(len(pair.xyz1), dtype=bool), np.ones(len(pair.xyz2), dtype=bool)
+    if rigid:  # turned about sensor 2's origin and moved: T in frame 1
+        T = np.eye(4)
+        T[:3, :3], T[:3, 3] = R, c + t - R @ c
+        return Outcome(keep1, keep2, xyz2=_moved(new_xyz, R, c, t), T_1_2=T @ pair.T_1_2, fitted=fitted)
     if params.cloud == 2:
         return Outcome(keep1, keep2, xyz2=new_xyz, fitted=fitted)
     return Outcome(keep1, keep2, xyz1=new_xyz, fitted=fitted)
@@ -276,17 +306,45 @@ def cloud_channels(pair: RegisteredPair, cloud: int, name: str = "range_calibrat
 
 
 def _normal_equations(
-    a: np.ndarray, b: np.ndarray, g: np.ndarray, y: np.ndarray, w: np.ndarray, p: int
+    a: np.ndarray, b: np.ndarray, g: np.ndarray, y: np.ndarray, w: np.ndarray, p: int, dense: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
-    """``J^T W J`` and ``J^T W y`` for rows ``[a, 0.., b (column 1 + g), ..0]``, without ``J``."""
-    groups = p - 1
-    information = np.zeros((p, p))
+    """``J^T W J`` and ``J^T W y`` for rows ``[a, 0.., b (column 1 + g), ..0, dense]``, without
+    building the calibration's sparse part of ``J`` (``dense``: (m, k) further columns, k >= 0)."""
+    groups, k = p - 1, dense.shape[1]
+    information = np.zeros((p + k, p + k))
     information[0, 0] = w @ (a * a)
     cross = np.bincount(g, w * a * b, groups)
-    information[0, 1:] = information[1:, 0] = cross
+    information[0, 1:p] = information[1:p, 0] = cross
     information[np.arange(1, p), np.arange(1, p)] = np.bincount(g, w * b * b, groups)
-    gradient = np.concatenate([[w @ (a * y)], np.bincount(g, w * b * y, groups)])
+    gradient = np.concatenate([[w @ (a * y)], np.bincount(g, w * b * y, groups), (w * y) @ dense])
+    if k:
+        weighted = dense * w[:, None]
+        information[p:, p:] = weighted.T @ dense
+        information[0, p:] = information[p:, 0] = weighted.T @ a
+        by_group = np.stack([np.bincount(g, weighted[:, j] * b, groups) for j in range(k)], axis=1)
+        information[1:p, p:] = by_group
+        information[p:, 1:p] = by_group.T
     return information, gradient
+
+
+def _moved(xyz: np.ndarray, R: np.ndarray, c: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """Points turned by ``R`` about ``c`` and moved by ``t``."""
+    return (xyz - c) @ R.T + c + t
+
+
+def _pose_record(R: np.ndarray, t: np.ndarray, covariance: np.ndarray) -> dict:
+    """The pose fitted with the calibration: sensor 2 turned by ``R`` about its origin and moved
+    by ``t`` (frame 1), with standard errors (``covariance``: of the rotation vector, rad, and
+    the translation, m)."""
+    se = np.sqrt(np.clip(np.diag(covariance), 0, None))
+    rotvec = Rotation.from_matrix(R).as_rotvec()
+    return {
+        "translation_m": t.tolist(),
+        "rotation_deg": np.degrees(rotvec).tolist(),
+        "angle_deg": float(np.degrees(np.linalg.norm(rotvec))),
+        "translation_se_m": se[3:].tolist(),
+        "rotation_se_deg": np.degrees(se[:3]).tolist(),
+    }
 
 
 def _huber(residual: np.ndarray) -> np.ndarray:

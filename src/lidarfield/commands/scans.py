@@ -205,23 +205,39 @@ def explain_scans(
     out_dir = check_out_dir(out_dir, EXPLAIN_MARKER, "lidarfield explain")
     study = validate_config({}, require_pairs=False) if config_path is None else load_config(config_path, None, False)
     settings = registration_settings(register, transform)
-    _, pair = read_and_register(scan1, scan2, settings, sensor, poses)
-    out_dir.mkdir(parents=True, exist_ok=True)  # marked first: the figures are drawn as the loop goes
-    run = {"scan1": str(scan1), "scan2": str(scan2), "config": config_path and str(config_path), "register": settings}
-    write_text(out_dir / EXPLAIN_MARKER, json.dumps({**run, "sensor": sensor, "poses": poses}, indent=1) + "\n")
-    return explain_into(pair, study, out_dir)
+    with stage_figures(study, out_dir) as figures:  # the drawing process starts while the scans are registered
+        _, pair = read_and_register(scan1, scan2, settings, sensor, poses)
+        out_dir.mkdir(parents=True, exist_ok=True)  # marked first: the figures are drawn as the loop goes
+        run = {
+            "scan1": str(scan1),
+            "scan2": str(scan2),
+            "config": config_path and str(config_path),
+            "register": settings,
+        }
+        write_text(out_dir / EXPLAIN_MARKER, json.dumps({**run, "sensor": sensor, "poses": poses}, indent=1) + "\n")
+        return explain_into(pair, study, out_dir, figures)
 
 
-def explain_into(pair: RegisteredPair, study: Study, out_dir: Path) -> Explanation:
+def stage_figures(study: Study, out_dir: Path):
+    """``out_dir``'s stage figures (``report.explanation.StageFigures``): drawn by a second
+    process while the loop goes on when more than one core is usable (``candidate_threads``)."""
+    from ..report.explanation import StageFigures  # the figures: matplotlib, only here
+
+    return StageFigures(out_dir.resolve().name, study.grid, out_dir, study.config["plots"], candidate_threads() > 1)
+
+
+def explain_into(pair: RegisteredPair, study: Study, out_dir: Path, figures=None) -> Explanation:
     """The loop on a registered pair (``explain_with_study``) and its folder written into
-    ``out_dir``: each stage's figures drawn as soon as it is decided, by a second process
-    while the loop goes on when more than one core is usable (``candidate_threads``)."""
-    from ..report.explanation import StageFigures, write_explanation  # the figures: matplotlib, only here
+    ``out_dir``, each stage's figures drawn as soon as it is decided (``figures``: a
+    ``stage_figures`` of ``out_dir`` already started; None: one made here)."""
+    from ..report.explanation import write_explanation
 
-    name, plots = out_dir.resolve().name, study.config["plots"]
-    with StageFigures(name, study.grid, out_dir, plots, background=candidate_threads() > 1) as figures:
-        explanation = explain_with_study(pair, study, name, on_stage=figures)
-        write_explanation(explanation, study.grid, study.grid_section, out_dir, plots, figures.paths)
+    if figures is None:
+        with stage_figures(study, out_dir) as figures:
+            return explain_into(pair, study, out_dir, figures)
+    explanation = explain_with_study(pair, study, out_dir.resolve().name, on_stage=figures)
+    plots = study.config["plots"]
+    write_explanation(explanation, study.grid, study.grid_section, out_dir, plots, figures.paths)
     return explanation
 
 

@@ -17,6 +17,7 @@ import io
 import json
 import logging
 import multiprocessing
+import queue
 import shutil
 from collections import Counter
 from collections.abc import Callable
@@ -141,10 +142,14 @@ def draw_explained_stage(
 class StageFigures:
     """Each stage's figures drawn as soon as the loop has decided the stage (``explain_pair``'s
     ``on_stage``), into a fresh ``figures/`` of ``out_dir``; ``paths()``: what
-    ``write_explanation`` takes. With ``background``, each stage is drawn by a forked child
-    process while the loop ranks the next step's candidates (the figures are the same files:
-    the same code on the same data); else here, one after the other. A context manager: on
-    leaving it, a child still drawing is stopped."""
+    ``write_explanation`` takes. With ``background``, the stages are drawn one after the other
+    by one drawing process while the loop ranks the next step's candidates (the figures are the
+    same files: the same code on the same data); else here. That process is spawned, not
+    forked: the caller has threads (the candidates' pool, Open3D's), and a fork copies their
+    locks, which can deadlock the child (Python 3.12+ warns). It starts, and imports the
+    drawing code, as the object is made: made before the scans are registered, that start-up
+    runs meanwhile. Each stage goes to it pickled with the stage before it (what its before /
+    after figure shows). A context manager: on leaving it, the drawing process is stopped."""
 
     def __init__(self, pair_name: str, settings: FieldSettings, out_dir: Path, plots: dict | None, background: bool):
         self.draw = functools.partial(
@@ -154,62 +159,68 @@ class StageFigures:
             figures_dir=fresh_figures_dir(out_dir),
             plots=plots,
         )
-        self.fork = multiprocessing.get_context("fork") if background and can_fork() else None
-        self.drawn: list = []  # per stage: its paths, or (child, the end of the pipe its paths come from)
+        self.drawing = _DrawingProcess(self.draw) if background else None
+        self.drawn: list = []  # per stage: its paths, or None while the drawing process has them
 
     def __call__(self, stages: list[ExplainedStage]) -> None:
         k = len(stages) - 1
-        if self.fork is None:
+        if self.drawing is None:
             self.drawn.append(self.draw(stages, k))
             return
-        receive, send = self.fork.Pipe(duplex=False)
-        child = self.fork.Process(target=_send_result, args=(send, self.draw, stages, k), daemon=True)
-        child.start()
-        send.close()
-        self.drawn.append((child, receive))
+        shown = stages[max(k - 1, 0) : k + 1]  # the stage and the one before it (stage 0: itself)
+        self.drawing.jobs.put((shown, len(shown) - 1))
+        self.drawn.append(None)
 
     def paths(self) -> list[list[Path]]:
-        """Each stage's figures, once drawn; a child's error raised here."""
-        self.drawn = [_received(*drawn) if isinstance(drawn, tuple) else drawn for drawn in self.drawn]
+        """Each stage's figures, once drawn; the drawing process's error raised here."""
+        self.drawn = [self.drawing.result() if drawn is None else drawn for drawn in self.drawn]
         return self.drawn
 
     def __enter__(self) -> StageFigures:
         return self
 
     def __exit__(self, *exc) -> None:
-        for drawn in self.drawn:
-            if isinstance(drawn, tuple):
-                drawn[0].terminate()
-                drawn[0].join()
+        if self.drawing is not None:
+            self.drawing.stop()
 
 
-def can_fork() -> bool:
-    """Whether a child process can start as a copy of this one (no pickling of the stages)."""
-    return "fork" in multiprocessing.get_all_start_methods()
+class _DrawingProcess:
+    """A spawned process calling ``draw`` on each job put in ``jobs``; ``result``: the next
+    job's result, or the error it raised raised here."""
+
+    def __init__(self, draw: Callable):
+        spawn = multiprocessing.get_context("spawn")
+        self.jobs, self.results = spawn.Queue(), spawn.Queue()  # put() does not wait for the drawing
+        self.process = spawn.Process(target=_draw_jobs, args=(draw, self.jobs, self.results), daemon=True)
+        self.process.start()
+
+    def result(self):
+        while True:
+            try:
+                ok, value = self.results.get(timeout=1.0)
+                break
+            except queue.Empty:
+                if not self.process.is_alive():  # killed (out of memory, a signal) before it could answer
+                    raise RuntimeError(
+                        f"the process drawing the figures ended with exit code {self.process.exitcode}"
+                    ) from None
+        if not ok:
+            raise value
+        return value
+
+    def stop(self) -> None:
+        self.jobs.cancel_join_thread()  # jobs it will not take: not flushed at exit
+        self.process.terminate()
+        self.process.join()
 
 
-def _send_result(send, function, *args) -> None:
-    """In a child: ``function(*args)``, or the error it raised, sent through ``send``."""
-    try:
-        result = function(*args)
-    except BaseException as e:  # to the parent, which raises it
-        send.send((False, e))
-    else:
-        send.send((True, result))
-    finally:
-        send.close()
-
-
-def _received(child, receive) -> list[Path]:
-    try:
-        ok, result = receive.recv()
-    except EOFError:  # it died before it could send
-        child.join()
-        ok, result = False, RuntimeError(f"the process drawing the figures ended with exit code {child.exitcode}")
-    child.join()
-    if not ok:
-        raise result
-    return result
+def _draw_jobs(draw: Callable, jobs, results) -> None:
+    """In the drawing process: each job drawn, its result or the error it raised put in ``results``."""
+    for args in iter(jobs.get, None):
+        try:
+            results.put((True, draw(*args)))
+        except Exception as e:  # to the parent, which raises it
+            results.put((False, e))
 
 
 def explain_page(

@@ -10,7 +10,7 @@ most I, so both tests draw their null distribution as standard normal vectors, o
 ``NULL_NEIGHBOUR_CORRELATION``: neighbouring voxels' sampling is not independent (they share
 the scan lattice's phase and the smooth surface between them). Measured on fault-free pairs
 that read random, neighbouring whitened vectors correlate by 0.05-0.20; where C bounds the
-noise loosely (simulated pairs, one place: the vectors at 0.2-0.5 of it) that hides inside an
+noise loosely (most simulated pairs, one place: the vectors at 0.2-0.5 of it) that hides inside an
 independent null's spread, but on a real pair from two places whose vectors are at their full
 modelled noise (the OS1-128 frames after ``realign``: 0.91) the same correlation read as a
 pattern (p_coherence 0.011). See docs/diagnosis.md. A voxel holding one surface seen from two places is read by its
@@ -18,7 +18,8 @@ normal part alone (w along its normal n, ``significance``): its draw is the stan
 vector's part along n, one degree of freedom.
 
 - ``p_direction``: do the vectors share a resultant? Statistic |sum w|^2 (chi^2 with 3 degrees
-  of freedom times the voxel count under the null). Catches a translation.
+  of freedom times the voxel count under an independent null; the neighbours' correlation
+  spreads it wider). Catches a translation.
 - ``p_coherence``: do neighbouring voxels' vectors agree? Statistic: the sum over pairs of
   grid neighbours of w_i . w_j. Catches patterns with no net resultant (a scale error's outward
   vectors, a rotation's swirl, opposing vectors in halves).

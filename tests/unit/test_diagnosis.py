@@ -193,12 +193,20 @@ def _slice_case(base: str, fault: str, level: str) -> dict:
 @pytest.mark.parametrize("base, fault, level", NAMED)
 def test_the_first_proposal_names_the_fault(base, fault, level):
     row = _slice_case(base, fault, level)
-    # a field of view cut by half leaves no vector where it is cut: random, named from the points
-    assert row["verdict0"] == ("random" if (fault, level) == ("fov_cut", "obvious") else "patterned")
+    # a field of view cut by half leaves no vector where it is cut: random, named from the points;
+    # so is the body a truck carries on the canyon drive at the visible level, a few voxels below
+    # the sensor, since the null's draws correlate between neighbours (HDL-32E: p_coherence
+    # 0.092, 0.002 before)
+    from_points = (fault, level) == ("fov_cut", "obvious") or (
+        base.startswith("sim-canyon-drive") and (fault, level) == ("ego_body", "visible")
+    )
+    assert row["verdict0"] == ("random" if from_points else "patterned")
     assert row["proposal"] in zoo.NAMING[fault], row["stack"]
 
 
-@pytest.mark.parametrize("base", ["sim-intersection-still-vlp16", "real-vlp16-capture"])
+# the OS1-128 frames from two places: random after the correction since the null's draws
+# correlate between neighbours as sampling does (randomness.NULL_NEIGHBOUR_CORRELATION)
+@pytest.mark.parametrize("base", ["sim-intersection-still-vlp16", "real-vlp16-capture", "real-os1-128-frames"])
 def test_the_corrections_leave_a_random_field(base):
     for fault in ("translation", "range_scale", "motion_distortion"):
         row = _slice_case(base, fault, "visible")
@@ -209,6 +217,13 @@ def test_the_corrections_leave_a_random_field(base):
 def test_controls_propose_nothing_and_read_random(base):
     row = _slice_case(base, zoo.CONTROL, "")
     assert row["named"] and row["stack"] == "" and row["final_verdict"] == "random"
+
+
+def test_the_real_os1_frames_control_reads_random_after_realigning_within_its_reference():
+    # realign's correction of the reference (0.063 deg, 2.4 cm: within its accuracy), then
+    # random (p_coherence 0.011 with independent null draws: patterned, realign > shadow)
+    row = _slice_case("real-os1-128-frames", zoo.CONTROL, "")
+    assert row["stack"] == "realign" and row["named"] and row["final_verdict"] == "random"
 
 
 def test_the_canyon_3_m_apart_reads_random_once_what_one_sensor_could_not_see_is_removed():

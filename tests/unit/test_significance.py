@@ -14,7 +14,13 @@ import pytest
 
 from helpers.clouds import targets
 from lidarfield.analysis.field_stats import field_statistics
-from lidarfield.analysis.randomness import LEVEL, neighbour_pairs, randomness_tests
+from lidarfield.analysis.randomness import (
+    LEVEL,
+    NULL_NEIGHBOUR_CORRELATION,
+    correlated_noise,
+    neighbour_pairs,
+    randomness_tests,
+)
 from lidarfield.analysis.tags import tag_column, voxel_tags
 from lidarfield.field.grid import CartesianGrid, FieldSettings, SphericalGrid
 from lidarfield.field.kernel import discrepancy_field
@@ -90,7 +96,10 @@ def test_false_patterned_rate_on_pure_sampling_noise_is_near_the_level(scene):
         z.append(np.abs(field["z"][field["valid"]]))
     rate = patterned / seeds
     slack = 2.5 * math.sqrt(LEVEL * (1 - LEVEL) / seeds)
-    assert LEVEL / 4 <= rate <= LEVEL + slack
+    # Independent noise: the null's neighbour correlation (randomness.NULL_NEIGHBOUR_CORRELATION)
+    # makes the tests conservative on it (0.5% and ... on these scenes); near the level on noise
+    # that correlates as the null says (test_the_null_holds_its_level_on_noise_that_correlates_as_it_says).
+    assert rate <= LEVEL + slack
     # z^2 is at most a chi^2(3) under this null: P(z >= 3) <= 2.9%.
     z = np.concatenate(z)
     assert np.mean(z >= 3) <= 0.029 + 0.005 and np.mean(z >= 4) <= 0.002
@@ -127,6 +136,38 @@ def test_small_counts_borrow_the_other_clouds_spread():
     assert both_few["valid"][0] and np.isnan(both_few["se"][0]) and np.isnan(both_few["z"][0])
 
 
+def test_the_null_draws_correlate_between_neighbours_as_said():
+    grid = SphericalGrid()
+    first, second = neighbour_pairs(grid, np.arange(grid.n_voxels))
+    draws = correlated_noise(np.random.default_rng(3).standard_normal((4000, grid.n_voxels, 3)), first, second)
+    assert draws.var() == pytest.approx(1.0, abs=0.01)
+    neighbours = np.mean(np.einsum("kvi,kvi->kv", draws[:, first], draws[:, second])) / 3
+    assert neighbours == pytest.approx(NULL_NEIGHBOUR_CORRELATION, abs=0.005)
+    # Two voxels apart (same band, azimuth +2): no shared draw, no correlation.
+    two_apart = np.mean(np.einsum("kvi,kvi->kv", draws[:, :34], draws[:, 2:36])) / 3
+    assert abs(two_apart) < 0.01
+    # Without neighbours the draws are left as they are.
+    lone = np.random.default_rng(4).standard_normal((2, 5, 3))
+    np.testing.assert_array_equal(correlated_noise(lone, first[:0], second[:0]), lone)
+
+
+def test_the_null_holds_its_level_on_noise_that_correlates_as_it_says():
+    """Whitened vectors drawn as the null says (unit variance, neighbour correlation
+    NULL_NEIGHBOUR_CORRELATION, 180 voxels of the default grid): patterned near LEVEL of the
+    time; independent noise of the same size less often (the null's correlation is a margin)."""
+    grid = SphericalGrid()
+    neighbours = neighbour_pairs(grid, np.arange(grid.n_voxels))
+    seeds = 120
+    rng = np.random.default_rng(11)
+    noise = rng.standard_normal((seeds, grid.n_voxels, 3))
+    correlated = correlated_noise(noise, *neighbours)
+    rate = np.mean([randomness_tests(w, neighbours)["verdict"] == "patterned" for w in correlated])
+    independent = np.mean([randomness_tests(w, neighbours)["verdict"] == "patterned" for w in noise])
+    slack = 2.5 * math.sqrt(LEVEL * (1 - LEVEL) / seeds)
+    assert LEVEL / 4 <= rate <= LEVEL + slack
+    assert independent <= rate
+
+
 def test_neighbour_pairs_of_full_grids():
     grid = SphericalGrid()
     first, second = neighbour_pairs(grid, np.arange(grid.n_voxels))
@@ -142,20 +183,25 @@ def test_neighbour_pairs_of_full_grids():
     assert len(neighbour_pairs(grid, np.array([0, 35]))[0]) == 1
 
 
-def test_p_values_match_their_values_under_the_normal_null():
-    from scipy.stats import chi2
+def _null_draws(count: int, neighbours: tuple[np.ndarray, np.ndarray], voxels: int) -> np.ndarray:
+    """A plain reference of the tests' null: (count, voxels, 3) standard normal vectors
+    correlated between the ``neighbours`` as ``correlated_noise`` says."""
+    return correlated_noise(np.random.default_rng(5).standard_normal((count, voxels, 3)), *neighbours)
 
-    # Three whitened vectors (0, 0, 1): |sum|^2 / 3 = 3 is chi^2(3) under the null, p = 0.39.
+
+def test_p_values_match_their_values_under_the_normal_null():
+    # Three whitened vectors (0, 0, 1) on a chain: |sum|^2 = 9 and neighbour sum 2, against the
+    # null's draws (about 0.45 and 0.14; with independent draws 0.39, chi^2(3) of 3).
     whitened = np.tile([0.0, 0.0, 1.0], (3, 1))
-    result = randomness_tests(whitened, (np.array([0, 1]), np.array([1, 2])))
-    assert result["p_direction"] == pytest.approx(chi2.sf(3.0, 3), abs=0.04)
-    # Neighbour sum 2: the sum of two independent products g0.g1 + g1.g2 of normal vectors.
-    g = np.random.default_rng(5).standard_normal((200_000, 3, 3))
+    chain = (np.array([0, 1]), np.array([1, 2]))
+    result = randomness_tests(whitened, chain)
+    g = _null_draws(200_000, chain, 3)
+    assert result["p_direction"] == pytest.approx(np.mean(np.sum(g.sum(axis=1) ** 2, axis=1) >= 9.0), abs=0.04)
     expected = np.mean(np.einsum("kj,kj->k", g[:, 0], g[:, 1]) + np.einsum("kj,kj->k", g[:, 1], g[:, 2]) >= 2.0)
     assert result["p_coherence"] == pytest.approx(expected, abs=0.04)
     assert result["verdict"] == "random"  # three noise-sized vectors show no pattern
     # Ten times larger: far outside the noise, one way.
-    assert randomness_tests(10 * whitened, (np.array([0, 1]), np.array([1, 2])))["verdict"] == "patterned"
+    assert randomness_tests(10 * whitened, chain)["verdict"] == "patterned"
     assert randomness_tests(whitened[:2], (np.array([0]), np.array([1])))["verdict"] == "undetermined"
 
 
@@ -262,13 +308,18 @@ def test_the_tests_draw_a_surface_voxels_null_along_its_normal():
     alternating = randomness_tests(signs * axes, chain, axes)
     assert alternating["p_direction"] == 1.0 and alternating["verdict"] == "random"
     middling = np.zeros((40, 3))
-    middling[:2] = 2.0 * normal  # |sum|^2 = 16: chi^2(1) 16 / 40 = 0.4, p = 0.53
-    assert randomness_tests(middling, chain, axes)["p_direction"] == pytest.approx(chi2.sf(0.4, 1), abs=0.04)
+    middling[:2] = 2.0 * normal  # |sum|^2 = 16: about 0.58 (independent draws: chi^2(1) 16 / 40 = 0.4, p = 0.53)
+    g = _null_draws(50_000, chain, 40)
+    along = np.mean(np.einsum("kvi,i->k", g, normal) ** 2 >= 16.0)
+    assert randomness_tests(middling, chain, axes)["p_direction"] == pytest.approx(along, abs=0.04)
+    assert along > chi2.sf(0.4, 1)  # neighbours that correlate spread the sum wider
     # Read whole (3 degrees of freedom a voxel), the same vectors look smaller than they are.
-    assert randomness_tests(middling, chain)["p_direction"] == pytest.approx(chi2.sf(16 / 40, 3), abs=0.04)
+    whole = np.mean(np.sum(g.sum(axis=1) ** 2, axis=1) >= 16.0)
+    assert randomness_tests(middling, chain)["p_direction"] == pytest.approx(whole, abs=0.04)
+    assert whole > along
     # An in-plane part of a vector read along its normal is not tested.
     sideways = middling + np.cross(normal, [1.0, 0.0, 0.0]) * 5.0
-    assert randomness_tests(sideways, chain, axes)["p_direction"] == pytest.approx(chi2.sf(0.4, 1), abs=0.04)
+    assert randomness_tests(sideways, chain, axes)["p_direction"] == pytest.approx(along, abs=0.04)
 
 
 def test_without_a_grid_the_verdict_rests_on_the_directions():
@@ -394,7 +445,8 @@ def test_a_shared_surface_from_two_places_is_random_and_content_only_one_sensor_
     missing, so the voxels from -12 to -4 deg hold ground that sensor 1 saw and sensor 2 could
     not) read patterned on at least 6 of 8 (measured 7). Faults stay patterned on every pair:
     0.3 m of misregistration, 0.5 deg of yaw, a range scale of 1.003 plus 3 cm; and 3 mm of shift
-    up to 0.8 m apart (beyond, the viewpoint's variance is larger than 3 mm; at 1 m it read
+    up to 0.5 m apart (0.8 m with independent null draws, before the null's neighbour
+    correlation; beyond, the viewpoint's variance is larger than 3 mm; at 1 m it read
     patterned before a surface's voxels were read by their normal part alone: a shift along a
     surface that spans its voxel does not move the mean, so what was seen there was sampling)."""
     import dataclasses
@@ -429,7 +481,7 @@ def test_a_shared_surface_from_two_places_is_random_and_content_only_one_sensor_
             pair.xyz2 @ turn.T,
             pair.origin2 + 1.003 * ray + 0.03 * ray / np.linalg.norm(ray, axis=1)[:, None],
         ]
-        if baseline <= 0.8:
+        if baseline <= 0.5:
             faults.append(pair.xyz2 + [0.003, 0.0, 0.0])
         for moved in faults:
             faulty = RegisteredPair(pair.xyz1, moved, pair.T_1_2, pair.sensor1, pair.sensor2)

@@ -5,13 +5,21 @@ valid voxel's vector is its own sampling noise, independent of the others. The t
 vector in units of that noise, the whitened vector w = C^-1/2 d of ``field.significance`` (C
 the covariance of d from both clouds' spread in the voxel and, when the pair's sensors are
 known, the phase of their scan patterns). Under the null every w has mean 0 and covariance at
-most I, so both tests draw their null distribution as independent standard normal vectors, one
-per voxel (``PERMUTATIONS`` draws from a fixed seed). A voxel holding one surface seen from two places is read by its
+most I, so both tests draw their null distribution as standard normal vectors, one per voxel
+(``PERMUTATIONS`` draws from a fixed seed), correlated between grid neighbours by
+``NULL_NEIGHBOUR_CORRELATION``: neighbouring voxels' sampling is not independent (they share
+the scan lattice's phase and the smooth surface between them). Measured on fault-free pairs
+that read random, neighbouring whitened vectors correlate by 0.05-0.20; where C bounds the
+noise loosely (most simulated pairs, one place: the vectors at 0.2-0.5 of it) that hides inside an
+independent null's spread, but on a real pair from two places whose vectors are at their full
+modelled noise (the OS1-128 frames after ``realign``: 0.91) the same correlation read as a
+pattern (p_coherence 0.011). See docs/diagnosis.md. A voxel holding one surface seen from two places is read by its
 normal part alone (w along its normal n, ``significance``): its draw is the standard normal
 vector's part along n, one degree of freedom.
 
 - ``p_direction``: do the vectors share a resultant? Statistic |sum w|^2 (chi^2 with 3 degrees
-  of freedom times the voxel count under the null). Catches a translation.
+  of freedom times the voxel count under an independent null; the neighbours' correlation
+  spreads it wider). Catches a translation.
 - ``p_coherence``: do neighbouring voxels' vectors agree? Statistic: the sum over pairs of
   grid neighbours of w_i . w_j. Catches patterns with no net resultant (a scale error's outward
   vectors, a rotation's swirl, opposing vectors in halves).
@@ -44,6 +52,9 @@ LEVEL = 0.05
 PERMUTATIONS = 999
 SEED = 0
 MIN_VOXELS = 3
+# The null draws' correlation between neighbouring voxels (module docstring): about the middle
+# of the 0.05-0.20 measured on fault-free pairs that read random (docs/diagnosis.md).
+NULL_NEIGHBOUR_CORRELATION = 0.1
 _CHUNK = 16  # null draws evaluated at a time (bounds memory on grids of 10^5 voxels)
 
 
@@ -71,7 +82,7 @@ def randomness_tests(
     tol_direction = 1e-9 * max(1.0, abs(observed_direction))
     tol_coherence = 1e-9 * max(1.0, abs(observed_coherence))
     for start in range(0, PERMUTATIONS, _CHUNK):
-        noise = rng.standard_normal(size=(min(_CHUNK, PERMUTATIONS - start), m, 3))
+        noise = correlated_noise(rng.standard_normal(size=(min(_CHUNK, PERMUTATIONS - start), m, 3)), first, second)
         if along is not None:
             noise[:, along] = np.einsum("kv,vi->kvi", np.einsum("kvi,vi->kv", noise[:, along], normals), normals)
         direction = np.sum(noise.sum(axis=1) ** 2, axis=1)
@@ -82,6 +93,23 @@ def randomness_tests(
     p_coherence = (1 + exceed_coherence) / (1 + PERMUTATIONS) if len(first) else math.nan
     patterned = min(p_direction, p_coherence if len(first) else 1.0) <= LEVEL / 2
     return {"p_direction": p_direction, "p_coherence": p_coherence, "verdict": "patterned" if patterned else "random"}
+
+
+def correlated_noise(noise: np.ndarray, first: np.ndarray, second: np.ndarray) -> np.ndarray:
+    """(K, M, 3) independent standard normal draws made to correlate by
+    ``NULL_NEIGHBOUR_CORRELATION`` between grid neighbours (the pairs ``first``, ``second``):
+    each voxel's draw plus beta times the sum of its neighbours', rescaled to unit variance.
+    Two neighbours then share 2 beta / sqrt((1 + d_i beta^2)(1 + d_j beta^2)) (d their neighbour
+    counts); beta is solved for the grid's usual four neighbours."""
+    rho = NULL_NEIGHBOUR_CORRELATION
+    if rho == 0 or len(first) == 0:
+        return noise
+    beta = (1.0 - math.sqrt(1.0 - 4.0 * rho**2)) / (4.0 * rho)
+    summed = np.zeros_like(noise)
+    np.add.at(summed, (slice(None), first), noise[:, second])
+    np.add.at(summed, (slice(None), second), noise[:, first])
+    degree = np.bincount(np.concatenate([first, second]), minlength=noise.shape[1])
+    return (noise + beta * summed) / np.sqrt(1.0 + degree * beta**2)[None, :, None]
 
 
 def neighbour_pairs(grid, voxel: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

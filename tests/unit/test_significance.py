@@ -151,6 +151,24 @@ def test_the_null_draws_correlate_between_neighbours_as_said():
     np.testing.assert_array_equal(correlated_noise(lone, first[:0], second[:0]), lone)
 
 
+def test_the_null_draws_match_a_plain_loop_over_each_voxels_neighbours():
+    """The sparse mixing against the definition: each voxel's draw plus beta times each of its
+    neighbours' draws, over sqrt(1 + degree beta^2); on the default grid and a chain."""
+    rho = NULL_NEIGHBOUR_CORRELATION
+    beta = (1.0 - math.sqrt(1.0 - 4.0 * rho**2)) / (4.0 * rho)
+    grid = SphericalGrid()
+    for voxels, (first, second) in (
+        (grid.n_voxels, neighbour_pairs(grid, np.arange(grid.n_voxels))),
+        (4, (np.array([0, 1, 2]), np.array([1, 2, 3]))),
+    ):
+        noise = np.random.default_rng(6).standard_normal((3, voxels, 3))
+        expected = np.empty_like(noise)
+        for v in range(voxels):
+            others = [b for a, b in zip(first, second) if a == v] + [a for a, b in zip(first, second) if b == v]
+            expected[:, v] = (noise[:, v] + beta * noise[:, others].sum(axis=1)) / math.sqrt(1 + len(others) * beta**2)
+        np.testing.assert_allclose(correlated_noise(noise, first, second), expected, rtol=0, atol=1e-12)
+
+
 def test_the_null_holds_its_level_on_noise_that_correlates_as_it_says():
     """Whitened vectors drawn as the null says (unit variance, neighbour correlation
     NULL_NEIGHBOUR_CORRELATION, 180 voxels of the default grid): patterned near LEVEL of the

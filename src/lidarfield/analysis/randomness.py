@@ -81,8 +81,11 @@ def randomness_tests(
     # A relative tolerance so that a draw equal to the observed value up to rounding counts.
     tol_direction = 1e-9 * max(1.0, abs(observed_direction))
     tol_coherence = 1e-9 * max(1.0, abs(observed_coherence))
+    mixing = neighbour_mixing(first, second, m)
     for start in range(0, PERMUTATIONS, _CHUNK):
-        noise = correlated_noise(rng.standard_normal(size=(min(_CHUNK, PERMUTATIONS - start), m, 3)), first, second)
+        noise = rng.standard_normal(size=(min(_CHUNK, PERMUTATIONS - start), m, 3))
+        if mixing is not None:
+            noise = mix(mixing, noise)
         if along is not None:
             noise[:, along] = np.einsum("kv,vi->kvi", np.einsum("kvi,vi->kv", noise[:, along], normals), normals)
         direction = np.sum(noise.sum(axis=1) ** 2, axis=1)
@@ -101,15 +104,31 @@ def correlated_noise(noise: np.ndarray, first: np.ndarray, second: np.ndarray) -
     each voxel's draw plus beta times the sum of its neighbours', rescaled to unit variance.
     Two neighbours then share 2 beta / sqrt((1 + d_i beta^2)(1 + d_j beta^2)) (d their neighbour
     counts); beta is solved for the grid's usual four neighbours."""
+    mixing = neighbour_mixing(first, second, noise.shape[1])
+    return noise if mixing is None else mix(mixing, noise)
+
+
+def neighbour_mixing(first: np.ndarray, second: np.ndarray, voxels: int):
+    """The sparse (M, M) operator of ``correlated_noise``, or None where it is the identity
+    (no correlation, no neighbours). Built once per test: a sparse product is ten times faster
+    than scattering each chunk's neighbour sums (``np.add.at``) on grids of 10^4 voxels."""
     rho = NULL_NEIGHBOUR_CORRELATION
     if rho == 0 or len(first) == 0:
-        return noise
+        return None
+    from scipy.sparse import coo_matrix, diags
+
     beta = (1.0 - math.sqrt(1.0 - 4.0 * rho**2)) / (4.0 * rho)
-    summed = np.zeros_like(noise)
-    np.add.at(summed, (slice(None), first), noise[:, second])
-    np.add.at(summed, (slice(None), second), noise[:, first])
-    degree = np.bincount(np.concatenate([first, second]), minlength=noise.shape[1])
-    return (noise + beta * summed) / np.sqrt(1.0 + degree * beta**2)[None, :, None]
+    rows = np.concatenate([first, second])
+    adjacency = coo_matrix((np.ones(len(rows)), (rows, np.concatenate([second, first]))), shape=(voxels, voxels))
+    degree = np.bincount(rows, minlength=voxels)
+    return diags(1.0 / np.sqrt(1.0 + degree * beta**2)) @ (diags(np.ones(voxels)) + beta * adjacency).tocsr()
+
+
+def mix(mixing, noise: np.ndarray) -> np.ndarray:
+    """``mixing`` (M, M) applied to every draw of (K, M, 3) ``noise``."""
+    k, m, _ = noise.shape
+    columns = np.ascontiguousarray(noise.transpose(1, 0, 2)).reshape(m, 3 * k)
+    return np.ascontiguousarray((mixing @ columns).reshape(m, k, 3).transpose(1, 0, 2))
 
 
 def neighbour_pairs(grid, voxel: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

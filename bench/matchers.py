@@ -129,7 +129,10 @@ def main() -> int:
             ):
                 errors = np.array([pose_error(T, reference) for T in estimates])
                 fitness = np.median(
-                    [matching.evaluate(clouds.source, clouds.target, T, p["fitness_distance_m"])[0] for T in estimates]
+                    [
+                        matching.evaluate(clouds.scored_source, clouds.scored_target, T, p["fitness_distance_m"])[0]
+                        for T in estimates
+                    ]
                 )
                 apart = np.median([pose_error(T, T0)[0] for T, T0 in zip(estimates, o3d_T)]) * 100
                 print(

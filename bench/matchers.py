@@ -1,8 +1,8 @@
 """Open3D against small_gicp for the ICP-family methods, on the shared real scans, with the same
-settings (the register defaults: the same 0.2 m downsampled clouds, 1 m correspondence distance,
-50 iterations at most, normals / covariances from 30 neighbours) and the same fitness measure
-(lidarfield's: the share of scan-2 points within 0.5 m of scan 1), from the same 8 seeded
-rematch starts about each pair's reference pose.
+settings (the register defaults: the same downsampled clouds, 0.2 m or 1 deg at the median
+range, 1 m correspondence distance, 50 iterations at most, normals / covariances from 30
+neighbours) and the same fitness measure (lidarfield's: the share of scan-2 points within 0.5 m
+of scan 1), from the same 8 seeded rematch starts about each pair's reference pose.
 
 small_gicp stops when an iteration changes the pose by less than ``--epsilon`` (metres and
 radians); Open3D when fitness and RMSE change by less than 1e-6 (relative). Its own default,
@@ -129,7 +129,10 @@ def main() -> int:
             ):
                 errors = np.array([pose_error(T, reference) for T in estimates])
                 fitness = np.median(
-                    [matching.evaluate(clouds.source, clouds.target, T, p["fitness_distance_m"])[0] for T in estimates]
+                    [
+                        matching.evaluate(clouds.scored_source, clouds.scored_target, T, p["fitness_distance_m"])[0]
+                        for T in estimates
+                    ]
                 )
                 apart = np.median([pose_error(T, T0)[0] for T, T0 in zip(estimates, o3d_T)]) * 100
                 print(

@@ -19,6 +19,11 @@ from helpers.real_pairs import OFFSETS, point_distance_cm, real_pair, realigned,
 # reference; 2026-11-27): to where the field's surfaces agree (on the OS1-128 frames their
 # field then reads random, test_significance.py); which is nearer the truth the references
 # cannot say. It must stay a refinement: under 4 cm from ICP's landing.
+# Where two references are published (the HDL-32E pair), a landing's distance is their mean:
+# T_target_source.txt is a GICP's and favours GICP. Since the registration's voxel is capped at
+# 1 deg at the median range (2026-11-28, 0.066 m on this indoor pair), the tool's GICP lands
+# 0.49 cm from it and 2.09 cm from relative.txt; realign 2.05 and 1.61 cm, NDT 1.90 and 1.70,
+# point-to-plane ICP 2.20 and 2.22.
 TOLERANCE_CM = 1.0
 REFINEMENT_MAX_CM = 4.0
 SPREAD = ("gicp", "ndt", "icp_point_to_plane")
@@ -30,8 +35,13 @@ def test_realign_lands_no_worse_than_the_best_registration(shared_data, name, sh
     start = OFFSETS["+x, yaw"] @ real.reference
     landed = realigned(real, start, {"field_refinement": False})
     matched = shared_pair(real, landed) if shared else real
-    distance = {m: point_distance_cm(registered(matched, m, start), real.reference, real.scan2.xyz) for m in SPREAD}
-    own = point_distance_cm(landed, real.reference, real.scan2.xyz)
+    references = [T for T in (real.reference, real.other_reference) if T is not None]
+
+    def from_references(T):
+        return sum(point_distance_cm(T, reference, real.scan2.xyz) for reference in references) / len(references)
+
+    distance = {m: from_references(registered(matched, m, start)) for m in SPREAD}
+    own = from_references(landed)
     assert own <= min(distance.values()) + TOLERANCE_CM, (own, distance)
     refined = realigned(real, start)
     assert point_distance_cm(refined, landed, real.scan2.xyz) < REFINEMENT_MAX_CM

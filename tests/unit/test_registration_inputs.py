@@ -130,6 +130,7 @@ def test_missing_and_malformed_transform_files_name_the_file(synthetic_pair, tmp
         ({"method": "ndt", "voxel_size": 1}, r"unknown setting\(s\) \['voxel_size'\]"),
         ({"method": "icp", "guess": [1, 2, 3, 4, 5]}, "register.guess: .*5 numbers"),
         ({"method": "icp", "voxel_m": -1}, "register.voxel_m"),
+        ({"method": "gicp", "voxel_deg": 0}, "register.voxel_deg: expected a positive number"),
         ({"method": "ndt", "ndt_min_points_per_voxel": 3}, "at least|>= 4"),
         ({"method": "icp", "min_fitness": 2}, "min_fitness"),
         ({"transform": "T.txt", "guess": [0] * 6}, "'transform' takes no other settings"),

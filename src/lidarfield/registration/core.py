@@ -51,6 +51,7 @@ def register_pair(
             record["transform_file"] = str(s.transform_file)
         _judge(record, clouds, T, p, matched=False)
     record["points_used"] = [len(clouds.target.points), len(clouds.source.points)]
+    record["voxel_used_m"] = clouds.voxel_m
     if reference is not None:
         translation_error, rotation_error = pose_error(T, reference)
         record.update(translation_error_m=translation_error, rotation_error_deg=rotation_error)
@@ -141,7 +142,7 @@ def _judge(record: dict, clouds: matching.Clouds, T: np.ndarray, p: dict, matche
     """
     from . import matching
 
-    fitness, rmse = matching.evaluate(clouds.source, clouds.target, T, p["fitness_distance_m"])
+    fitness, rmse = matching.evaluate(clouds.scored_source, clouds.scored_target, T, p["fitness_distance_m"])
     record.update(fitness=fitness, inlier_rmse=rmse, fitness_distance_m=p["fitness_distance_m"])
     record["min_fitness"] = p["min_fitness"]
     problems = []

@@ -12,6 +12,8 @@ from dataclasses import dataclass
 import numpy as np
 import open3d as o3d
 
+from .settings import MATCHING_METHODS
+
 reg = o3d.pipelines.registration
 
 
@@ -29,20 +31,50 @@ def point_cloud(xyz: np.ndarray, voxel_m: float, min_range_m: float) -> o3d.geom
     return cloud.voxel_down_sample(voxel_m) if voxel_m > 0 else cloud
 
 
+def voxel_size(xyz1: np.ndarray, xyz2: np.ndarray, p: dict) -> float:
+    """The voxel both clouds are downsampled with: ``voxel_m``, or less where the scene is near,
+    no wider than ``voxel_deg`` seen from the sensors at the pair's median range.
+
+    A voxel's centroid stands for the surfaces in it: at an edge, a corner, a curved surface or
+    where it merges two rings it lies off them by up to half the voxel, and the two scans'
+    voxels fall differently on the same surfaces. Seen from the sensor that blur is an angle,
+    the voxel over the range, and the rotation fitted on the centroids inherits it. A fixed
+    0.2 m is a degree at 11 m (a street) but 9 deg at 1.3 m (a sensor in a small room), where it
+    also leaves a few hundred points (docs/registration.md)."""
+    voxel_m = p["voxel_m"]
+    if voxel_m == 0:
+        return 0.0
+    ranges = np.concatenate([np.linalg.norm(xyz, axis=1) for xyz in (xyz1, xyz2)])
+    ranges = ranges[ranges >= p["min_range_m"]]
+    if len(ranges) == 0:
+        return float(voxel_m)
+    return float(min(voxel_m, np.median(ranges) * np.radians(p["voxel_deg"])))
+
+
 @dataclass
 class Clouds:
-    """Both clouds as a method needs them: scan 2 (source, its sensor frame) and scan 1 (target)."""
+    """Both clouds as a method needs them: scan 2 (source, its sensor frame) and scan 1 (target),
+    downsampled by ``voxel_size``, and as the fitness is measured for every method (by the
+    configured ``voxel_m``, so that fitness values compare across methods and pairs)."""
 
     source: o3d.geometry.PointCloud
-    target: o3d.geometry.PointCloud  # what the fitness is measured against (downsampled scan 1)
+    target: o3d.geometry.PointCloud
     model: o3d.geometry.PointCloud  # what the method matches against (NDT: every scan-1 point)
+    voxel_m: float  # the voxel of source and target (``voxel_size``)
+    scored_source: o3d.geometry.PointCloud  # what the fitness is measured on ...
+    scored_target: o3d.geometry.PointCloud  # ... and against
 
 
 def prepare(method: str, xyz1: np.ndarray, xyz2: np.ndarray, p: dict) -> Clouds:
     """Downsample both clouds and give them the normals the method uses, once for any number
     of runs from different guesses."""
-    source = point_cloud(xyz2, p["voxel_m"], p["min_range_m"])
-    target = point_cloud(xyz1, p["voxel_m"], p["min_range_m"])
+    scored_source = point_cloud(xyz2, p["voxel_m"], p["min_range_m"])
+    scored_target = point_cloud(xyz1, p["voxel_m"], p["min_range_m"])
+    voxel_m = voxel_size(xyz1, xyz2, p) if method in MATCHING_METHODS else p["voxel_m"]
+    if voxel_m == p["voxel_m"]:
+        source, target = scored_source, scored_target
+    else:
+        source, target = (point_cloud(xyz, voxel_m, p["min_range_m"]) for xyz in (xyz2, xyz1))
     if method in ("icp_point_to_plane", "gicp"):
         # Point-to-plane needs target normals; Open3D's GICP builds its covariances from normals.
         search = o3d.geometry.KDTreeSearchParamHybrid(radius=p["normal_radius_m"], max_nn=p["normal_max_nn"])
@@ -50,7 +82,7 @@ def prepare(method: str, xyz1: np.ndarray, xyz2: np.ndarray, p: dict) -> Clouds:
             cloud.estimate_normals(search)
     # NDT models scan 1 with its own cells: give it every point, not the downsampled cloud.
     model = point_cloud(xyz1, 0.0, p["min_range_m"]) if method == "ndt" else target
-    return Clouds(source, target, model)
+    return Clouds(source, target, model, voxel_m, scored_source, scored_target)
 
 
 def match(method: str, clouds: Clouds, guess: np.ndarray, p: dict) -> MatchResult:

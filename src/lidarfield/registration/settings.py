@@ -24,7 +24,8 @@ METHODS = FIXED_METHODS + MATCHING_METHODS
 # Defaults for automotive scans (10^4..10^5 points, scenes tens of metres across, sensors
 # moving under a metre or so between scans once the guess is applied); docs/registration.md explains each.
 DEFAULTS = {
-    "voxel_m": 0.2,  # downsampling of both clouds (NDT: of scan 2 only; it models scan 1 itself)
+    "voxel_m": 0.2,  # downsampling of both clouds (NDT: of scan 2 only; it models scan 1 itself) ...
+    "voxel_deg": 1.0,  # ... by voxels no wider than this seen from the pair's median range
     "min_range_m": 0.0,  # drop points nearer than this to their sensor (e.g. the ego vehicle)
     "max_correspondence_m": 1.0,  # ICP family: pairs farther apart are ignored
     "max_iterations": 50,  # per stage
@@ -102,6 +103,8 @@ def _check_params(params: dict) -> None:
             raise ConfigError(
                 f"register.{key}: expected a positive number (voxel_m may be 0: no downsampling), got {params[key]!r}"
             )
+    if not is_number(params["voxel_deg"], finite=True) or params["voxel_deg"] <= 0:
+        raise ConfigError(f"register.voxel_deg: expected a positive number, got {params['voxel_deg']!r}")
     for key in ("max_iterations", "normal_max_nn"):
         if not isinstance(params[key], int) or params[key] < 1:
             raise ConfigError(f"register.{key}: expected a positive integer, got {params[key]!r}")

@@ -107,6 +107,11 @@ def test_with_the_pose_it_fits_a_range_fault_on_a_pair_whose_pose_is_off(faulty)
     u = (moved.xyz2 - moved.origin2) / r[:, None]
     expected = ((r - c["offset_m"]) / c["scale"])[:, None] * u @ rotation.T + shift
     assert np.allclose(outcome.xyz2, expected, atol=1e-6)
+    # the pose is recorded as realign records its own: the transform T of cloud 2 in frame 1
+    # (T_1_2 becomes T @ T_1_2), its translation T's own, not the motion of sensor 2's origin
+    T = outcome.T_1_2 @ np.linalg.inv(moved.T_1_2)
+    assert np.allclose(c["pose"]["translation_m"], T[:3, 3], atol=1e-9)
+    assert np.isclose(np.degrees(np.arccos((np.trace(T[:3, :3]) - 1) / 2)), c["pose"]["angle_deg"], atol=1e-6)
 
 
 def test_with_the_pose_it_needs_cloud_2():

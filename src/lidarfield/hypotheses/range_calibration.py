@@ -28,7 +28,10 @@ errors ``scale_se``, ``offset_se_m``, ``points`` (pairs used in the last solve),
 ``residual_rms_m`` (their point-to-plane residuals' RMS), ``sigma_m`` (the weighted residuals'
 standard deviation), ``iterations``, ``parameters`` (how many it fitted: 2, or 1 + the offsets);
 with ``per_ring``, ``ring_offsets_m`` and ``ring_offsets_se_m`` (by ring, as text) and
-``offset_m`` their mean over the rings. The standard errors are ``sigma^2 (J^T W J)^-1`` of the
+``offset_m`` their mean over the rings; with ``with_pose``, ``pose``: the fitted rigid
+transform ``T`` of cloud 2 in frame 1 (a point ``p`` becomes ``R p + t``), recorded as
+``realign`` records its own (``translation_m`` is ``T``'s, not the motion of sensor 2's origin),
+with ``translation_se_m`` and ``rotation_se_deg``. The standard errors are ``sigma^2 (J^T W J)^-1`` of the
 last solve, carried from ``(alpha, beta)`` to ``(scale, offset)`` to first order. They treat
 neighbouring residuals as independent, which on a scan they are not quite: read them as lower
 bounds.
@@ -39,7 +42,6 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from ..errors import HypothesisError
 from ..field.free_space import directions, nearest_channel, sensor_channels
@@ -47,6 +49,7 @@ from ..pair import RegisteredPair
 from ..poses import in_sensor_frame, rotation_from_vector
 from .outcome import Outcome
 from .params import doc
+from .realign import transform_record
 
 MIN_POINTS = 20  # pairs in the fit, and points of each cloud
 MIN_RING_POINTS = 30  # a ring's own offset needs this many pairs
@@ -252,8 +255,11 @@ def range_calibration(pair: RegisteredPair, params: Params) -> Outcome:
         "method": "point_to_plane_huber",
         "parameters": p + rigid,
     }
-    if rigid:
-        fitted["pose"] = _pose_record(R, t, full_covariance[p:, p:])
+    if rigid:  # turned about sensor 2's origin c and moved by t: T in frame 1
+        T = np.eye(4)
+        T[:3, :3], T[:3, 3] = R, c + t - R @ c
+        # each step turned about the moved sensor's origin, c + t (the Jacobian's columns)
+        fitted["pose"] = transform_record(T, full_covariance[p:, p:], about=c + t)
     if ring is None:
         fitted.update(offset_m=float(offsets[0]), offset_se_m=number(se[1]))
         offset_of_point = np.full(len(xyz), offsets[0])
@@ -265,9 +271,7 @@ def range_calibration(pair: RegisteredPair, params: Params) -> Outcome:
     corrected_r = np.where(measurable, (r - offset_of_point) / scale, 0.0)
     new_xyz = np.where(measurable[:, None], origin + corrected_r[:, None] * u, xyz)
     keep1, keep2 = np.ones(len(pair.xyz1), dtype=bool), np.ones(len(pair.xyz2), dtype=bool)
-    if rigid:  # turned about sensor 2's origin and moved: T in frame 1
-        T = np.eye(4)
-        T[:3, :3], T[:3, 3] = R, c + t - R @ c
+    if rigid:
         return Outcome(keep1, keep2, xyz2=_moved(new_xyz, R, c, t), T_1_2=T @ pair.T_1_2, fitted=fitted)
     if params.cloud == 2:
         return Outcome(keep1, keep2, xyz2=new_xyz, fitted=fitted)
@@ -330,21 +334,6 @@ def _normal_equations(
 def _moved(xyz: np.ndarray, R: np.ndarray, c: np.ndarray, t: np.ndarray) -> np.ndarray:
     """Points turned by ``R`` about ``c`` and moved by ``t``."""
     return (xyz - c) @ R.T + c + t
-
-
-def _pose_record(R: np.ndarray, t: np.ndarray, covariance: np.ndarray) -> dict:
-    """The pose fitted with the calibration: sensor 2 turned by ``R`` about its origin and moved
-    by ``t`` (frame 1), with standard errors (``covariance``: of the rotation vector, rad, and
-    the translation, m)."""
-    se = np.sqrt(np.clip(np.diag(covariance), 0, None))
-    rotvec = Rotation.from_matrix(R).as_rotvec()
-    return {
-        "translation_m": t.tolist(),
-        "rotation_deg": np.degrees(rotvec).tolist(),
-        "angle_deg": float(np.degrees(np.linalg.norm(rotvec))),
-        "translation_se_m": se[3:].tolist(),
-        "rotation_se_deg": np.degrees(se[:3]).tolist(),
-    }
 
 
 def _huber(residual: np.ndarray) -> np.ndarray:

@@ -306,11 +306,12 @@ def test_a_fit_with_the_pose_that_finds_no_calibration_is_not_proposed(faulty, t
     """Fitted with the pose, a pair without a range fault gives a scale and an offset within
     their standard errors (the joint fit is the pose alone, which realign fits): not worth it,
     ranked last; the fault's are tens of standard errors off."""
-    from lidarfield.analysis.stopping_rule import MIN_CALIBRATION_SIGNIFICANCE, calibration_seen
+    from lidarfield.hypotheses.range_calibration import MIN_CALIBRATION_SIGNIFICANCE
 
     none = apply_step(truth, {"range_calibration": {"with_pose": True}}).fitted
     fault = apply_step(faulty, {"range_calibration": {"with_pose": True}}).fitted
-    assert not calibration_seen(none) and calibration_seen(fault)
+    assert not none["calibration_seen"] and fault["calibration_seen"]
     assert abs(none["scale"] - 1) < MIN_CALIBRATION_SIGNIFICANCE * none["scale_se"]
+    assert abs(none["offset_m"]) < MIN_CALIBRATION_SIGNIFICANCE * none["offset_se_m"]
     assert abs(fault["offset_m"]) > 10 * fault["offset_se_m"]
-    assert calibration_seen(apply_step(truth, {"range_calibration": {}}).fitted)  # alone: no pose, no test
+    assert "calibration_seen" not in apply_step(truth, {"range_calibration": {}}).fitted  # alone: no pose, no test

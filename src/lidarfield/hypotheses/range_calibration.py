@@ -31,7 +31,12 @@ with ``per_ring``, ``ring_offsets_m`` and ``ring_offsets_se_m`` (by ring, as tex
 ``offset_m`` their mean over the rings; with ``with_pose``, ``pose``: the fitted rigid
 transform ``T`` of cloud 2 in frame 1 (a point ``p`` becomes ``R p + t``), recorded as
 ``realign`` records its own (``translation_m`` is ``T``'s, not the motion of sensor 2's origin),
-with ``translation_se_m`` and ``rotation_se_deg``. The standard errors are ``sigma^2 (J^T W J)^-1`` of the
+with ``translation_se_m`` and ``rotation_se_deg``, and ``calibration_seen``: whether the scale or
+the offset is ``MIN_CALIBRATION_SIGNIFICANCE`` (3) standard errors off (1 and 0). Where neither
+is, the joint fit is the pose alone, which ``realign`` fits (and its 2 parameters more than
+realign's explain a few units of noise, which can rank it first on a pure misregistration): it
+would name a range error it does not see, so ``suggest`` ranks it last and the stopping rule
+never applies it. The standard errors are ``sigma^2 (J^T W J)^-1`` of the
 last solve, carried from ``(alpha, beta)`` to ``(scale, offset)`` to first order. They treat
 neighbouring residuals as independent, which on a scan they are not quite: read them as lower
 bounds.
@@ -55,6 +60,9 @@ MIN_POINTS = 20  # pairs in the fit, and points of each cloud
 MIN_RING_POINTS = 30  # a ring's own offset needs this many pairs
 HUBER_K = 1.345
 TOLERANCE_M = 1e-4  # converged when no corrected range of the sample changes by more
+# A calibration fitted with the pose names a range error only where the calibration itself is
+# off by this many of its standard errors (scale from 1 or offset from 0): ``calibration_seen``.
+MIN_CALIBRATION_SIGNIFICANCE = 3.0
 
 
 @dataclass(frozen=True)
@@ -256,6 +264,9 @@ def range_calibration(pair: RegisteredPair, params: Params) -> Outcome:
         "parameters": p + rigid,
     }
     if rigid:  # turned about sensor 2's origin c and moved by t: T in frame 1
+        offset_significance = abs(offsets[0]) / se[1] if ring is None and se[1] > 0 else 0.0
+        scale_significance = abs(scale - 1.0) / se[0] if se[0] > 0 else 0.0
+        fitted["calibration_seen"] = bool(max(scale_significance, offset_significance) >= MIN_CALIBRATION_SIGNIFICANCE)
         T = np.eye(4)
         T[:3, :3], T[:3, 3] = R, c + t - R @ c
         # each step turned about the moved sensor's origin, c + t (the Jacobian's columns)

@@ -315,3 +315,63 @@ def test_a_fit_with_the_pose_that_finds_no_calibration_is_not_proposed(faulty, t
     assert abs(none["offset_m"]) < MIN_CALIBRATION_SIGNIFICANCE * none["offset_se_m"]
     assert abs(fault["offset_m"]) > 10 * fault["offset_se_m"]
     assert "calibration_seen" not in apply_step(truth, {"range_calibration": {}}).fitted  # alone: no pose, no test
+
+
+def test_the_fits_of_a_stage_share_its_planes_and_find_what_fresh_planes_do(faulty):
+    """The calibrations of one stage pair the same cloud with its planes: built once
+    (``planes_of``), each normal computed once whichever fit asks first, in any thread, and
+    every fit the same to the last bit as with planes of its own."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    from lidarfield.hypotheses import range_calibration as module
+
+    steps = [{"range_calibration": {}}, {"range_calibration": {"with_pose": True}}, {"elevation_calibration": {}}]
+
+    def fresh(step):
+        module.SHARED_PLANES.clear()
+        return apply_step(faulty, step).fitted
+
+    alone = [fresh(step) for step in steps]
+    module.SHARED_PLANES.clear()
+    with ThreadPoolExecutor(3) as pool:
+        shared = list(pool.map(lambda step: apply_step(faulty, step).fitted, steps))
+    assert shared == alone
+    planes = module.planes_of(faulty.xyz1, 12)
+    assert planes is module.planes_of(faulty.xyz1, 12) and planes is not module.planes_of(faulty.xyz1.copy(), 12)
+    computed = np.isfinite(planes.normals[:, 0]) | np.isinf(planes.normals[:, 0])
+    assert computed.any() and not computed.all()  # only where a fit asked
+
+
+def test_a_fits_pairing_searches_again_only_what_moved_enough_and_answers_as_a_full_search(faulty):
+    """``Pairing`` against ``Planes.pair`` (every row searched each time) on the real-size
+    simulated cloud moved as a fit moves it: by a scale (large, then ever smaller steps), a
+    shift past the correspondence distance and back, and a random jitter: the same rows, normals
+    and points each time, with fewer rows searched once the moves are small."""
+    from lidarfield.hypotheses.range_calibration import Pairing, planes_of
+
+    planes = planes_of(faulty.xyz1, 12)
+    pairing = Pairing(planes, 0.5)
+    searched = []
+    original = pairing._search
+
+    def counting(points, rows):
+        searched.append(len(rows))
+        original(points, rows)
+
+    pairing._search = counting
+    rng = np.random.default_rng(1)
+    origin, sample = faulty.origin2, faulty.xyz2[::3]
+    moves = [1.0, 1.01, 1.003, 1.003, 1.0031, 1.00311, 1.00311, 1.00311]
+    for k, scale in enumerate(moves):
+        points = origin + (sample - origin) * scale
+        if k == 3:
+            points = points + [0.45, 0.0, 0.0]  # past max_correspondence_m for many rows
+        if k == 6:
+            points = points + rng.normal(0, 0.002, points.shape)
+        got, want = pairing(points), planes.pair(points, 0.5)
+        assert all(np.array_equal(a, b) for a, b in zip(got, want)), k
+    # every row at first; a few where the move is 0.3 mm at most (1e-5 of 30 m); none unmoved
+    assert searched[0] == len(sample) and searched[5] < 0.05 * len(sample) and searched[-1] > 0, searched
+    calls = len(searched)
+    pairing(points)
+    assert len(searched) == calls  # unmoved: nothing searched

@@ -90,7 +90,9 @@ parameters.
 
 The candidates a stage runs are independent: they are evaluated by a pool of threads
 (``candidate_threads``: the usable cores, one in a workflow job), each row then completed and
-ranked in the candidates' order, so the table is the serial one bit for bit.
+ranked in the candidates' order, so the table is the serial one bit for bit. The pool starts
+the correcting candidates first (they fit: the costliest), so that a stage does not wait at its
+end for one long fit started last.
 """
 
 from __future__ import annotations
@@ -238,8 +240,12 @@ def suggestions(
 
     threads = min(len(todo), candidate_threads() if workers is None else workers)
     if threads > 1:  # the candidates are independent; numpy, scipy and Open3D release the GIL
+        # the fits first (the costliest: ICP, the calibrations' iterations), so that no thread
+        # is left with one at the end while the others wait; the rows are kept by their k
+        started = sorted(todo, key=lambda task: step_name(task[1]) not in CORRECTING)
         with ThreadPoolExecutor(threads) as pool:
-            evaluated = dict(zip((k for k, _ in todo), pool.map(evaluate, todo)))
+            running = {task[0]: pool.submit(evaluate, task) for task in started}
+            evaluated = {k: running[k].result() for k, _ in todo}  # an error: the first in the serial order
     else:
         evaluated = {k: evaluate((k, spec)) for k, spec in todo}
     seen = None  # the points seen through, found once, for the first candidate that removes any

@@ -342,14 +342,17 @@ def test_the_fits_of_a_stage_share_its_planes_and_find_what_fresh_planes_do(faul
     assert computed.any() and not computed.all()  # only where a fit asked
 
 
-def test_a_fits_pairing_searches_again_only_what_moved_enough_and_answers_as_a_full_search(faulty):
+@pytest.mark.parametrize("repeated", [False, True])
+def test_a_fits_pairing_searches_again_only_what_moved_enough_and_answers_as_a_full_search(faulty, repeated):
     """``Pairing`` against ``Planes.pair`` (every row searched each time) on the real-size
     simulated cloud moved as a fit moves it: by a scale (large, then ever smaller steps), a
     shift past the correspondence distance and back, and a random jitter: the same rows, normals
-    and points each time, with fewer rows searched once the moves are small."""
+    and points each time, with fewer rows searched once the moves are small; also where the
+    other cloud repeats points (equally near neighbours: the full search's pick)."""
     from lidarfield.hypotheses.range_calibration import Pairing, planes_of
 
-    planes = planes_of(faulty.xyz1, 12)
+    other = np.vstack([faulty.xyz1, faulty.xyz1[::5]]) if repeated else faulty.xyz1
+    planes = planes_of(other, 12)
     pairing = Pairing(planes, 0.5)
     searched = []
     original = pairing._search
@@ -371,7 +374,9 @@ def test_a_fits_pairing_searches_again_only_what_moved_enough_and_answers_as_a_f
         got, want = pairing(points), planes.pair(points, 0.5)
         assert all(np.array_equal(a, b) for a, b in zip(got, want)), k
     # every row at first; a few where the move is 0.3 mm at most (1e-5 of 30 m); none unmoved
-    assert searched[0] == len(sample) and searched[5] < 0.05 * len(sample) and searched[-1] > 0, searched
+    # (a row whose two nearest are a repeated point is searched each time: a tie may change)
+    assert searched[0] == len(sample) and searched[-1] > 0, searched
+    assert repeated or searched[5] < 0.05 * len(sample), searched
     calls = len(searched)
     pairing(points)
-    assert len(searched) == calls  # unmoved: nothing searched
+    assert repeated or len(searched) == calls  # unmoved: nothing searched

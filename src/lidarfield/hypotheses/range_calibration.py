@@ -192,9 +192,9 @@ class Pairing:
         reach = self.max_distance + self.MARGIN_M
         distance, nearest = self.planes.tree.query(points[rows], k=2, distance_upper_bound=reach)
         d1, d2, first = distance[:, 0], np.minimum(distance[:, 1], reach), nearest[:, 0]
-        tie = np.flatnonzero(d1 == d2)  # equally near (a repeated point): the nearest as a plain search picks it
+        tie = np.flatnonzero(d1 == d2)  # equally near (a repeated point): the nearest as Planes.pair's search picks it
         if len(tie):
-            first[tie] = self.planes.tree.query(points[rows[tie]])[1]
+            first[tie] = self.planes.tree.query(points[rows[tie]], distance_upper_bound=self.max_distance)[1]
         self.anchor[rows], self.nearest[rows], self.d1[rows], self.d2[rows] = points[rows], first, d1, d2
 
 

@@ -163,13 +163,14 @@ def test_worth_it_weighs_the_reduction_against_a_random_removal():
     points of each voxel at random (``removal_null``), not the share of all points it removes."""
     settings = ExplainSettings(min_energy_reduction=0.05, max_removed_share=0.5, min_reduction_per_removed=1.0)
 
-    def row(whitened, share, null=0.0, raw=0.0, fitted=0.0):
+    def row(whitened, share, null=0.0, raw=0.0, fitted=0.0, seen=True):
         return {
             "whitened_reduction": whitened,
             "energy_reduction": raw,
             "removed_share": share,
             "removal_null": null,
             "fitted_null": fitted,
+            "calibration_seen": seen,
         }
 
     assert worth_it(row(0.57, 0.22, null=0.05), settings)  # most of it in voxels it empties
@@ -181,6 +182,8 @@ def test_worth_it_weighs_the_reduction_against_a_random_removal():
     assert worth_it(row(0.06, 0.0, raw=-0.2), settings)  # a correction: the raw energy may rise
     # a correction must explain more than its free parameters fit of the noise
     assert not worth_it(row(0.09, 0.0, fitted=0.1), settings) and worth_it(row(0.11, 0.0, fitted=0.1), settings)
+    # a calibration fitted with the pose that found none is the pose alone: never worth it
+    assert not worth_it(row(0.57, 0.0, fitted=0.01, seen=False), settings)
 
 
 def test_a_removal_explains_the_points_seen_through_beyond_thinning_and_not_against_the_vectors():

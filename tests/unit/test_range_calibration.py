@@ -107,6 +107,11 @@ def test_with_the_pose_it_fits_a_range_fault_on_a_pair_whose_pose_is_off(faulty)
     u = (moved.xyz2 - moved.origin2) / r[:, None]
     expected = ((r - c["offset_m"]) / c["scale"])[:, None] * u @ rotation.T + shift
     assert np.allclose(outcome.xyz2, expected, atol=1e-6)
+    # the pose is recorded as realign records its own: the transform T of cloud 2 in frame 1
+    # (T_1_2 becomes T @ T_1_2), its translation T's own, not the motion of sensor 2's origin
+    T = outcome.T_1_2 @ np.linalg.inv(moved.T_1_2)
+    assert np.allclose(c["pose"]["translation_m"], T[:3, 3], atol=1e-9)
+    assert np.isclose(np.degrees(np.arccos((np.trace(T[:3, :3]) - 1) / 2)), c["pose"]["angle_deg"], atol=1e-6)
 
 
 def test_with_the_pose_it_needs_cloud_2():
@@ -301,11 +306,77 @@ def test_a_fit_with_the_pose_that_finds_no_calibration_is_not_proposed(faulty, t
     """Fitted with the pose, a pair without a range fault gives a scale and an offset within
     their standard errors (the joint fit is the pose alone, which realign fits): not worth it,
     ranked last; the fault's are tens of standard errors off."""
-    from lidarfield.analysis.stopping_rule import MIN_CALIBRATION_SIGNIFICANCE, calibration_seen
+    from lidarfield.hypotheses.range_calibration import MIN_CALIBRATION_SIGNIFICANCE
 
     none = apply_step(truth, {"range_calibration": {"with_pose": True}}).fitted
     fault = apply_step(faulty, {"range_calibration": {"with_pose": True}}).fitted
-    assert not calibration_seen(none) and calibration_seen(fault)
+    assert not none["calibration_seen"] and fault["calibration_seen"]
     assert abs(none["scale"] - 1) < MIN_CALIBRATION_SIGNIFICANCE * none["scale_se"]
+    assert abs(none["offset_m"]) < MIN_CALIBRATION_SIGNIFICANCE * none["offset_se_m"]
     assert abs(fault["offset_m"]) > 10 * fault["offset_se_m"]
-    assert calibration_seen(apply_step(truth, {"range_calibration": {}}).fitted)  # alone: no pose, no test
+    assert "calibration_seen" not in apply_step(truth, {"range_calibration": {}}).fitted  # alone: no pose, no test
+
+
+def test_the_fits_of_a_stage_share_its_planes_and_find_what_fresh_planes_do(faulty):
+    """The calibrations of one stage pair the same cloud with its planes: built once
+    (``planes_of``), each normal computed once whichever fit asks first, in any thread, and
+    every fit the same to the last bit as with planes of its own."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    from lidarfield.hypotheses import range_calibration as module
+
+    steps = [{"range_calibration": {}}, {"range_calibration": {"with_pose": True}}, {"elevation_calibration": {}}]
+
+    def fresh(step):
+        module.SHARED_PLANES.clear()
+        return apply_step(faulty, step).fitted
+
+    alone = [fresh(step) for step in steps]
+    module.SHARED_PLANES.clear()
+    with ThreadPoolExecutor(3) as pool:
+        shared = list(pool.map(lambda step: apply_step(faulty, step).fitted, steps))
+    assert shared == alone
+    planes = module.planes_of(faulty.xyz1, 12)
+    assert planes is module.planes_of(faulty.xyz1, 12) and planes is not module.planes_of(faulty.xyz1.copy(), 12)
+    computed = np.isfinite(planes.normals[:, 0]) | np.isinf(planes.normals[:, 0])
+    assert computed.any() and not computed.all()  # only where a fit asked
+
+
+@pytest.mark.parametrize("repeated", [False, True])
+def test_a_fits_pairing_searches_again_only_what_moved_enough_and_answers_as_a_full_search(faulty, repeated):
+    """``Pairing`` against ``Planes.pair`` (every row searched each time) on the real-size
+    simulated cloud moved as a fit moves it: by a scale (large, then ever smaller steps), a
+    shift past the correspondence distance and back, and a random jitter: the same rows, normals
+    and points each time, with fewer rows searched once the moves are small; also where the
+    other cloud repeats points (equally near neighbours: the full search's pick)."""
+    from lidarfield.hypotheses.range_calibration import Pairing, planes_of
+
+    other = np.vstack([faulty.xyz1, faulty.xyz1[::5]]) if repeated else faulty.xyz1
+    planes = planes_of(other, 12)
+    pairing = Pairing(planes, 0.5)
+    searched = []
+    original = pairing._search
+
+    def counting(points, rows):
+        searched.append(len(rows))
+        original(points, rows)
+
+    pairing._search = counting
+    rng = np.random.default_rng(1)
+    origin, sample = faulty.origin2, faulty.xyz2[::3]
+    moves = [1.0, 1.01, 1.003, 1.003, 1.0031, 1.00311, 1.00311, 1.00311]
+    for k, scale in enumerate(moves):
+        points = origin + (sample - origin) * scale
+        if k == 3:
+            points = points + [0.45, 0.0, 0.0]  # past max_correspondence_m for many rows
+        if k == 6:
+            points = points + rng.normal(0, 0.002, points.shape)
+        got, want = pairing(points), planes.pair(points, 0.5)
+        assert all(np.array_equal(a, b) for a, b in zip(got, want)), k
+    # every row at first; a few where the move is 0.3 mm at most (1e-5 of 30 m); none unmoved
+    # (a row whose two nearest are a repeated point is searched each time: a tie may change)
+    assert searched[0] == len(sample) and searched[-1] > 0, searched
+    assert repeated or searched[5] < 0.05 * len(sample), searched
+    calls = len(searched)
+    pairing(points)
+    assert repeated or len(searched) == calls  # unmoved: nothing searched

@@ -277,6 +277,7 @@ def test_a_suggested_correction_shows_its_displacement_and_fit(tmp_path):
         "seen_through_removed": np.nan,
         "seen_through_null": np.nan,
         "fitted_null": 0.02,
+        "calibration_seen": True,
     }
     table = {name: np.asarray([row[name]]) for name in SUGGESTION_COLUMNS}
     stage = tmp_path / "stages" / "00-none"
@@ -330,11 +331,20 @@ def test_a_correction_is_ranked_by_what_it_explains_beyond_its_free_parameters()
     same = compare_fields(before, before, parameters=33)
     assert same["fitted_null"] == pytest.approx(33 / whitened_energy(before).sum())
 
-    def row(name, reduction, null):
-        given = {"hypothesis": name, "whitened_reduction": reduction, "fitted_null": null, "tag_share": math.nan}
+    def row(name, reduction, null, seen=True):
+        given = {
+            "hypothesis": name,
+            "whitened_reduction": reduction,
+            "fitted_null": null,
+            "tag_share": math.nan,
+            "calibration_seen": seen,
+        }
         return {column: given.get(column, 0) for column in SUGGESTION_COLUMNS[1:]}
 
     table = rank_table([row("per_ring", 0.30, 0.05), row("common", 0.27, 0.001), row("rigid", 0.26, 0.006)])
     assert list(table["hypothesis"]) == ["common", "rigid", "per_ring"]
     table = rank_table([row("per_ring", 0.40, 0.05), row("common", 0.27, 0.001)])
     assert list(table["hypothesis"]) == ["per_ring", "common"]
+    # a calibration fitted with the pose that found none (``calibration_seen`` False) is the pose alone: last
+    table = rank_table([row("pose_alone", 0.50, 0.001, seen=False), row("rigid", 0.26, 0.006)])
+    assert list(table["hypothesis"]) == ["rigid", "pose_alone"]

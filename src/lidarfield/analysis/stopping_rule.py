@@ -27,7 +27,6 @@ The defaults are the config's ``explain`` section (the schema).
 
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import dataclass, fields
 
@@ -63,28 +62,10 @@ def explain_settings(section: dict | None) -> ExplainSettings:
     return ExplainSettings(**section)
 
 
-# A calibration fitted with the pose is worth it only where the calibration itself is off by
-# this many of its standard errors (scale from 1 or offset from 0).
-MIN_CALIBRATION_SIGNIFICANCE = 3.0
-
-
-def calibration_seen(fitted: dict) -> bool:
-    """Whether a range calibration fitted with sensor 2's pose (its record has ``pose``) found a
-    scale or an offset ``MIN_CALIBRATION_SIGNIFICANCE`` standard errors off; True for any other
-    record. Where it did not, the joint fit is the pose alone, which ``realign`` fits (and its 2
-    parameters more than realign's explain a few units of noise, which can rank it first on a
-    pure misregistration): it would name a range error it does not see."""
-    if "pose" not in fitted or "scale" not in fitted:
-        return True
-    scale_se, offset_se = fitted.get("scale_se") or math.inf, fitted.get("offset_se_m") or math.inf
-    return (
-        max(abs(fitted["scale"] - 1.0) / scale_se, abs(fitted["offset_m"]) / offset_se) >= MIN_CALIBRATION_SIGNIFICANCE
-    )
-
-
 def worth_it(row: dict, settings: ExplainSettings) -> bool:
-    """Whether one suggestion row (``SUGGESTION_COLUMNS``) is worth applying."""
-    if not calibration_seen(json.loads(str(row.get("fitted") or "{}"))):
+    """Whether one suggestion row (``SUGGESTION_COLUMNS``) is worth applying: never a fit with
+    the pose that found none of its own correction (``calibration_seen``: it is the pose alone)."""
+    if not row["calibration_seen"]:
         return False
     reduction, share = float(row["whitened_reduction"]), float(row["removed_share"])
     if not (math.isfinite(reduction) and reduction > 0 and reduction >= settings.min_energy_reduction):

@@ -59,11 +59,14 @@ binned once) and compared with the stage's field:
   measured) and where they cannot be told (no sensor model, no origin of sensor 2, or none seen
   through); 0 for a candidate that removes nothing. ``stopping_rule.explains_seen_through``
   reads them.
+- ``calibration_seen``: False for a range calibration fitted with the pose whose scale and
+  offset are both within ``range_calibration.MIN_CALIBRATION_SIGNIFICANCE`` standard errors of
+  none (its record's ``calibration_seen``: that fit is the pose alone); True for every other
+  candidate.
 
 ``rank`` 1 is the largest whitened reduction beyond ``fitted_null`` (ties: fewer points removed,
 then the larger share of the energy in the tag that points to it; undefined reductions last,
-and with them a range calibration fitted with the pose whose scale and offset are both within
-``stopping_rule.MIN_CALIBRATION_SIGNIFICANCE`` standard errors: that fit is the pose alone).
+and with them a row whose ``calibration_seen`` is False).
 Candidates are the config's ``suggest`` list, or by default every built-in hypothesis the stack
 has not applied up to that stage, with its defaults: the removing ones and every correcting one
 (``CORRECTING``: a correction joins by being registered there). The per-laser calibration
@@ -87,7 +90,9 @@ parameters.
 
 The candidates a stage runs are independent: they are evaluated by a pool of threads
 (``candidate_threads``: the usable cores, one in a workflow job), each row then completed and
-ranked in the candidates' order, so the table is the serial one bit for bit.
+ranked in the candidates' order, so the table is the serial one bit for bit. The pool starts
+the correcting candidates first (they fit: the costliest), so that a stage does not wait at its
+end for one long fit started last.
 """
 
 from __future__ import annotations
@@ -118,7 +123,6 @@ from ..hypotheses.steps import step_name
 from ..io.parquet_table import read_metadata, read_table, write_table
 from ..pair import RegisteredPair
 from ..storage.stage_ids import canonical_json
-from .stopping_rule import calibration_seen
 from .tags import vector_tags, voxel_energy, whitened_energy
 
 log = logging.getLogger(__name__)
@@ -147,6 +151,7 @@ SUGGESTION_COLUMNS = (
     "seen_through_removed",
     "seen_through_null",
     "fitted_null",
+    "calibration_seen",
 )
 
 # The tag whose voxels each correcting built-in would explain: a field whose energy sits in
@@ -235,8 +240,12 @@ def suggestions(
 
     threads = min(len(todo), candidate_threads() if workers is None else workers)
     if threads > 1:  # the candidates are independent; numpy, scipy and Open3D release the GIL
+        # the fits first (the costliest: ICP, the calibrations' iterations), so that no thread
+        # is left with one at the end while the others wait; the rows are kept by their k
+        started = sorted(todo, key=lambda task: step_name(task[1]) not in CORRECTING)
         with ThreadPoolExecutor(threads) as pool:
-            evaluated = dict(zip((k for k, _ in todo), pool.map(evaluate, todo)))
+            running = {task[0]: pool.submit(evaluate, task) for task in started}
+            evaluated = {k: running[k].result() for k, _ in todo}  # an error: the first in the serial order
     else:
         evaluated = {k: evaluate((k, spec)) for k, spec in todo}
     seen = None  # the points seen through, found once, for the first candidate that removes any
@@ -327,6 +336,8 @@ def candidate_row(
         "displacement_median_m": max(m[0] for m in moved),
         "displacement_max_m": max(m[1] for m in moved),
         "fitted": canonical_json(outcome.fitted),
+        # False only for a calibration fitted with the pose that found none (range_calibration)
+        "calibration_seen": bool(outcome.fitted.get("calibration_seen", True)),
         "suggested_by": tag,
         "tag_share": stage.shares.get(tag, math.nan),
         **compare_fields(stage.before, after, fitted_parameters(outcome.fitted)),
@@ -373,6 +384,7 @@ def rank_table(rows: list[dict]) -> dict[str, np.ndarray]:
         "removed2": np.int64,
         "voxels_invalidated": np.int64,
         "corrects": bool,
+        "calibration_seen": bool,
         "hypothesis": str,
         "params": str,
         "fitted": str,
@@ -486,7 +498,7 @@ def tag_energy_shares(columns: dict[str, np.ndarray]) -> dict[str, float]:
 def _rank_key(row: dict) -> tuple:
     reduction = row["whitened_reduction"] - row["fitted_null"]
     # a calibration fitted with the pose that found none is the pose alone: last, as undefined
-    defined = math.isfinite(reduction) and calibration_seen(json.loads(str(row["fitted"] or "{}")))
+    defined = math.isfinite(reduction) and row["calibration_seen"]
     share = row["tag_share"] if math.isfinite(row["tag_share"]) else 0.0
     return (not defined, -reduction if defined else 0.0, row["removed1"] + row["removed2"], -share)
 

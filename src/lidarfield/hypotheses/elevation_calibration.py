@@ -54,12 +54,12 @@ from .params import doc
 from .range_calibration import (
     TOLERANCE_M,
     PlaneFit,
-    Planes,
     _huber,
     check_clouds,
     check_overlap,
     cloud_channels,
     evenly_spaced,
+    planes_of,
 )
 
 NAME = "elevation_calibration"
@@ -95,12 +95,12 @@ def elevation_calibration(pair: RegisteredPair, params: Params) -> Outcome:
     lidar = lidar_index(views, len(xyz))
     candidates = evenly_spaced(np.arange(len(xyz)), params.max_points)
     sample, sample_laser, sample_lidar = xyz[candidates], laser[candidates], lidar[candidates]
-    planes = Planes(other, params)
+    planes = planes_of(other, params.normal_k)
 
     def pairs(points: np.ndarray, rows: np.ndarray):
         """The ``rows`` of ``points`` paired with a plane of the other cloud: those rows,
         ``a = -n . t`` (the residual's change per radian of offset) and the residual ``y``."""
-        use, n, q = planes.pair(points[rows])
+        use, n, q = planes.pair(points[rows], params.max_correspondence_m)
         rows = rows[use]
         t = elevation_tangents(points[rows], sample_lidar[rows], views)
         return rows, -np.einsum("ij,ij->i", n, t), np.einsum("ij,ij->i", n, points[rows] - q)

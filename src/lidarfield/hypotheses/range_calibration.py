@@ -28,7 +28,15 @@ errors ``scale_se``, ``offset_se_m``, ``points`` (pairs used in the last solve),
 ``residual_rms_m`` (their point-to-plane residuals' RMS), ``sigma_m`` (the weighted residuals'
 standard deviation), ``iterations``, ``parameters`` (how many it fitted: 2, or 1 + the offsets);
 with ``per_ring``, ``ring_offsets_m`` and ``ring_offsets_se_m`` (by ring, as text) and
-``offset_m`` their mean over the rings. The standard errors are ``sigma^2 (J^T W J)^-1`` of the
+``offset_m`` their mean over the rings; with ``with_pose``, ``pose``: the fitted rigid
+transform ``T`` of cloud 2 in frame 1 (a point ``p`` becomes ``R p + t``), recorded as
+``realign`` records its own (``translation_m`` is ``T``'s, not the motion of sensor 2's origin),
+with ``translation_se_m`` and ``rotation_se_deg``, and ``calibration_seen``: whether the scale or
+the offset is ``MIN_CALIBRATION_SIGNIFICANCE`` (3) standard errors off (1 and 0). Where neither
+is, the joint fit is the pose alone, which ``realign`` fits (and its 2 parameters more than
+realign's explain a few units of noise, which can rank it first on a pure misregistration): it
+would name a range error it does not see, so ``suggest`` ranks it last and the stopping rule
+never applies it. The standard errors are ``sigma^2 (J^T W J)^-1`` of the
 last solve, carried from ``(alpha, beta)`` to ``(scale, offset)`` to first order. They treat
 neighbouring residuals as independent, which on a scan they are not quite: read them as lower
 bounds.
@@ -36,10 +44,11 @@ bounds.
 
 from __future__ import annotations
 
+import threading
+import weakref
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from ..errors import HypothesisError
 from ..field.free_space import directions, nearest_channel, sensor_channels
@@ -47,11 +56,15 @@ from ..pair import RegisteredPair
 from ..poses import in_sensor_frame, rotation_from_vector
 from .outcome import Outcome
 from .params import doc
+from .realign import transform_record
 
 MIN_POINTS = 20  # pairs in the fit, and points of each cloud
 MIN_RING_POINTS = 30  # a ring's own offset needs this many pairs
 HUBER_K = 1.345
 TOLERANCE_M = 1e-4  # converged when no corrected range of the sample changes by more
+# A calibration fitted with the pose names a range error only where the calibration itself is
+# off by this many of its standard errors (scale from 1 or offset from 0): ``calibration_seen``.
+MIN_CALIBRATION_SIGNIFICANCE = 3.0
 
 
 @dataclass(frozen=True)
@@ -106,25 +119,105 @@ class Params(PlaneFit):
 
 
 class Planes:
-    """The other cloud's planes: its k-d tree, and its points' normals computed where asked."""
+    """The other cloud's planes: its k-d tree, and its points' normals (from ``normal_k``
+    neighbours) computed where asked. Shared by the fits of one stage (``planes_of``): several
+    threads may pair at once, each point's normal is computed alone (the same values whoever
+    computes it first), and only its reading and writing are locked."""
 
-    def __init__(self, other: np.ndarray, params: PlaneFit):
+    def __init__(self, other: np.ndarray, normal_k: int):
         from scipy.spatial import cKDTree
 
-        self.other, self.params = other, params
+        self.other, self.normal_k = other, normal_k
         self.tree = cKDTree(other, balanced_tree=False, compact_nodes=False)  # faster to build, as fast to query
         self.normals = np.full((len(other), 3), np.nan)
+        self.lock = threading.Lock()
 
-    def pair(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def pair(self, points: np.ndarray, max_distance: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The rows of ``points`` whose nearest point ``q`` of the other cloud is within
-        ``max_correspondence_m`` and on a plane, with ``n`` (that plane's normal) and ``q``."""
-        distance, nearest = self.tree.query(points, distance_upper_bound=self.params.max_correspondence_m)
-        paired = np.isfinite(distance)
+        ``max_distance`` and on a plane, with ``n`` (that plane's normal) and ``q``."""
+        distance, nearest = self.tree.query(points, distance_upper_bound=max_distance)
+        return self.on_planes(np.isfinite(distance), nearest)
+
+    def on_planes(self, paired: np.ndarray, nearest: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``pair``'s answer from each row's nearest point (``nearest``, used where ``paired``)."""
         index = nearest[paired]
-        _fill_normals(self.normals, self.other, self.tree, np.unique(index), self.params.normal_k)
-        n = self.normals[index]
+        needed = np.unique(index)
+        with self.lock:
+            missing = needed[np.isnan(self.normals[needed, 0])]
+        found = _normals(self.other, self.tree, missing, self.normal_k)  # outside the lock: the costly part
+        with self.lock:
+            self.normals[missing] = found
+            n = self.normals[index]
         planar = np.isfinite(n).all(axis=1)
         return np.flatnonzero(paired)[planar], n[planar], self.other[index[planar]]
+
+
+class Pairing:
+    """``Planes.pair`` for the same rows of points moved again and again (a fit's iterations),
+    the same answer for less: a row is searched again only where its move since it was last
+    searched could change it. Searched, a row records its nearest and second-nearest distances
+    ``d1``, ``d2`` (to ``max_distance + MARGIN_M``); moved by ``delta`` since, its nearest point
+    is still the nearest if ``d2 - d1 > 2 delta`` (no other point can have come closer), and it
+    is still paired (or not) if ``d1`` is more than ``delta`` from ``max_distance`` (one with
+    nothing within the margin while it moved less than the margin). Exact: the same rows, points
+    and normals as a search of every row each time (a test compares them)."""
+
+    MARGIN_M = 0.1  # searched this far beyond max_distance, to know how far an unpaired row is
+
+    def __init__(self, planes: Planes, max_distance: float):
+        self.planes, self.max_distance = planes, max_distance
+        self.anchor = self.nearest = self.d1 = self.d2 = None
+
+    def __call__(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        if self.anchor is None:
+            redo = np.arange(len(points))
+            self.anchor = np.empty_like(points)
+            self.nearest = np.empty(len(points), dtype=np.int64)
+            self.d1, self.d2 = np.empty(len(points)), np.empty(len(points))
+        else:
+            delta = np.linalg.norm(points - self.anchor, axis=1) * (1 + 1e-9) + 1e-12  # rounding: err on searching
+            near = self.d1 < self.max_distance
+            same_side = np.abs(self.d1 - self.max_distance) > delta
+            kept = np.where(
+                np.isinf(self.d1),  # nothing within reach: still unpaired while it moved less than the margin
+                delta < self.MARGIN_M,
+                same_side & (~near | (self.d2 - self.d1 > 2 * delta)),
+            )
+            redo = np.flatnonzero(~kept)
+        if len(redo):
+            self._search(points, redo)
+        return self.planes.on_planes(self.d1 < self.max_distance, self.nearest)
+
+    def _search(self, points: np.ndarray, rows: np.ndarray) -> None:
+        reach = self.max_distance + self.MARGIN_M
+        distance, nearest = self.planes.tree.query(points[rows], k=2, distance_upper_bound=reach)
+        d1, d2, first = distance[:, 0], np.minimum(distance[:, 1], reach), nearest[:, 0]
+        tie = np.flatnonzero(d1 == d2)  # equally near (a repeated point): the nearest as Planes.pair's search picks it
+        if len(tie):
+            first[tie] = self.planes.tree.query(points[rows[tie]], distance_upper_bound=self.max_distance)[1]
+        self.anchor[rows], self.nearest[rows], self.d1[rows], self.d2[rows] = points[rows], first, d1, d2
+
+
+def planes_of(other: np.ndarray, normal_k: int) -> Planes:
+    """The planes of ``other``: those made for the same array object and ``normal_k`` while it
+    lives (``SHARED_PLANES``), else new ones. A stage's candidates pair the same cloud with its
+    planes three times (``range_calibration`` alone and with the pose, ``elevation_calibration``):
+    its tree is built, and each normal computed, once."""
+    key = (id(other), normal_k)
+    with SHARED_PLANES_LOCK:
+        known = SHARED_PLANES.get(key)
+        if known is not None and known[0]() is other:
+            return known[1]
+        planes = Planes(other, normal_k)
+        SHARED_PLANES.clear()  # one cloud's at a time: a stage's, not a study's
+        SHARED_PLANES[key] = (weakref.ref(other), planes)
+        return planes
+
+
+# The planes of the last cloud asked for, by its array object (a weak reference: it holds no
+# cloud alive; a stage's clouds are not changed in place, a correction makes new ones).
+SHARED_PLANES: dict[tuple[int, int], tuple] = {}
+SHARED_PLANES_LOCK = threading.Lock()
 
 
 def check_clouds(name: str, params, xyz: np.ndarray, other: np.ndarray) -> None:
@@ -169,7 +262,7 @@ def range_calibration(pair: RegisteredPair, params: Params) -> Outcome:
     u[measurable] = d[measurable] / r[measurable, None]
     candidates = evenly_spaced(np.flatnonzero(measurable), params.max_points)
     groups, group_of = _groups(ring, candidates)
-    planes = Planes(other, params)
+    pairing = Pairing(planes_of(other, params.normal_k), params.max_correspondence_m)
     rs, us, origins = r[candidates], u[candidates], np.broadcast_to(origin, xyz.shape)[candidates]
     r_max = float(rs.max())
     theta = np.concatenate([[1.0], np.zeros(len(groups))])  # alpha, then beta per group
@@ -181,7 +274,7 @@ def range_calibration(pair: RegisteredPair, params: Params) -> Outcome:
     while iterations < params.max_iterations and not converged:
         iterations += 1
         calibrated = origins + (theta[0] * rs - theta[1:][group_of])[:, None] * us
-        use, n, q = planes.pair(_moved(calibrated, R, c, t) if rigid else calibrated)
+        use, n, q = pairing(_moved(calibrated, R, c, t) if rigid else calibrated)
         check_overlap(name, params, len(use))
         nu = np.einsum("ij,ij->i", n, us[use] @ R.T if rigid else us[use])
         # the Jacobian's rows: r (n . Ru) for alpha, -(n . Ru) for the point's group's beta;
@@ -252,8 +345,14 @@ def range_calibration(pair: RegisteredPair, params: Params) -> Outcome:
         "method": "point_to_plane_huber",
         "parameters": p + rigid,
     }
-    if rigid:
-        fitted["pose"] = _pose_record(R, t, full_covariance[p:, p:])
+    if rigid:  # turned about sensor 2's origin c and moved by t: T in frame 1
+        offset_significance = abs(offsets[0]) / se[1] if ring is None and se[1] > 0 else 0.0
+        scale_significance = abs(scale - 1.0) / se[0] if se[0] > 0 else 0.0
+        fitted["calibration_seen"] = bool(max(scale_significance, offset_significance) >= MIN_CALIBRATION_SIGNIFICANCE)
+        T = np.eye(4)
+        T[:3, :3], T[:3, 3] = R, c + t - R @ c
+        # each step turned about the moved sensor's origin, c + t (the Jacobian's columns)
+        fitted["pose"] = transform_record(T, full_covariance[p:, p:], about=c + t)
     if ring is None:
         fitted.update(offset_m=float(offsets[0]), offset_se_m=number(se[1]))
         offset_of_point = np.full(len(xyz), offsets[0])
@@ -265,9 +364,7 @@ def range_calibration(pair: RegisteredPair, params: Params) -> Outcome:
     corrected_r = np.where(measurable, (r - offset_of_point) / scale, 0.0)
     new_xyz = np.where(measurable[:, None], origin + corrected_r[:, None] * u, xyz)
     keep1, keep2 = np.ones(len(pair.xyz1), dtype=bool), np.ones(len(pair.xyz2), dtype=bool)
-    if rigid:  # turned about sensor 2's origin and moved: T in frame 1
-        T = np.eye(4)
-        T[:3, :3], T[:3, 3] = R, c + t - R @ c
+    if rigid:
         return Outcome(keep1, keep2, xyz2=_moved(new_xyz, R, c, t), T_1_2=T @ pair.T_1_2, fitted=fitted)
     if params.cloud == 2:
         return Outcome(keep1, keep2, xyz2=new_xyz, fitted=fitted)
@@ -332,21 +429,6 @@ def _moved(xyz: np.ndarray, R: np.ndarray, c: np.ndarray, t: np.ndarray) -> np.n
     return (xyz - c) @ R.T + c + t
 
 
-def _pose_record(R: np.ndarray, t: np.ndarray, covariance: np.ndarray) -> dict:
-    """The pose fitted with the calibration: sensor 2 turned by ``R`` about its origin and moved
-    by ``t`` (frame 1), with standard errors (``covariance``: of the rotation vector, rad, and
-    the translation, m)."""
-    se = np.sqrt(np.clip(np.diag(covariance), 0, None))
-    rotvec = Rotation.from_matrix(R).as_rotvec()
-    return {
-        "translation_m": t.tolist(),
-        "rotation_deg": np.degrees(rotvec).tolist(),
-        "angle_deg": float(np.degrees(np.linalg.norm(rotvec))),
-        "translation_se_m": se[3:].tolist(),
-        "rotation_se_deg": np.degrees(se[:3]).tolist(),
-    }
-
-
 def _huber(residual: np.ndarray) -> np.ndarray:
     """Huber weights, k = 1.345 robust standard deviations (MAD) of the residuals."""
     scale = 1.4826 * float(np.median(np.abs(residual - np.median(residual))))
@@ -356,14 +438,13 @@ def _huber(residual: np.ndarray) -> np.ndarray:
     return np.where(a <= 1, 1.0, 1.0 / np.maximum(a, 1e-300))
 
 
-def _fill_normals(normals: np.ndarray, points: np.ndarray, tree, index: np.ndarray, k: int) -> None:
-    """Fill ``normals[index]`` where not yet known: the covariance's smallest eigenvector of the
-    ``k`` nearest points; a neighbourhood that is no plane (a line, or a blob) gets -inf (unused).
+def _normals(points: np.ndarray, tree, index: np.ndarray, k: int) -> np.ndarray:
+    """The normals of ``points[index]``: the covariance's smallest eigenvector of the ``k``
+    nearest points; a neighbourhood that is no plane (a line, or a blob) gets -inf (unused).
     (The plane through the point itself, not through the neighbours' mean: on the simulated
     intersection the mean, pulled off curved and bent surfaces, doubled the fit's bias.)"""
-    index = index[np.isnan(normals[index, 0])]
     if len(index) == 0:
-        return
+        return np.empty((0, 3))
     _, neighbours = tree.query(points[index], k=k)
     local = points[neighbours]
     local = local - local.mean(axis=1, keepdims=True)
@@ -372,7 +453,7 @@ def _fill_normals(normals: np.ndarray, points: np.ndarray, tree, index: np.ndarr
     normal = vectors[:, :, 0]
     planar = (values[:, 1] > 0.05 * values[:, 2]) & (values[:, 0] < 0.1 * values[:, 1])
     normal[~planar] = -np.inf
-    normals[index] = normal
+    return normal
 
 
 def _groups(ring: np.ndarray | None, candidates: np.ndarray) -> tuple[dict, np.ndarray]:

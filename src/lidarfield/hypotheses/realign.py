@@ -211,9 +211,23 @@ def _fitted(T: np.ndarray, mapped: np.ndarray, target: np.ndarray, normals: np.n
         covariance = sigma2 * np.linalg.inv(information)
     except np.linalg.LinAlgError:
         covariance = np.full((6, 6), np.nan)
-    t = T[:3, 3]
-    # t after a small rotation w and translation v applied after T: t + w x t + v
-    A = np.hstack([-skew(t), np.eye(3)])
+    return {
+        **transform_record(T, covariance),
+        "inlier_rmse_m": float(np.sqrt(np.mean(np.sum((mapped - target) ** 2, axis=1)))),
+        "sigma_m": float(np.sqrt(sigma2)),
+    }
+
+
+def transform_record(T: np.ndarray, covariance: np.ndarray, about: np.ndarray | None = None) -> dict:
+    """A fitted transform ``T`` of cloud 2 (frame 1) as recorded: its translation, rotation
+    vector and angle (``_fitted_transform``) and their standard errors, from ``covariance``
+    (6x6: a small rotation vector w, rad, then a translation v, m) of the motion that, applied
+    after ``T``, turns by w about the point ``about`` (frame 1; the origin when None) and moves
+    by v. Every correction that fits sensor 2's pose records it so (``realign``, ``deskew`` and
+    ``range_calibration`` with ``with_pose``)."""
+    pivot = np.zeros(3) if about is None else np.asarray(about, dtype=np.float64)
+    # T's translation t after that motion, to first order: t + w x (t - pivot) + v
+    A = np.hstack([-skew(T[:3, 3] - pivot), np.eye(3)])
     translation_cov = A @ covariance @ A.T
 
     def se(values: np.ndarray, scale: float = 1.0) -> list | None:
@@ -224,8 +238,6 @@ def _fitted(T: np.ndarray, mapped: np.ndarray, target: np.ndarray, normals: np.n
         **_fitted_transform(T),
         "translation_se_m": se(translation_cov),
         "rotation_se_deg": se(covariance[:3, :3], float(np.degrees(1.0))),
-        "inlier_rmse_m": float(np.sqrt(np.mean(np.sum((mapped - target) ** 2, axis=1)))),
-        "sigma_m": float(np.sqrt(sigma2)),
     }
 
 

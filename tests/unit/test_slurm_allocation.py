@@ -92,8 +92,7 @@ def test_a_socket_too_deep_for_its_folder_goes_to_the_temporary_folder_else_nowh
     private folder goes to the system's temporary folder; where it is too long there too, there
     is no worker."""
     monkeypatch.setattr(launch, "HOST", "node")
-    temporary = tmp_path / "t"
-    monkeypatch.setattr(launch.tempfile, "tempdir", str(temporary))
+    temporary = Path(launch.tempfile.gettempdir())  # short (pytest's tmp_path under xdist is not)
     # The deepest folder that still fits: its name and "/" take the room left in tmp_path.
     room = 107 - len(launch.socket_path(tmp_path / ".worker-node-1234"))
     fits = tmp_path / ("d" * (room - 1))

@@ -29,8 +29,10 @@ export VIRTUAL_ENV := $(abspath $(VENV))
 run: setup
 	snakemake --cores $(CORES)
 
+# On $(CORES) processes (pytest-xdist), a test file's tests in one of them: its module-scoped
+# fixtures (a workflow run, a decoded scan) are built once. A file run by hand runs in one.
 test: setup-test
-	python -m pytest
+	python -m pytest -n $(CORES) --dist loadfile
 
 # The core: pyproject.toml's dependencies and what they need, at the lock's versions. pip is
 # re-run only when the lock or pyproject.toml changes.

@@ -8,6 +8,7 @@ import os
 import stat
 import subprocess
 import sys
+from pathlib import Path
 from types import SimpleNamespace
 
 import pytest
@@ -84,6 +85,23 @@ def test_a_socket_is_named_after_its_host_and_run_in_a_folder_of_its_own(tmp_pat
     folder.chmod(0o755)
     assert launch.private_folder(tmp_path, "lidarfield-slurm-42", 1234) == folder
     assert stat.S_IMODE(folder.stat().st_mode) == 0o700
+
+
+def test_a_socket_too_deep_for_its_folder_goes_to_the_temporary_folder_else_nowhere(tmp_path, monkeypatch):
+    """A socket's path holds 107 bytes: where the worker's would be longer in its folder, its
+    private folder goes to the system's temporary folder; where it is too long there too, there
+    is no worker."""
+    monkeypatch.setattr(launch, "HOST", "node")
+    temporary = Path(launch.tempfile.gettempdir())  # short (pytest's tmp_path under xdist is not)
+    # The deepest folder that still fits: its name and "/" take the room left in tmp_path.
+    room = 107 - len(launch.socket_path(tmp_path / ".worker-node-1234"))
+    fits = tmp_path / ("d" * (room - 1))
+    assert len(launch.socket_path(fits / ".worker-node-1234")) == 107
+    assert launch.socket_place(fits, ".worker", 1234) == (fits, ".worker")
+    deeper = Path(f"{fits}x")
+    assert launch.socket_place(deeper, ".worker", 1234) == (temporary, launch.TEMP_RUN_STEM)
+    monkeypatch.setattr(launch.tempfile, "tempdir", str(deeper))
+    assert launch.socket_place(deeper, ".worker", 1234) is None
 
 
 def test_no_worker_folder_where_another_user_made_one_of_its_name(tmp_path):

@@ -341,6 +341,32 @@ def test_the_workers_socket_is_private_to_its_user_whatever_the_umask(tmp_path, 
     assert sorted(p.name for p in (tmp_path / "results").iterdir()) == ["logs"]
 
 
+def test_a_working_folder_too_deep_for_a_socket_gets_its_worker_in_the_temporary_folder(tmp_path, monkeypatch):
+    """A results folder too deep for a Unix socket's path (107 bytes) puts the socket in a
+    private folder of the system's temporary folder, by an absolute path that jobs reach from
+    any working directory; the folder is removed when the worker stops."""
+    from lidarfield.runner import launch
+
+    deep = tmp_path / ("a-deep-working-folder-" * 5)
+    deep.mkdir()
+    monkeypatch.chdir(deep)
+    monkeypatch.delenv("LIDARFIELD_WORKER", raising=False)
+    assert launch.start("results") is not None
+    try:
+        sock = os.environ["LIDARFIELD_WORKER"]
+        folder = Path(sock).parent
+        assert Path(sock).is_absolute() and len(os.fsencode(sock)) <= 107
+        assert folder.parent == Path(tempfile.gettempdir()) and folder.name.startswith(launch.TEMP_RUN_STEM)
+        assert stat.S_IMODE(folder.lstat().st_mode) == 0o700 and folder.lstat().st_uid == os.getuid()
+        log = tmp_path / "plotly.log"
+        assert start_job(["plotly-js", "--out", "plotly.min.js"], tmp_path, sock, log).wait(timeout=60) == 0
+        wait_for(lambda: "plotly-js: {'exit': 0}" in (deep / "results" / "logs" / "worker.log").read_text())
+    finally:
+        launch.stop()
+    assert not folder.exists()
+    assert sorted(p.name for p in (deep / "results").iterdir()) == ["logs"]
+
+
 def connect_as(user: pwd.struct_passwd, sock: str, argv: list[str], cwd: Path) -> int:
     """Send a job request to the worker on ``sock`` from a forked child running as ``user``:
     0 when the worker closed the connection without starting the job, 1 when it started it,

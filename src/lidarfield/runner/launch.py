@@ -49,6 +49,11 @@ LOCAL_RUN_STEM = ".worker"
 
 
 SOCKET_NAME = "socket"
+# A Unix socket's path holds at most 107 bytes (108 with its NUL).
+MAX_SOCKET_PATH = 107
+# The stem of a local run's worker folder in the system's temporary folder, where the results
+# folder lies too deep for a socket path (see ``socket_place``).
+TEMP_RUN_STEM = "lidarfield-worker"
 
 
 def private_folder(folder: str | Path, stem: str, owner_pid: int) -> Path | None:
@@ -69,10 +74,21 @@ def private_folder(folder: str | Path, stem: str, owner_pid: int) -> Path | None
 
 
 def socket_path(private: str | Path) -> str:
-    """The worker's socket in its ``private`` folder; a relative path where the absolute one
-    is too long for a Unix socket (108 bytes)."""
-    path = Path(private).absolute() / SOCKET_NAME
-    return str(path) if len(str(path)) < 100 else os.path.relpath(path)
+    """The worker's socket in its ``private`` folder, as an absolute path: the jobs connect to
+    it from any working directory."""
+    return str(Path(private).absolute() / SOCKET_NAME)
+
+
+def socket_place(folder: Path, stem: str, owner_pid: int) -> tuple[Path, str] | None:
+    """Where the worker of the workflow run ``owner_pid`` makes its private folder, and the
+    folder's stem: ``folder`` and ``stem``, or, where a socket there would be too long (a deep
+    working folder), the system's temporary folder and ``TEMP_RUN_STEM``. A private folder there
+    is as safe (see ``private_folder``). None when both are too long: then there is no worker."""
+    for place, name in ((folder, stem), (Path(tempfile.gettempdir()), TEMP_RUN_STEM)):
+        path = socket_path(place / f"{name}-{HOST}-{owner_pid}")
+        if len(os.fsencode(path)) <= MAX_SOCKET_PATH:
+            return place, name
+    return None
 
 
 def open_private_log(log: Path):
@@ -165,13 +181,18 @@ def worker_env(environ) -> dict[str, str]:
 
 
 def _spawn(folder: Path, stem: str, log: Path, idle_timeout_s: float, figure_jobs: int) -> subprocess.Popen | None:
-    """The worker, listening on its socket in ``folder`` and logging to ``log``."""
+    """The worker, listening on its socket in ``folder`` (or the temporary folder: see
+    ``socket_place``) and logging to ``log``."""
     global _running, _socket
     if ENV in os.environ and worker_socket() is None:
         return None
     if not hasattr(socket, "SO_PEERCRED"):
         return None  # the worker could not tell who connects (not Linux): jobs run as processes
     if _running is None:
+        place = socket_place(folder, stem, os.getpid())
+        if place is None:
+            return None
+        folder, stem = place
         folder.mkdir(parents=True, exist_ok=True)
         log.parent.mkdir(parents=True, exist_ok=True)
         remove_stale_sockets(folder, stem)

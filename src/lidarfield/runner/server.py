@@ -9,7 +9,8 @@ job ...`` in-process, so a crash or a kill stays in its job. It reports the chil
 
 The workflow starts one worker per run as Snakemake plans it, points the jobs at it when the
 run starts executing locally, with its socket in a folder of the results folder named after the
-Snakemake process, and stops it when the run ends (:mod:`lidarfield.runner.launch`). Only the
+Snakemake process (of the temporary folder where the results folder is too deep for a socket's
+path), and stops it when the run ends (:mod:`lidarfield.runner.launch`). Only the
 user who runs the workflow can reach the socket (0600, in a 0700 folder), and the worker
 serves only that user's processes (their user id, from the kernel): a job runs a hypothesis's
 plugin code, so another user's request would run their code as this user. The

@@ -13,8 +13,10 @@ from __future__ import annotations
 import importlib.util
 import os
 import re
+import shutil
 import subprocess
 import sys
+import tempfile
 from pathlib import Path
 
 import pytest
@@ -136,15 +138,22 @@ def workers_on(node_tmp: Path) -> list[str]:
     return found
 
 
-def test_a_failing_job_fails_with_its_log_and_the_rerun_completes(slurm_env, slurm_profile, tmp_path):
+@pytest.fixture
+def node_tmp():
+    """The allocations' node-local folder (sbatch passes the environment on), short: the worker's
+    socket lies in it, and under pytest-xdist ``tmp_path`` is too deep for a socket's 107 bytes
+    (then no worker starts, as in an allocation whose TMPDIR is that deep)."""
+    folder = Path(tempfile.mkdtemp(prefix="lf-node-"))
+    yield folder
+    shutil.rmtree(folder, ignore_errors=True)
+
+
+def test_a_failing_job_fails_with_its_log_and_the_rerun_completes(slurm_env, slurm_profile, tmp_path, node_tmp):
     study = yaml.safe_load(SMOKE.read_text())
     study["hypotheses"] = [{"plugin": {"file": "fails.py", "function": "remove"}}]
     (tmp_path / "fails.py").write_text(FAILING_PLUGIN.format(limit=FAILS_FOR_SHIFT))
     config = tmp_path / "failing.yaml"
     config.write_text(yaml.safe_dump(study))
-    # The allocations' node-local folder (sbatch passes the environment on).
-    node_tmp = tmp_path / "node-tmp"
-    node_tmp.mkdir()
     env = {**slurm_env, "TMPDIR": str(node_tmp)}
 
     failed = run_study(tmp_path, config, *slurm_profile, env=env)

@@ -45,7 +45,6 @@ bounds.
 from __future__ import annotations
 
 import threading
-import weakref
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -206,17 +205,18 @@ def planes_of(other: np.ndarray, normal_k: int) -> Planes:
     key = (id(other), normal_k)
     with SHARED_PLANES_LOCK:
         known = SHARED_PLANES.get(key)
-        if known is not None and known[0]() is other:
-            return known[1]
+        if known is not None and known.other is other:
+            return known
         planes = Planes(other, normal_k)
         SHARED_PLANES.clear()  # one cloud's at a time: a stage's, not a study's
-        SHARED_PLANES[key] = (weakref.ref(other), planes)
+        SHARED_PLANES[key] = planes
         return planes
 
 
-# The planes of the last cloud asked for, by its array object (a weak reference: it holds no
-# cloud alive; a stage's clouds are not changed in place, a correction makes new ones).
-SHARED_PLANES: dict[tuple[int, int], tuple] = {}
+# The planes of the last cloud asked for, by its array object. They hold that cloud (and its
+# tree) alive until another cloud's planes are asked for: one cloud at a time, so its id cannot
+# be reused meanwhile. A stage's clouds are not changed in place (a correction makes new ones).
+SHARED_PLANES: dict[tuple[int, int], Planes] = {}
 SHARED_PLANES_LOCK = threading.Lock()
 
 

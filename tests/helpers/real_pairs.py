@@ -78,13 +78,19 @@ def registered(real: RealPair, method: str, start: np.ndarray) -> np.ndarray:
     return register_pair(real.scan1, real.scan2, {"method": method, "guess": start.ravel().tolist()}).T_1_2
 
 
-def realigned(real: RealPair, start: np.ndarray, params: dict | None = None, models: bool = True) -> np.ndarray:
-    """Where ``realign`` lands on the pair registered at ``start`` (by a transform, as the
-    suggestions run it on a pair registered off), with both scans' sensor models or none."""
+def pair_at(real: RealPair, T: np.ndarray | None = None, models: bool = True) -> RegisteredPair:
+    """``real`` registered at ``T`` (default: its reference) by a transform, as a study of it
+    registered by a pose file is, with both scans' sensor models or none."""
+    T = real.reference if T is None else T
     model = PRESETS[real.sensor] if models else None
-    xyz2 = real.scan2.xyz @ start[:3, :3].T + start[:3, 3]
-    pair = RegisteredPair(real.scan1.xyz, xyz2, start, model, model, registration={"method": "transform"})
-    return apply_step(pair, {"realign": params or {}}).T_1_2
+    xyz2 = real.scan2.xyz @ T[:3, :3].T + T[:3, 3]
+    return RegisteredPair(real.scan1.xyz, xyz2, T, model, model, registration={"method": "transform"})
+
+
+def realigned(real: RealPair, start: np.ndarray, params: dict | None = None, models: bool = True) -> np.ndarray:
+    """Where ``realign`` lands on the pair registered at ``start`` (as the suggestions run it
+    on a pair registered off), with both scans' sensor models or none."""
+    return apply_step(pair_at(real, start, models), {"realign": params or {}}).T_1_2
 
 
 def shared_pair(real: RealPair, T: np.ndarray) -> RealPair:

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 import lidarfield
-from helpers.real_pairs import real_pair
+from helpers.real_pairs import pair_at, real_pair
 from lidarfield.analysis import suggest
 from lidarfield.analysis.suggest import (
     PACKAGE,
@@ -29,7 +29,6 @@ from lidarfield.field.grid import field_settings_from_config
 from lidarfield.io.parquet_table import read_metadata
 from lidarfield.pair import RegisteredPair, write_pair
 from lidarfield.registration import register_pair
-from lidarfield.sensors.models import PRESETS
 from lidarfield.study.config import load_config
 from lidarfield.study.stack import apply_stack
 
@@ -70,10 +69,7 @@ def test_the_default_study_pair_gets_the_same_ranked_candidates_reused():
 
 @pytest.mark.parametrize("name", ["hdl32", "os1 0->1", "expd"])
 def test_the_real_pairs_get_the_same_ranked_candidates_reused(shared_data, name):
-    real = real_pair(shared_data, name)
-    model = PRESETS[real.sensor]
-    xyz2 = real.scan2.xyz @ real.reference[:3, :3].T + real.reference[:3, 3]
-    pair = RegisteredPair(real.scan1.xyz, xyz2, real.reference, model, model, registration={"method": "transform"})
+    pair = pair_at(real_pair(shared_data, name))
     grid = load_config(ROOT / "config" / "config.yaml", ROOT).grid_section
     fresh, reused = appended_tables(pair, [{"ego_vehicle": {}}], grid)
     assert "realign" in fresh["hypothesis"]

@@ -56,8 +56,13 @@ normals stay at full resolution.
 Why at most 20,000 points of cloud 2: ICP's time grows with the source's points, its accuracy
 hardly does beyond a few thousand, and a VLP-16 scan (12,000 to 16,000 points) is still fitted
 on all of them, as before. What is left is mostly cloud 1's normals (about 70% of the time on a
-pair of 55,000-point scans), which a full-resolution target needs. Measured figures: the
-hypotheses page of the docs and ``bench/RESULTS.md``.
+pair of 55,000-point scans), which a full-resolution target needs. The second fit's target,
+the points both sensors saw, takes them from the first's (``Target.subset``): a point's
+neighbours' normal and its one-ring test depend only on the points within
+``normal_radius_m``, so only the kept points that near to a dropped one are found again, the
+same to the bit as made afresh (tested on simulated and real scans); on the drive of
+``bench/drive.py`` that is 27% of them. Measured figures: the hypotheses page of the docs and
+``bench/RESULTS.md``.
 """
 
 from __future__ import annotations
@@ -72,9 +77,13 @@ from ..pair import RegisteredPair
 from ..poses import skew
 from .outcome import Outcome
 from .params import doc
-from .ring_normals import ring_normals
+from .ring_normals import one_ring_points, ring_normals
 
 MIN_POINTS = 10  # per downsampled cloud, and correspondences: 6 unknowns and a residual's sigma
+# Above this share of the kept points near enough to a dropped one to be found again, the
+# target's subset is made afresh: as fast, the same result (Target.subset; measured 2026-11-28:
+# 62% of them cost 0.70 of a fresh one on the OS1-128 frames, 98% 1.03 on the HDL-32E pair).
+LOCAL_SHARE_MAX = 0.8
 
 
 @dataclass(frozen=True)
@@ -117,13 +126,15 @@ class Params:
 def realign(pair: RegisteredPair, params: Params) -> Outcome:
     """Cloud 2 moved by point-to-plane ICP onto cloud 1, sensor 2's pose with it; nothing removed.
     With both sensor models and origins known, refined on the points both sensors could see."""
-    T, result, source, target = _icp(pair.xyz1, pair.xyz2, pair.sensor1, params, np.eye(4))
+    target = Target.of(pair.xyz1, pair.sensor1, params)
+    T, result, source = _icp(target.cloud, pair.xyz2, params, np.eye(4))
     if pair.sensor1 is not None and pair.sensor2 is not None and (pair.registration or {}).get("method") != "identity":
         # What only one sensor saw has no counterpart to match; where the sensors were is known
         # (an identity registration does not say) once the first fit has brought them close.
         moved = replace(pair, xyz2=pair.xyz2 @ T[:3, :3].T + T[:3, 3], T_1_2=T @ pair.T_1_2)
         shared1, shared2 = shared_points(moved)
-        T, result, source, target = _icp(pair.xyz1[shared1], pair.xyz2[shared2], pair.sensor1, params, T)
+        target = target.subset(pair.xyz1, shared1, pair.sensor1, params)
+        T, result, source = _icp(target.cloud, pair.xyz2[shared2], params, T)
     # ICP's correspondences are those at its final transform (Open3D searches them after the last
     # update); T is that transform rounded to 1e-9, so only a nearest-neighbour tie that close
     # could tell them apart.
@@ -140,7 +151,9 @@ def realign(pair: RegisteredPair, params: Params) -> Outcome:
         refinement = _field_refinement(replace(pair, xyz2=pair.xyz2 @ T[:3, :3].T + T[:3, 3], T_1_2=T @ pair.T_1_2))
         T = _rounded(refinement @ T)
     fitted = {
-        **_fitted(T, mapped, np.asarray(target.points)[pairs[:, 1]], np.asarray(target.normals)[pairs[:, 1]]),
+        **_fitted(
+            T, mapped, np.asarray(target.cloud.points)[pairs[:, 1]], np.asarray(target.cloud.normals)[pairs[:, 1]]
+        ),
         "fitness": float(result.fitness),
         "correspondences": len(pairs),
         "method": "icp_point_to_plane",
@@ -167,36 +180,110 @@ def _field_refinement(pair: RegisteredPair) -> np.ndarray:
     return T
 
 
-def _icp(xyz1: np.ndarray, xyz2: np.ndarray, sensor1, params: Params, start: np.ndarray):
-    """(T, ICP's result, source, target): point-to-plane ICP of at most ``max_points`` of
-    ``xyz2`` onto ``xyz1`` from ``start``, the target's normals from its neighbours and, with
-    sensor 1's model and no downsampling, from its rings where its neighbours hold one ring
-    (``ring_normals``)."""
+@dataclass(frozen=True)
+class Target:
+    """Cloud 1 as ICP's target: ``cloud`` (Open3D, voxel-downsampled if ``voxel_m``) with its
+    normals, from its neighbours within ``normal_radius_m`` and, with sensor 1's model and no
+    downsampling, from its rings where its neighbours hold one ring (``ring_normals``). Without
+    downsampling it keeps what its normals were made of, so that a subset's are found again
+    only where they can differ (``subset``): ``surface``, the neighbours' normals, and
+    ``one_ring``, the points given their rings' (None without sensor 1's model)."""
+
+    cloud: object
+    surface: np.ndarray | None = None
+    one_ring: np.ndarray | None = None
+
+    @classmethod
+    def of(cls, xyz1: np.ndarray, sensor1, params: Params) -> "Target":
+        from ..registration.matching import point_cloud
+
+        cloud = point_cloud(xyz1, params.voxel_m, 0.0)
+        _require_points(len(cloud.points), 1, params)
+        surface = _surface_normals(cloud, params)
+        if params.voxel_m > 0:  # its points are voxels': no rings, no subset of them
+            return cls(cloud)
+        one_ring = None if sensor1 is None else one_ring_points(xyz1, sensor1.elevation_deg, *_neighbourhood(params))
+        return cls._with_normals(cloud, surface, one_ring, sensor1, params)
+
+    @classmethod
+    def _with_normals(cls, cloud, surface: np.ndarray, one_ring, sensor1, params: Params) -> "Target":
+        import open3d as o3d
+
+        normals = surface
+        if one_ring is not None:
+            xyz = np.asarray(cloud.points)
+            normals = ring_normals(xyz, surface, sensor1.elevation_deg, *_neighbourhood(params), one_ring=one_ring)
+        cloud.normals = o3d.utility.Vector3dVector(normals)
+        return cls(cloud, surface, one_ring)
+
+    def subset(self, xyz1: np.ndarray, keep: np.ndarray, sensor1, params: Params) -> "Target":
+        """``Target.of`` the points ``keep`` of ``xyz1``, the cloud it was made of, the same to the bit:
+        a point's neighbours' normal and one-ring test depend only on the points within
+        ``normal_radius_m``, so they are found again only for the kept points that near to a
+        dropped one (among the kept points near enough to be their neighbours); the rings'
+        normals, which reach farther along a ring, are found again for all."""
+        from ..registration.matching import point_cloud
+
+        if self.surface is None:  # downsampled: made again from the kept points
+            return Target.of(xyz1[keep], sensor1, params)
+        kept, dropped = xyz1[keep], xyz1[~keep]
+        _require_points(len(kept), 1, params)
+        surface, one_ring = self.surface[keep], None if self.one_ring is None else self.one_ring[keep]
+        if len(dropped):
+            from scipy.spatial import cKDTree
+
+            radius = params.normal_radius_m * (1 + 1e-9) + 1e-12  # a tie at the radius counts as near
+            distance, _ = cKDTree(dropped).query(kept, k=1, distance_upper_bound=2 * radius)
+            local = np.flatnonzero(distance <= 2 * radius)  # holds every neighbour of a near point
+            if len(local) > LOCAL_SHARE_MAX * len(kept):
+                return Target.of(kept, sensor1, params)
+            near = distance[local] <= radius
+            if near.any():
+                surface[local[near]] = _surface_normals(point_cloud(kept[local], 0.0, 0.0), params)[near]
+                if one_ring is not None:
+                    found = one_ring_points(kept[local], sensor1.elevation_deg, *_neighbourhood(params))
+                    one_ring[local[near]] = found[near]
+        return Target._with_normals(point_cloud(kept, 0.0, 0.0), surface, one_ring, sensor1, params)
+
+
+def _surface_normals(cloud, params: Params) -> np.ndarray:
+    """(N, 3) Open3D's normals of ``cloud``'s points from their neighbours, set on it too."""
+    import open3d as o3d
+
+    search = o3d.geometry.KDTreeSearchParamHybrid(radius=params.normal_radius_m, max_nn=params.normal_max_nn)
+    cloud.estimate_normals(search)
+    return np.asarray(cloud.normals).copy()
+
+
+def _neighbourhood(params: Params) -> tuple[float, int]:
+    """The normals' neighbourhood: its radius and how many neighbours at most."""
+    return params.normal_radius_m, params.normal_max_nn
+
+
+def _icp(target, xyz2: np.ndarray, params: Params, start: np.ndarray):
+    """(T, ICP's result, source): point-to-plane ICP of at most ``max_points`` of ``xyz2`` onto
+    the Open3D cloud ``target`` (with normals) from ``start``."""
     import open3d as o3d  # only where a stage realigns
 
     from ..registration.matching import point_cloud
 
     reg = o3d.pipelines.registration
     source = _sample(point_cloud(xyz2, params.voxel_m, 0.0), params.max_points)
-    target = point_cloud(xyz1, params.voxel_m, 0.0)
-    for cloud, points in ((2, source), (1, target)):
-        if len(points.points) < MIN_POINTS:
-            raise HypothesisError(
-                f"realign: too few points: cloud {cloud} has {len(points.points)}"
-                + (f" after {params.voxel_m} m voxels" if params.voxel_m else "")
-                + f", it needs at least {MIN_POINTS}"
-            )
-    target.estimate_normals(
-        o3d.geometry.KDTreeSearchParamHybrid(radius=params.normal_radius_m, max_nn=params.normal_max_nn)
-    )
-    if sensor1 is not None and params.voxel_m == 0:
-        normals = np.asarray(target.normals)
-        normals = ring_normals(xyz1, normals, sensor1.elevation_deg, params.normal_radius_m, params.normal_max_nn)
-        target.normals = o3d.utility.Vector3dVector(normals)
+    _require_points(len(source.points), 2, params)
     criteria = reg.ICPConvergenceCriteria(1e-6, 1e-6, params.max_iterations)
     estimation = reg.TransformationEstimationPointToPlane()
     result = reg.registration_icp(source, target, params.max_correspondence_m, start, estimation, criteria)
-    return _rounded(np.array(result.transformation, dtype=np.float64)), result, source, target
+    return _rounded(np.array(result.transformation, dtype=np.float64)), result, source
+
+
+def _require_points(count: int, number: int, params: Params) -> None:
+    """A HypothesisError where cloud ``number`` has too few points (``count``) to fit."""
+    if count < MIN_POINTS:
+        raise HypothesisError(
+            f"realign: too few points: cloud {number} has {count}"
+            + (f" after {params.voxel_m} m voxels" if params.voxel_m else "")
+            + f", it needs at least {MIN_POINTS}"
+        )
 
 
 def _fitted(T: np.ndarray, mapped: np.ndarray, target: np.ndarray, normals: np.ndarray) -> dict:

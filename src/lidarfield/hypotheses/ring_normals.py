@@ -36,16 +36,18 @@ from ..field.significance import GRAZING_MIN
 FIRST_NEIGHBOURS = 8
 
 
-def ring_normals(xyz: np.ndarray, normals: np.ndarray, elevation_deg, radius_m: float, k: int) -> np.ndarray:
+def ring_normals(
+    xyz: np.ndarray, normals: np.ndarray, elevation_deg, radius_m: float, k: int, one_ring: np.ndarray | None = None
+) -> np.ndarray:
     """``normals`` (N, 3) of a cloud given in its own sensor's frame, with those of the points
     whose ``k`` nearest neighbours within ``radius_m`` hold one of the channels at
-    ``elevation_deg`` replaced by their rings' (see the module; zero where none)."""
+    ``elevation_deg`` replaced by their rings' (see the module; zero where none). ``one_ring``:
+    those points (``one_ring_points``), when already known."""
     from scipy.spatial import cKDTree
 
-    channels = np.sort(np.asarray(elevation_deg, dtype=np.float64))
-    elevation = np.degrees(np.arctan2(xyz[:, 2], np.hypot(xyz[:, 0], xyz[:, 1])))
-    channel = np.searchsorted(0.5 * (channels[1:] + channels[:-1]), elevation)  # the nearest channel
-    one_ring = _one_ring(cKDTree(xyz), xyz, channel, radius_m, min(k, len(xyz)))
+    channels, channel = nearest_channels(xyz, elevation_deg)
+    if one_ring is None:
+        one_ring = one_ring_points(xyz, elevation_deg, radius_m, k)
     out = np.array(normals, dtype=np.float64, copy=True)
     order = np.argsort(channel, kind="stable")
     starts = np.searchsorted(channel[order], np.arange(len(channels) + 1))
@@ -60,6 +62,23 @@ def ring_normals(xyz: np.ndarray, normals: np.ndarray, elevation_deg, radius_m: 
         ring = _neighbours(trees[c], xyz[members[c]], xyz[own], k, np.inf)
         out[own] = _ring_normal(ring, *_neighbouring_rings(xyz, own, c, channels, members, trees, ring, k))
     return out
+
+
+def one_ring_points(xyz: np.ndarray, elevation_deg, radius_m: float, k: int) -> np.ndarray:
+    """(N,) whether each point's ``k`` nearest neighbours within ``radius_m`` all lie on its
+    channel (the nearest of ``elevation_deg``): the points ``ring_normals`` gives their rings'
+    normals. It depends only on the points within ``radius_m``."""
+    from scipy.spatial import cKDTree
+
+    _, channel = nearest_channels(xyz, elevation_deg)
+    return _one_ring(cKDTree(xyz), xyz, channel, radius_m, min(k, len(xyz)))
+
+
+def nearest_channels(xyz: np.ndarray, elevation_deg) -> tuple[np.ndarray, np.ndarray]:
+    """The channels' elevations, ascending, and each point's nearest of them (its index)."""
+    channels = np.sort(np.asarray(elevation_deg, dtype=np.float64))
+    elevation = np.degrees(np.arctan2(xyz[:, 2], np.hypot(xyz[:, 0], xyz[:, 1])))
+    return channels, np.searchsorted(0.5 * (channels[1:] + channels[:-1]), elevation)
 
 
 def _neighbouring_rings(xyz: np.ndarray, own: np.ndarray, c: int, channels: np.ndarray, members, trees, ring, k: int):

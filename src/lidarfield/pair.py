@@ -58,6 +58,14 @@ class RegisteredPair:
         """Sensor 2's origin in frame 1."""
         return self.T_1_2[:3, 3].copy()
 
+    @property
+    def pose_exact(self) -> bool:
+        """Whether sensor 2's pose is the simulation's truth: both scans simulated, the pair
+        registered by their poses (``truth``) and the pose not moved since (by a correction or
+        a misregistration put on it)."""
+        record = self.registration or {}
+        return bool(record.get("reference_exact")) and np.array_equal(record["reference_T_1_2"], self.T_1_2)
+
     def lidars(self, cloud: int) -> list[LidarView]:
         """The lidars that measured cloud 1 or 2, each placed in frame 1 with its points."""
         if cloud == 1:

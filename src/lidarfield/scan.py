@@ -12,6 +12,9 @@ from .sensors.rig import Lidar, check_lidar_ids
 # Attributes the contracts know; readers may add others (kept as they are). ``object`` is a
 # simulated point's label: the moving object it hit, 0 for the static scene.
 KNOWN_ATTRIBUTES = ("intensity", "ring", "time", "object", "lidar")
+# The first word of a simulated scan's ``source`` (lidarfield.simulation.raycast): its pose is
+# the simulation's, exact.
+SIMULATED = "simulated"
 
 
 def still_sweep() -> dict:
@@ -48,6 +51,11 @@ class Scan:
 
     def __len__(self) -> int:
         return len(self.xyz)
+
+    @property
+    def simulated(self) -> bool:
+        """Whether the simulator made it (its ``source`` says so): its pose is then exact."""
+        return (self.source or "").split(" ", 1)[0] == SIMULATED
 
     def subset(self, mask: np.ndarray) -> "Scan":
         return Scan(

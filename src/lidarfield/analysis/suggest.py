@@ -172,7 +172,9 @@ TAG_CORRECTIONS = {"rigid": "realign", "radial": "range_calibration"}
 # faulty scan (scan matching), or by a ``realign`` before, it took that part and the correction
 # alone fits the wrong thing (docs/diagnosis.md); where it was measured apart from the scan (the
 # truth, odometry, GNSS) it did not, and the pose's 6 parameters only fit noise. The pair cannot
-# say which: both are candidates, ranked beyond their parameters (``fitted_null``).
+# say which: both are candidates, ranked beyond their parameters (``fitted_null``); except where
+# the pose is the simulation's truth (``RegisteredPair.pose_exact``), exact: there the pose's part
+# of a joint fit is noise alone, and only the correction alone is tried (``exact_pose_candidates``).
 DEFAULT_CANDIDATE_PARAMS = {
     "shadow": [{"rule": "auto"}],
     "range_calibration": [{}, {"with_pose": True}],
@@ -223,6 +225,8 @@ def suggestions(
     (``explain`` applies the chosen one's as it is instead of running it again).
     """
     known = known or {}
+    if defaults:
+        candidates = exact_pose_candidates(pair, candidates)
     reused = [known.get(candidate_key(spec)) for spec in candidates]
     if all(row is not None for row in reused):  # nothing to run: not even the field before
         log.info("all %d candidates reused: the same points and grid as a stage already suggested for", len(reused))
@@ -265,6 +269,20 @@ def suggestions(
             row |= seen_through_columns(seen, ids1, ids2, *outcome)
         rows.append(row)
     return rank_table(rows)
+
+
+def exact_pose_candidates(pair: RegisteredPair, candidates: list[dict]) -> list[dict]:
+    """``candidates`` without those fitted with sensor 2's pose (``with_pose``) where that pose
+    is exact (``pair.pose_exact``): the simulation's truth, not fitted on the scans."""
+    if not pair.pose_exact:
+        return candidates
+    kept = [spec for spec in candidates if not spec[step_name(spec)].get("with_pose")]
+    if len(kept) < len(candidates):
+        log.info(
+            "%d candidates fitted with the pose not run: the pose is the simulation's truth",
+            len(candidates) - len(kept),
+        )
+    return kept
 
 
 @dataclass(frozen=True)

@@ -56,6 +56,7 @@ def register_pair(
         translation_error, rotation_error = pose_error(T, reference)
         record.update(translation_error_m=translation_error, rotation_error_deg=rotation_error)
         record["reference_T_1_2"] = reference.tolist()
+        record["reference_exact"] = scan1.simulated and scan2.simulated  # the simulation's truth
     return RegisteredPair(
         scan1.xyz,
         apply_pose(T, scan2.xyz),

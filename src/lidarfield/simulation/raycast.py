@@ -22,7 +22,7 @@ import open3d as o3d
 import trimesh
 
 from ..errors import ConfigError
-from ..scan import Scan
+from ..scan import SIMULATED, Scan
 from ..sensors.models import SensorModel
 from .faults import checked_elevation_offsets, checked_range_fault
 from .scene import Scene
@@ -262,7 +262,7 @@ def _checked_max_range(sensor: SensorModel, max_range_m: float | None) -> float:
 def _describe(
     scene, sensor, time_s, seed, noise, dropout, max_range, rolling, velocity, angular, scale, offset, elevation
 ) -> str:
-    parts = [f"simulated scene={scene.source} sensor={sensor.name} time_s={time_s:g} seed={seed}"]
+    parts = [f"{SIMULATED} scene={scene.source} sensor={sensor.name} time_s={time_s:g} seed={seed}"]
     if noise:
         parts.append(f"range_noise_m={noise:g}")
     if dropout:

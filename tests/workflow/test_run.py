@@ -215,13 +215,16 @@ def test_run_writes_every_stage_and_prints_the_table(tmp_path, paper_scans, caps
 
 def test_run_reuses_the_suggestions_of_a_stage_whose_hypothesis_changed_no_point(tmp_path, paper_scans, caplog):
     """A crop past every point appended: its stage has the points of the one before, and its
-    suggestions are that stage's rows without crop's, ranked as before, none run again."""
+    suggestions are that stage's rows without crop's, ranked as before, none run again. (The
+    simulated pair is registered by its truth: the 2 default candidates fitted with the pose
+    are not among its 10; analysis.suggest.exact_pose_candidates.)"""
     config = _study(tmp_path, paper_scans, [{"field_of_view": {}}, {"crop": {"max_range_m": 10_000}}])
     out = tmp_path / "out"
     argv = ["run", *map(str, paper_scans), "--config", str(config), "--out", str(out), "--register", "truth"]
     with caplog.at_level("INFO", logger="lidarfield.analysis.suggest"):
         assert main(argv) == 0
-    assert "all 10 candidates reused" in caplog.text
+    assert "2 candidates fitted with the pose not run" in caplog.text
+    assert "all 8 candidates reused" in caplog.text
     ids = list(pd.read_parquet(out / "summary.parquet")["stage"])
     files = [out / "stages" / stage_id / "suggestions.parquet" for stage_id in ids[1:]]
     before, after = (pd.read_parquet(path) for path in files)

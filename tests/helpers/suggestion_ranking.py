@@ -32,7 +32,8 @@ from lidarfield.study.stack import apply_stack
 
 ROOT = Path(__file__).resolve().parents[2]
 # how far a candidate's whitened reduction beyond its null may move (of the field's whitened
-# energy): far above rounding, below what reorders any two of the reference's candidates
+# energy): far above rounding; the order is held apart, exactly (several candidates of a real
+# pair lie closer together than this)
 SCORE_TOLERANCE = 0.01
 # the drive of bench/drive.py: its stack, at its last stage
 DRIVE_STACK = [

@@ -1,6 +1,7 @@
 """``realign``'s second fit takes cloud 1's normals from its first (``Target.subset``): they must
-be those made afresh on the kept points, to the bit, on the drive's 80-channel pair and the real
-shared pairs (VLP-16, HDL-32E, OS1-128), for the points both sensors saw and for a dropped block."""
+be those made afresh on the kept points, to the bit, on the drive's 80-channel pair, the zoo's
+two-lidar rig (two VLP-32C, uneven channels, one upside down) and the real shared pairs (VLP-16,
+HDL-32E, OS1-128), for the points both sensors saw and for a dropped block."""
 
 from __future__ import annotations
 
@@ -46,6 +47,27 @@ def test_without_a_sensor_model_or_with_voxels_a_subset_is_made_afresh_the_same(
         carried = Target.of(drive.xyz1, sensor, params).subset(drive.xyz1, keep, sensor, params)
         fresh = Target.of(drive.xyz1[keep], sensor, params)
         np.testing.assert_array_equal(np.asarray(carried.cloud.normals), np.asarray(fresh.cloud.normals))
+
+
+def test_a_subset_of_a_two_lidar_rig_target_is_the_target_made_afresh():
+    from helpers.fault_zoo import _sim_rig_scan
+    from lidarfield.poses import pose_from_xyzrpy
+    from lidarfield.registration import register_pair
+    from lidarfield.simulation.scene import load_scene
+
+    scene = load_scene("paper-intersection")
+    scans = [
+        _sim_rig_scan(scene, pose_from_xyzrpy(p), 0.0, k)
+        for k, p in enumerate(([0, 0, 2, 0, 0, 0], [2, 1, 2, 0, 0, 0.1]))
+    ]
+    pair = register_pair(*scans, "truth")
+    assert len(pair.lidars(1)) == 2
+    params = Params()
+    full = Target.of(pair.xyz1, pair.sensor1, params)
+    for keep in kept_sets(pair.xyz1, shared_points(pair)[0]).values():
+        assert 0 < np.count_nonzero(~keep) < len(keep)
+        carried = full.subset(pair.xyz1, keep, pair.sensor1, params)
+        assert_same_target(carried, Target.of(pair.xyz1[keep], pair.sensor1, params))
 
 
 @pytest.mark.parametrize("name", ["expd", "hdl32", "os1 0->1"])

@@ -23,7 +23,11 @@ def assert_same_ranking(name: str, rows: list[dict]) -> None:
     """The reference's ranking of the candidates offered: on the simulated pairs, whose pose is
     the simulation's truth, those fitted with the pose are no longer run (analysis.suggest)."""
     expected = [r for r in REFERENCE[name] if not (name in SIMULATED and fits_pose(r))]
-    assert not any(fits_pose(r) for r in rows) if name in SIMULATED else any(fits_pose(r) for r in rows)
+    fitted_with_pose = [r for r in rows if fits_pose(r)]
+    if name in SIMULATED:
+        assert fitted_with_pose == []
+    else:
+        assert fitted_with_pose
     assert [(r["hypothesis"], r["params"]) for r in rows] == [(r["hypothesis"], r["params"]) for r in expected]
     for row, before in zip(rows, expected):
         if before["score"] is None:

@@ -40,6 +40,10 @@ class RegisteredPair:
     # What hypotheses derived from the clouds and may reuse, e.g. ``outliers``' neighbour
     # distances by (cloud, k). Not written to files, not compared, not carried by subset().
     neighbours: dict = field(default_factory=dict, compare=False, repr=False)
+    # Each cloud's range images on its lidars' models (``field.free_space.lidar_images``), by
+    # cloud, with the points and pose they were made of: a stage's field, ``moving_objects`` and
+    # ``shadow`` look at the same clouds. Not passed on by ``replace`` or ``subset``.
+    range_images: dict = field(default_factory=dict, init=False, compare=False, repr=False)
 
     def __post_init__(self):
         self.xyz1 = np.ascontiguousarray(self.xyz1, dtype=np.float64).reshape(-1, 3)
@@ -48,6 +52,11 @@ class RegisteredPair:
         self.lidars1, self.lidars2 = tuple(self.lidars1), tuple(self.lidars2)
         check_lidar_ids(self.lidars1, self.attributes1)
         check_lidar_ids(self.lidars2, self.attributes2)
+
+    def __getstate__(self) -> dict:
+        """Pickled without what was derived from the clouds (``neighbours``, ``range_images``):
+        made again where asked for, not sent to another process (the figures' process)."""
+        return {**self.__dict__, "neighbours": {}, "range_images": {}}
 
     @property
     def origin1(self) -> np.ndarray:

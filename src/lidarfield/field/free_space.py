@@ -358,10 +358,22 @@ def occluded_points(pair: RegisteredPair, sensor: int, occluders: np.ndarray | N
 def lidar_images(pair: RegisteredPair, cloud: int, image_of=None) -> list[tuple[LidarView, RangeImage]]:
     """Each lidar of cloud 1 or 2 (:meth:`RegisteredPair.lidars`) with the range image of its
     own points in its own frame: ``image_of(xyz, view, ring)``, by default on its model's
-    channels (:func:`sensor_image`)."""
+    channels (:func:`sensor_image`), those made once per pair for the same points and pose
+    (``RegisteredPair.range_images``; the images are shared: not to be changed)."""
+    if image_of is not None:
+        return _lidar_images(pair, cloud, image_of)
+    xyz = pair.xyz1 if cloud == 1 else pair.xyz2
+    known = pair.range_images.get(cloud)
+    if known is not None and known[0] is xyz and np.array_equal(known[1], pair.T_1_2):
+        return known[2]
+    images = _lidar_images(pair, cloud, lambda own, view, own_ring: sensor_image(own, view.sensor, own_ring))
+    pair.range_images[cloud] = (xyz, pair.T_1_2.copy(), images)
+    return images
+
+
+def _lidar_images(pair: RegisteredPair, cloud: int, image_of) -> list[tuple[LidarView, RangeImage]]:
     xyz = pair.xyz1 if cloud == 1 else pair.xyz2
     ring = (pair.attributes1 if cloud == 1 else pair.attributes2).get("ring")
-    image_of = image_of or (lambda own, view, own_ring: sensor_image(own, view.sensor, own_ring))
     return [
         (
             view,

@@ -183,7 +183,12 @@ def pair_evidence(pair: RegisteredPair, params: Params) -> tuple[np.ndarray, np.
     def evidence(own: np.ndarray, view: LidarView, image: RangeImage) -> np.ndarray:
         return free_space_evidence(own, image, params.margin_m, params.beam_width_deg)
 
-    images = lidar_images(pair, 1, image_of), lidar_images(pair, 2, image_of)
+    def images_of(cloud: int) -> list[tuple[LidarView, RangeImage]]:
+        if params.angular_resolution_deg is None and all(view.sensor is not None for view in pair.lidars(cloud)):
+            return lidar_images(pair, cloud)  # on the models: the pair's own, which its field's co-visibility uses too
+        return lidar_images(pair, cloud, image_of)  # (without a model, image_of says why it cannot)
+
+    images = images_of(1), images_of(2)
     return any_lidar(pair.xyz1, images[1], evidence), any_lidar(pair.xyz2, images[0], evidence)
 
 

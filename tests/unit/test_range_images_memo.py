@@ -1,0 +1,101 @@
+"""A pair's range images made once (``RegisteredPair.range_images``, issue 38): the memo's images
+are those made afresh (the plain path, ``image_of`` given), on a two-lidar rig (two VLP-32C,
+uneven channels, one upside down) and a real pair; made again once the points or the pose
+change; not passed on by ``replace``, ``subset`` or a pickle; and ``moving_objects`` and the
+field's shared points find the same on a pair that remembers them as on one that does not."""
+
+from __future__ import annotations
+
+import pickle
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from helpers.real_pairs import pair_at, real_pair
+from lidarfield.field import free_space as fs
+from lidarfield.hypotheses import apply_step
+from lidarfield.poses import pose_from_xyzrpy
+
+
+@pytest.fixture(scope="module")
+def rig_pair():
+    from helpers.fault_zoo import _sim_rig_scan
+    from lidarfield.registration import register_pair
+    from lidarfield.simulation.scene import load_scene
+
+    scene = load_scene("paper-intersection-traffic")
+    scans = [
+        _sim_rig_scan(scene, pose_from_xyzrpy(p), t, k)
+        for k, (p, t) in enumerate((([0, 0, 2, 0, 0, 0], 0.0), ([1.5, 0.5, 2, 0, 0, 0.1], 0.3)))
+    ]
+    pair = register_pair(*scans, "truth")
+    assert len(pair.lidars(1)) == len(pair.lidars(2)) == 2
+    return pair
+
+
+def fresh_images(pair, cloud: int):
+    """The plain path: each lidar's image made now, on its model."""
+    return fs.lidar_images(pair, cloud, lambda own, view, ring: fs.sensor_image(own, view.sensor, ring))
+
+
+def assert_same_images(remembered, fresh) -> None:
+    assert len(remembered) == len(fresh)
+    for (view, image), (fresh_view, fresh_image) in zip(remembered, fresh):
+        assert view.name == fresh_view.name
+        np.testing.assert_array_equal(image.nearest, fresh_image.nearest)
+        np.testing.assert_array_equal(image.channels, fresh_image.channels)
+        assert image.azimuth_step == fresh_image.azimuth_step and image.min_range_m == fresh_image.min_range_m
+
+
+def test_the_remembered_images_are_those_made_afresh(rig_pair):
+    pair = replace(rig_pair)
+    for cloud in (1, 2):
+        images = fs.lidar_images(pair, cloud)
+        assert fs.lidar_images(pair, cloud) is images  # made once
+        assert_same_images(images, fresh_images(rig_pair, cloud))
+
+
+def test_moved_points_or_pose_are_imaged_again(rig_pair):
+    pair = replace(rig_pair)
+    before = fs.lidar_images(pair, 2)
+    pair.xyz2 = pair.xyz2 + [0.5, 0.0, 0.0]  # as a correcting stage moves its survivors in place
+    moved = fs.lidar_images(pair, 2)
+    assert moved is not before
+    assert_same_images(moved, fresh_images(pair, 2))
+    pair.T_1_2 = pose_from_xyzrpy([0.5, 0, 0, 0, 0, 0]) @ pair.T_1_2  # sensor 2 moved with them
+    again = fs.lidar_images(pair, 2)
+    assert again is not moved
+    assert_same_images(again, fresh_images(pair, 2))
+    # in sensor 2's frame the points did not move: the same image as before both changes
+    for (_, image), (_, first) in zip(again, before):
+        np.testing.assert_allclose(image.nearest, first.nearest, rtol=0, atol=1e-9)
+
+
+def test_the_memo_is_not_passed_on(rig_pair):
+    pair = replace(rig_pair)
+    fs.lidar_images(pair, 1)
+    assert pair.range_images
+    assert not replace(pair).range_images
+    assert not pair.subset(np.ones(len(pair.xyz1), bool), np.ones(len(pair.xyz2), bool)).range_images
+    back = pickle.loads(pickle.dumps(pair))
+    assert not back.range_images and np.array_equal(back.xyz2, pair.xyz2) and np.array_equal(back.T_1_2, pair.T_1_2)
+
+
+@pytest.mark.parametrize("source", ["rig", "hdl32"])
+def test_what_uses_the_images_finds_the_same_with_them_remembered(rig_pair, source, request):
+    if source == "rig":
+        pair = rig_pair
+    else:
+        pair = pair_at(real_pair(request.getfixturevalue("shared_data"), source))
+    cold, warm = replace(pair), replace(pair)
+    shared = fs.shared_points(warm)  # the field's: the images made here, used by moving_objects below
+    assert warm.range_images
+    moved = apply_step(warm, {"moving_objects": {}})
+    expected = apply_step(cold, {"moving_objects": {}})  # its images made inside
+    for mine, theirs in zip(shared, fs.shared_points(replace(pair))):
+        np.testing.assert_array_equal(mine, theirs)
+    np.testing.assert_array_equal(moved.keep1, expected.keep1)
+    np.testing.assert_array_equal(moved.keep2, expected.keep2)
+    if source == "rig":  # the cars moved 0.3 s on: something is removed, so the masks say something
+        assert np.count_nonzero(~moved.keep1) + np.count_nonzero(~moved.keep2) > 0

@@ -6,6 +6,7 @@ Parquet files hold (column ``cloud`` = 1 or 2, ``x, y, z`` in frame 1, plus attr
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -40,10 +41,11 @@ class RegisteredPair:
     # What hypotheses derived from the clouds and may reuse, e.g. ``outliers``' neighbour
     # distances by (cloud, k). Not written to files, not compared, not carried by subset().
     neighbours: dict = field(default_factory=dict, compare=False, repr=False)
-    # Each cloud's range images on its lidars' models (``field.free_space.lidar_images``), by
-    # cloud, with the points and pose they were made of: a stage's field, ``moving_objects`` and
-    # ``shadow`` look at the same clouds. Not passed on by ``replace`` or ``subset``.
-    range_images: dict = field(default_factory=dict, init=False, compare=False, repr=False)
+    # What was derived from the clouds and the pose and may be used again while they are the
+    # same (``remembered``): each cloud's range images on its lidars' models, its k-d tree in
+    # its own sensor's frame. A stage's field, ``moving_objects``, ``shadow`` and the carried
+    # body look at the same clouds. Not passed on by ``replace`` or ``subset``.
+    derived: dict = field(default_factory=dict, init=False, compare=False, repr=False)
 
     def __post_init__(self):
         self.xyz1 = np.ascontiguousarray(self.xyz1, dtype=np.float64).reshape(-1, 3)
@@ -54,9 +56,20 @@ class RegisteredPair:
         check_lidar_ids(self.lidars2, self.attributes2)
 
     def __getstate__(self) -> dict:
-        """Pickled without what was derived from the clouds (``neighbours``, ``range_images``):
-        made again where asked for, not sent to another process (the figures' process)."""
-        return {**self.__dict__, "neighbours": {}, "range_images": {}}
+        """Pickled without what was derived from the clouds (``neighbours``, ``derived``): made
+        again where asked for, not sent to another process (the figures' process)."""
+        return {**self.__dict__, "neighbours": {}, "derived": {}}
+
+    def remembered(self, key, make: Callable[[], object]):
+        """``make()``, made once for the clouds and pose as they are now (kept in ``derived``
+        under ``key``; made again once they were replaced). What it returns is shared: not to be
+        changed. Two threads asking at once may both make it: the same value."""
+        known = self.derived.get(key)
+        if known is not None and known[0] is self.xyz1 and known[1] is self.xyz2 and np.array_equal(known[2], self.T_1_2):
+            return known[3]
+        value = make()
+        self.derived[key] = (self.xyz1, self.xyz2, self.T_1_2.copy(), value)
+        return value
 
     @property
     def origin1(self) -> np.ndarray:

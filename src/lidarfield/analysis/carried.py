@@ -30,7 +30,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..hypotheses.geometry import near_in_own_frames
+from ..hypotheses.geometry import cloud_tree, near_in_own_frames
 from ..pair import RegisteredPair
 
 OWN_M = 0.05  # within this in both sensors' own frames: the same point of the body
@@ -42,13 +42,11 @@ MIN_CARRIED_POINTS = 50  # ... and at least this many points (a roof rack's pole
 def carried_points(pair: RegisteredPair, candidates: tuple[np.ndarray, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
     """Per cloud, which of its ``candidates`` (masks) are carried: the other cloud has a point
     within ``OWN_M`` of it in their own sensors' frames and none within ``STATIC_M`` in frame 1."""
-    from scipy.spatial import cKDTree
-
     world = (pair.xyz1, pair.xyz2)
     carried = near_in_own_frames(pair, candidates, OWN_M)
     for k in (0, 1):
         if carried[k].any():
-            near_world, _ = cKDTree(world[1 - k]).query(world[k][carried[k]], distance_upper_bound=STATIC_M)
+            near_world, _ = cloud_tree(pair, 2 - k).query(world[k][carried[k]], distance_upper_bound=STATIC_M)
             carried[k][carried[k]] = ~np.isfinite(near_world)
     return carried
 

@@ -342,7 +342,7 @@ def occluded_points(pair: RegisteredPair, sensor: int, occluders: np.ndarray | N
     if any(view.sensor is None for view in pair.lidars(sensor)):
         return None
     source = pair
-    if occluders is not None:
+    if occluders is not None and not occluders.all():  # all: the pair's own images
         every = np.ones(len(pair.xyz2 if sensor == 1 else pair.xyz1), dtype=bool)
         source = pair.subset(occluders, every) if sensor == 1 else pair.subset(every, occluders)
     own = source.xyz1 if sensor == 1 else source.xyz2
@@ -359,16 +359,13 @@ def lidar_images(pair: RegisteredPair, cloud: int, image_of=None) -> list[tuple[
     """Each lidar of cloud 1 or 2 (:meth:`RegisteredPair.lidars`) with the range image of its
     own points in its own frame: ``image_of(xyz, view, ring)``, by default on its model's
     channels (:func:`sensor_image`), those made once per pair for the same points and pose
-    (``RegisteredPair.range_images``; the images are shared: not to be changed)."""
+    (``RegisteredPair.remembered``; the images are shared: not to be changed)."""
     if image_of is not None:
         return _lidar_images(pair, cloud, image_of)
-    xyz = pair.xyz1 if cloud == 1 else pair.xyz2
-    known = pair.range_images.get(cloud)
-    if known is not None and known[0] is xyz and np.array_equal(known[1], pair.T_1_2):
-        return known[2]
-    images = _lidar_images(pair, cloud, lambda own, view, own_ring: sensor_image(own, view.sensor, own_ring))
-    pair.range_images[cloud] = (xyz, pair.T_1_2.copy(), images)
-    return images
+    return pair.remembered(
+        ("range images", cloud),
+        lambda: _lidar_images(pair, cloud, lambda own, view, ring: sensor_image(own, view.sensor, ring)),
+    )
 
 
 def _lidar_images(pair: RegisteredPair, cloud: int, image_of) -> list[tuple[LidarView, RangeImage]]:

@@ -25,18 +25,30 @@ def near_in_own_frames(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Per cloud, which of its ``candidates`` (masks) have a point of the other cloud within
     ``radius_m`` once each cloud is in its own sensor's frame: what stays put with the sensor."""
-    from scipy.spatial import cKDTree
-
     own = own_frame_points(pair)
     near = []
     for k in (0, 1):
         mask = np.zeros(len(own[k]), dtype=bool)
-        other = own[1 - k]
-        if candidates[k].any() and len(other):
-            distance, _ = cKDTree(other).query(own[k][candidates[k]], distance_upper_bound=radius_m)
+        if candidates[k].any() and len(own[1 - k]):
+            tree = cloud_tree(pair, 2 - k, own_frame=True)
+            distance, _ = tree.query(own[k][candidates[k]], distance_upper_bound=radius_m)
             mask[candidates[k]] = np.isfinite(distance)
         near.append(mask)
     return near[0], near[1]
+
+
+def cloud_tree(pair: RegisteredPair, cloud: int, own_frame: bool = False):
+    """SciPy's k-d tree of cloud 1 or 2, in frame 1 or in its own sensor's frame, made once per
+    pair (``RegisteredPair.remembered``): ``shadow``, ``moving_objects`` and the carried body
+    ask for the same. For distances only: which of equally near points a query names depends
+    on how the tree was built."""
+    from scipy.spatial import cKDTree
+
+    def make():
+        xyz = own_frame_points(pair)[cloud - 1] if own_frame else (pair.xyz1 if cloud == 1 else pair.xyz2)
+        return cKDTree(xyz)
+
+    return pair.remembered(("own-frame tree" if own_frame else "tree", cloud), make)
 
 
 def elevation_deg(xyz: np.ndarray) -> np.ndarray:

@@ -1,8 +1,9 @@
-"""A pair's range images made once (``RegisteredPair.range_images``, issue 38): the memo's images
-are those made afresh (the plain path, ``image_of`` given), on a two-lidar rig (two VLP-32C,
-uneven channels, one upside down) and a real pair; made again once the points or the pose
-change; not passed on by ``replace``, ``subset`` or a pickle; and ``moving_objects`` and the
-field's shared points find the same on a pair that remembers them as on one that does not."""
+"""What a pair derives from its clouds made once (``RegisteredPair.remembered``, issue 38): its
+range images and k-d trees are those made afresh (the plain path), on a two-lidar rig (two
+VLP-32C, uneven channels, one upside down) and a real pair; made again once the points or the
+pose change; not passed on by ``replace``, ``subset`` or a pickle; and ``moving_objects``,
+``shadow``, the carried body and the field's shared points find the same on a pair that
+remembers them as on one that does not."""
 
 from __future__ import annotations
 
@@ -13,8 +14,10 @@ import numpy as np
 import pytest
 
 from helpers.real_pairs import pair_at, real_pair
+from lidarfield.analysis.carried import carried_points
 from lidarfield.field import free_space as fs
 from lidarfield.hypotheses import apply_step
+from lidarfield.hypotheses.geometry import cloud_tree, own_frame_points
 from lidarfield.poses import pose_from_xyzrpy
 
 
@@ -75,11 +78,11 @@ def test_moved_points_or_pose_are_imaged_again(rig_pair):
 def test_the_memo_is_not_passed_on(rig_pair):
     pair = replace(rig_pair)
     fs.lidar_images(pair, 1)
-    assert pair.range_images
-    assert not replace(pair).range_images
-    assert not pair.subset(np.ones(len(pair.xyz1), bool), np.ones(len(pair.xyz2), bool)).range_images
+    assert pair.derived
+    assert not replace(pair).derived
+    assert not pair.subset(np.ones(len(pair.xyz1), bool), np.ones(len(pair.xyz2), bool)).derived
     back = pickle.loads(pickle.dumps(pair))
-    assert not back.range_images and np.array_equal(back.xyz2, pair.xyz2) and np.array_equal(back.T_1_2, pair.T_1_2)
+    assert not back.derived and np.array_equal(back.xyz2, pair.xyz2) and np.array_equal(back.T_1_2, pair.T_1_2)
 
 
 @pytest.mark.parametrize("source", ["rig", "hdl32"])
@@ -88,14 +91,37 @@ def test_what_uses_the_images_finds_the_same_with_them_remembered(rig_pair, sour
         pair = rig_pair
     else:
         pair = pair_at(real_pair(request.getfixturevalue("shared_data"), source))
-    cold, warm = replace(pair), replace(pair)
-    shared = fs.shared_points(warm)  # the field's: the images made here, used by moving_objects below
-    assert warm.range_images
-    moved = apply_step(warm, {"moving_objects": {}})
-    expected = apply_step(cold, {"moving_objects": {}})  # its images made inside
+    warm = replace(pair)
+    shared = fs.shared_points(warm)  # the field's: the images made here, used by what follows
+    assert warm.derived
     for mine, theirs in zip(shared, fs.shared_points(replace(pair))):
         np.testing.assert_array_equal(mine, theirs)
-    np.testing.assert_array_equal(moved.keep1, expected.keep1)
-    np.testing.assert_array_equal(moved.keep2, expected.keep2)
+    for step in ({"moving_objects": {}}, {"shadow": {}}):
+        reused, alone = apply_step(warm, step), apply_step(replace(pair), step)  # alone: its own made inside
+        np.testing.assert_array_equal(reused.keep1, alone.keep1)
+        np.testing.assert_array_equal(reused.keep2, alone.keep2)
+    everything = (np.ones(len(pair.xyz1), bool), np.ones(len(pair.xyz2), bool))
+    for mine, theirs in zip(carried_points(warm, everything), carried_points(replace(pair), everything)):
+        np.testing.assert_array_equal(mine, theirs)
+    moved = apply_step(warm, {"moving_objects": {}})
     if source == "rig":  # the cars moved 0.3 s on: something is removed, so the masks say something
         assert np.count_nonzero(~moved.keep1) + np.count_nonzero(~moved.keep2) > 0
+
+
+def test_the_remembered_trees_answer_as_trees_made_afresh(rig_pair):
+    from scipy.spatial import cKDTree
+
+    pair = replace(rig_pair)
+    rng = np.random.default_rng(0)
+    queries = rng.uniform(-30, 30, size=(2000, 3))
+    for cloud in (1, 2):
+        for own_frame, xyz in ((False, (pair.xyz1, pair.xyz2)[cloud - 1]), (True, own_frame_points(pair)[cloud - 1])):
+            tree = cloud_tree(pair, cloud, own_frame)
+            assert cloud_tree(pair, cloud, own_frame) is tree
+            np.testing.assert_array_equal(tree.query(queries)[0], cKDTree(xyz).query(queries)[0])
+    own2 = cloud_tree(pair, 2, own_frame=True)
+    pair.T_1_2 = pose_from_xyzrpy([0.5, 0, 0, 0, 0, 0]) @ pair.T_1_2  # cloud 2 in its own frame moves
+    assert cloud_tree(pair, 2, own_frame=True) is not own2
+    np.testing.assert_array_equal(
+        cloud_tree(pair, 2, own_frame=True).query(queries)[0], cKDTree(own_frame_points(pair)[1]).query(queries)[0]
+    )

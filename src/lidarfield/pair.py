@@ -65,7 +65,8 @@ class RegisteredPair:
         under ``key``; made again once they were replaced). What it returns is shared: not to be
         changed. Two threads asking at once may both make it: the same value."""
         known = self.derived.get(key)
-        if known is not None and known[0] is self.xyz1 and known[1] is self.xyz2 and np.array_equal(known[2], self.T_1_2):
+        same_clouds = known is not None and known[0] is self.xyz1 and known[1] is self.xyz2
+        if same_clouds and np.array_equal(known[2], self.T_1_2):
             return known[3]
         value = make()
         self.derived[key] = (self.xyz1, self.xyz2, self.T_1_2.copy(), value)

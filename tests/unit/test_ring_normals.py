@@ -102,3 +102,24 @@ def test_the_fast_ring_normals_equal_the_plain_ones_for_any_number_of_neighbours
             f(xyz, given, PRESETS["vlp16"].elevation_deg, radius_m, k) for f in (ring_normals, reference_ring_normals)
         )
         np.testing.assert_array_equal(fast, plain)
+
+
+@pytest.mark.parametrize("k", [2, 9, 30])
+def test_the_one_ring_test_of_some_points_is_the_whole_clouds_for_them(expd, k):
+    """``one_ring_points`` asked for some rows (``Target.subset``'s points near a dropped one):
+    each answer is the whole cloud's for that point (its neighbours still among all points), on
+    the real VLP-16 scan (30% one-ring at k = 30) and the 80-channel drive (none at 30)."""
+    from lidarfield.hypotheses.ring_normals import one_ring_points
+    from lidarfield.io import read_scan
+
+    rng = np.random.default_rng(k)
+    scans = {"vlp16": read_scan(expd / "Cloud1_ExpD.txt").xyz, "paper-sim-80": drive_pair().xyz1}
+    for sensor, xyz in scans.items():
+        xyz = xyz[np.isfinite(xyz).all(axis=1)]
+        whole = one_ring_points(xyz, PRESETS[sensor].elevation_deg, 1.0, k)
+        assert whole.any() == (sensor == "vlp16" or k < 30)  # answers of both kinds where there are
+        rows = np.flatnonzero(rng.random(len(xyz)) < 0.3)
+        np.testing.assert_array_equal(
+            one_ring_points(xyz, PRESETS[sensor].elevation_deg, 1.0, k, rows=rows), whole[rows]
+        )
+        assert one_ring_points(xyz, PRESETS[sensor].elevation_deg, 1.0, k, rows=rows[:0]).shape == (0,)

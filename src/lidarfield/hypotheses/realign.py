@@ -81,9 +81,10 @@ from .ring_normals import one_ring_points, ring_normals
 
 MIN_POINTS = 10  # per downsampled cloud, and correspondences: 6 unknowns and a residual's sigma
 # Above this share of the kept points within twice normal_radius_m of a dropped one (the points
-# the recomputed normals come from), the target's subset is made afresh: as fast, the same result
-# (Target.subset; measured 2026-11-28, serially: at 62% the subset cost 0.70 of a fresh target on
-# the OS1-128 frames, at 98% 1.08 on ExpD and at 99.9% 1.03 on the HDL-32E pair).
+# the recomputed normals come from), a target's subset takes Open3D's normals of all its points:
+# as fast, the same result (Target.subset; measured 2026-11-28, serially: at 62% the subset cost
+# 0.70 of a fresh target on the OS1-128 frames, at 98% 1.08 on ExpD and at 99.9% 1.03 on the
+# HDL-32E pair, when both parts of the normals were found again for all points there).
 LOCAL_SHARE_MAX = 0.8
 
 
@@ -221,8 +222,9 @@ class Target:
         """``Target.of`` the points ``keep`` of ``xyz1``, the cloud it was made of, the same to the bit:
         a point's neighbours' normal and one-ring test depend only on the points within
         ``normal_radius_m``, so they are found again only for the kept points that near to a
-        dropped one (among the kept points near enough to be their neighbours); the rings'
-        normals, which reach farther along a ring, are found again for all."""
+        dropped one: the normals from the kept points near enough to be their neighbours (from
+        all, above ``LOCAL_SHARE_MAX``), the test among all kept points; the rings' normals,
+        which reach farther along a ring, are found again for all."""
         from ..registration.matching import point_cloud
 
         if self.surface is None:  # downsampled: made again from the kept points
@@ -230,21 +232,22 @@ class Target:
         kept, dropped = xyz1[keep], xyz1[~keep]
         _require_points(len(kept), 1, params)
         surface, one_ring = self.surface[keep], None if self.one_ring is None else self.one_ring[keep]
+        cloud = point_cloud(kept, 0.0, 0.0)
         if len(dropped):
             from scipy.spatial import cKDTree
 
             radius = params.normal_radius_m * (1 + 1e-9) + 1e-12  # a tie at the radius counts as near
             distance, _ = cKDTree(dropped).query(kept, k=1, distance_upper_bound=2 * radius)
             local = np.flatnonzero(distance <= 2 * radius)  # holds every neighbour of a near point
+            near = np.flatnonzero(distance <= radius)
             if len(local) > LOCAL_SHARE_MAX * len(kept):
-                return Target.of(kept, sensor1, params)
-            near = distance[local] <= radius
-            if near.any():
-                surface[local[near]] = _surface_normals(point_cloud(kept[local], 0.0, 0.0), params)[near]
-                if one_ring is not None:
-                    found = one_ring_points(kept[local], sensor1.elevation_deg, *_neighbourhood(params))
-                    one_ring[local[near]] = found[near]
-        return Target._with_normals(point_cloud(kept, 0.0, 0.0), surface, one_ring, sensor1, params)
+                surface = _surface_normals(cloud, params)
+            elif len(near):
+                local_normals = _surface_normals(point_cloud(kept[local], 0.0, 0.0), params)
+                surface[near] = local_normals[distance[local] <= radius]
+            if one_ring is not None and len(near):
+                one_ring[near] = one_ring_points(kept, sensor1.elevation_deg, *_neighbourhood(params), rows=near)
+        return Target._with_normals(cloud, surface, one_ring, sensor1, params)
 
 
 def _surface_normals(cloud, params: Params) -> np.ndarray:

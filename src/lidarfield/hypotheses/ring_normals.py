@@ -64,14 +64,18 @@ def ring_normals(
     return out
 
 
-def one_ring_points(xyz: np.ndarray, elevation_deg, radius_m: float, k: int) -> np.ndarray:
+def one_ring_points(
+    xyz: np.ndarray, elevation_deg, radius_m: float, k: int, rows: np.ndarray | None = None
+) -> np.ndarray:
     """(N,) whether each point's ``k`` nearest neighbours within ``radius_m`` all lie on its
     channel (the nearest of ``elevation_deg``): the points ``ring_normals`` gives their rings'
-    normals. It depends only on the points within ``radius_m``."""
+    normals. It depends only on the points within ``radius_m``. ``rows``: only those points'
+    answers (their neighbours still among all of ``xyz``)."""
     from scipy.spatial import cKDTree
 
     _, channel = nearest_channels(xyz, elevation_deg)
-    return _one_ring(cKDTree(xyz), xyz, channel, radius_m, min(k, len(xyz)))
+    rows = np.arange(len(xyz)) if rows is None else np.asarray(rows)
+    return _one_ring(cKDTree(xyz), xyz, channel, rows, radius_m, min(k, len(xyz)))
 
 
 def nearest_channels(xyz: np.ndarray, elevation_deg) -> tuple[np.ndarray, np.ndarray]:
@@ -104,25 +108,27 @@ def _neighbouring_rings(xyz: np.ndarray, own: np.ndarray, c: int, channels: np.n
     return sides, nearest
 
 
-def _one_ring(tree, xyz: np.ndarray, channel: np.ndarray, radius_m: float, k: int) -> np.ndarray:
-    """(N,) whether each point's ``k`` nearest neighbours within ``radius_m`` (``tree`` of
-    ``xyz``) all lie on its ``channel``. A point whose first ``FIRST_NEIGHBOURS`` hold another
-    channel's point strictly nearer than the farthest of them is not (that point is among the
-    ``k`` nearest however distance ties fall), nor is one with another channel's point among
-    fewer (they are all its neighbours within the radius); the others are searched for all ``k``."""
+def _one_ring(tree, xyz: np.ndarray, channel: np.ndarray, rows: np.ndarray, radius_m: float, k: int) -> np.ndarray:
+    """(len(rows),) whether each of the points ``rows``' ``k`` nearest neighbours within
+    ``radius_m`` (``tree`` of ``xyz``) all lie on its ``channel``. A point whose first
+    ``FIRST_NEIGHBOURS`` hold another channel's point strictly nearer than the farthest of them
+    is not (that point is among the ``k`` nearest however distance ties fall), nor is one with
+    another channel's point among fewer (they are all its neighbours within the radius); the
+    others are searched for all ``k``."""
     n = len(xyz)
     padded = np.append(channel, -1)  # the tree's index of a missing neighbour is n
-    one_ring = np.ones(n, dtype=bool)
-    pending = np.arange(n)
+    points, own = xyz[rows], channel[rows]
+    one_ring = np.ones(len(rows), dtype=bool)
+    pending = np.arange(len(rows))
     if FIRST_NEIGHBOURS < k:
-        distance, index = tree.query(xyz, k=FIRST_NEIGHBOURS, distance_upper_bound=radius_m)
-        other = (padded[index] != channel[:, None]) & (index < n)
+        distance, index = tree.query(points, k=FIRST_NEIGHBOURS, distance_upper_bound=radius_m)
+        other = (padded[index] != own[:, None]) & (index < n)
         settled = np.any(other & (distance < distance[:, -1:]), axis=1) | ~np.isfinite(distance[:, -1])
         one_ring[settled] = ~np.any(other[settled], axis=1)
         pending = np.flatnonzero(~settled)
-    _, index = tree.query(xyz[pending], k=k, distance_upper_bound=radius_m)
+    _, index = tree.query(points[pending], k=k, distance_upper_bound=radius_m)
     neighbour_channel = padded[index.reshape(len(pending), k)]
-    one_ring[pending] = np.all((neighbour_channel == channel[pending, None]) | (neighbour_channel < 0), axis=1)
+    one_ring[pending] = np.all((neighbour_channel == own[pending, None]) | (neighbour_channel < 0), axis=1)
     return one_ring
 
 

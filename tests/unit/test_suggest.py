@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from helpers.clouds import targets
-from lidarfield.analysis.suggest import SUGGESTION_COLUMNS, candidate_steps, seen_through_columns, suggestions
+from lidarfield.analysis.suggest import SUGGESTION_COLUMNS, SeenThrough, candidate_steps, suggestions
 from lidarfield.errors import HypothesisError
 from lidarfield.field.grid import FieldSettings, SphericalGrid
 from lidarfield.pair import RegisteredPair
@@ -302,17 +302,17 @@ def test_seen_through_columns_weigh_a_removal_against_thinning_the_same_voxels()
     ids1, ids2 = np.array([0, 0, 0, 0, 1, 1]), np.array([0, 0, 1, 1])
     seen = (np.array([1, 1, 0, 0, 0, 0], bool), np.array([0, 0, 1, 0], bool))
     keep1, keep2 = np.array([0, 0, 1, 1, 1, 1], bool), np.ones(4, bool)
-    got = seen_through_columns(seen, ids1, ids2, keep1, keep2)
+    got = SeenThrough(seen, ids1, ids2).columns(keep1, keep2)
     assert got["seen_through_removed"] == pytest.approx(2 / 3) and got["seen_through_null"] == pytest.approx(2 / 9)
     # the same number of points, one of each voxel's ordinary ones: none seen through, the same null
-    other = seen_through_columns(seen, ids1, ids2, np.array([1, 1, 0, 0, 1, 1], bool), keep2)
+    other = SeenThrough(seen, ids1, ids2).columns(np.array([1, 1, 0, 0, 1, 1], bool), keep2)
     assert other["seen_through_removed"] == 0 and other["seen_through_null"] == pytest.approx(2 / 9)
     # a voxel emptied of what was seen through: all of them, against the voxel's share
-    whole = seen_through_columns(seen, ids1, ids2, ~seen[0], ~seen[1])
+    whole = SeenThrough(seen, ids1, ids2).columns(~seen[0], ~seen[1])
     assert whole["seen_through_removed"] == 1 and whole["seen_through_null"] == pytest.approx((2 / 6 * 2 + 1 / 4) / 3)
-    assert math.isnan(seen_through_columns(None, ids1, ids2, keep1, keep2)["seen_through_removed"])
+    assert math.isnan(SeenThrough(None, ids1, ids2).columns(keep1, keep2)["seen_through_removed"])
     nothing = (np.zeros(6, bool), np.zeros(4, bool))
-    assert math.isnan(seen_through_columns(nothing, ids1, ids2, keep1, keep2)["seen_through_null"])
+    assert math.isnan(SeenThrough(nothing, ids1, ids2).columns(keep1, keep2)["seen_through_null"])
 
 
 def test_a_correction_is_ranked_by_what_it_explains_beyond_its_free_parameters():

@@ -265,8 +265,8 @@ def suggestions(
         if outcomes is not None and candidate_key(spec)[0]:
             outcomes[candidate_key(spec)] = outcome
         if row["seen_through_removed"] is None:  # a removal of some points
-            seen = seen_through_points(pair) if seen is None else seen
-            row |= seen_through_columns(seen, ids1, ids2, *outcome)
+            seen = seen_through_points(pair, ids1, ids2) if seen is None else seen
+            row |= seen.columns(*outcome)
         rows.append(row)
     return rank_table(rows)
 
@@ -455,37 +455,42 @@ def compare_fields(before: dict[str, np.ndarray], after: dict[str, np.ndarray], 
     }
 
 
-def seen_through_points(pair: RegisteredPair) -> tuple[np.ndarray, np.ndarray] | None:
-    """Per cloud, its points seen through by the other scan (``moving_objects.seen_through``
-    with its defaults); None where that cannot be told (no sensor model, or no origin of sensor 2)."""
+def seen_through_points(pair: RegisteredPair, ids1: np.ndarray, ids2: np.ndarray) -> SeenThrough:
+    """The stage's points seen through by the other scan (``moving_objects.seen_through`` with
+    its defaults), for the points of voxel ids ``ids1``, ``ids2``; none where that cannot be
+    told (no sensor model, or no origin of sensor 2)."""
     from ..hypotheses.moving_objects import Params, seen_through
 
     try:
-        return seen_through(pair, Params())
+        seen = seen_through(pair, Params())
     except NotApplicableError:
-        return None
+        seen = None
+    return SeenThrough(seen, ids1, ids2)
 
 
-def seen_through_columns(
-    seen: tuple[np.ndarray, np.ndarray] | None,
-    ids1: np.ndarray,
-    ids2: np.ndarray,
-    keep1: np.ndarray,
-    keep2: np.ndarray,
-) -> dict[str, float]:
-    """``seen_through_removed`` and ``seen_through_null`` of a removal (keep-masks) of points
-    with voxel ids ``ids1``, ``ids2``, of which ``seen`` are seen through (NaN without any)."""
-    count = 0 if seen is None else int(np.count_nonzero(seen[0]) + np.count_nonzero(seen[1]))
-    if not count:
-        return {"seen_through_removed": math.nan, "seen_through_null": math.nan}
-    seen_all, kept = np.concatenate(seen), np.concatenate([keep1, keep2])
-    _, voxel = np.unique(np.concatenate([ids1, ids2]), return_inverse=True)
-    removed_share = np.bincount(voxel, weights=~kept) / np.bincount(voxel)
-    in_voxel = np.bincount(voxel, weights=seen_all)
-    return {
-        "seen_through_removed": np.count_nonzero(seen_all & ~kept) / count,
-        "seen_through_null": float(removed_share @ in_voxel) / count,
-    }
+class SeenThrough:
+    """A stage's points seen through (``seen``: per cloud, or None where unknown), by voxel
+    (``ids1``, ``ids2``): ``columns`` of each removal, the voxels numbered once per stage."""
+
+    def __init__(self, seen: tuple[np.ndarray, np.ndarray] | None, ids1: np.ndarray, ids2: np.ndarray):
+        self.count = 0 if seen is None else int(np.count_nonzero(seen[0]) + np.count_nonzero(seen[1]))
+        if self.count:
+            self.seen = np.concatenate(seen)
+            _, self.voxel = np.unique(np.concatenate([ids1, ids2]), return_inverse=True)
+            self.in_voxel = np.bincount(self.voxel, weights=self.seen)
+            self.points = np.bincount(self.voxel)
+
+    def columns(self, keep1: np.ndarray, keep2: np.ndarray) -> dict[str, float]:
+        """``seen_through_removed`` and ``seen_through_null`` of a removal (keep-masks; NaN
+        without any point seen through)."""
+        if not self.count:
+            return {"seen_through_removed": math.nan, "seen_through_null": math.nan}
+        kept = np.concatenate([keep1, keep2])
+        removed_share = np.bincount(self.voxel, weights=~kept, minlength=len(self.points)) / self.points
+        return {
+            "seen_through_removed": np.count_nonzero(self.seen & ~kept) / self.count,
+            "seen_through_null": float(removed_share @ self.in_voxel) / self.count,
+        }
 
 
 def fitted_parameters(fitted: dict) -> int:

@@ -7,7 +7,7 @@ Parquet files hold (column ``cloud`` = 1 or 2, ``x, y, z`` in frame 1, plus attr
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -48,8 +48,7 @@ class RegisteredPair:
     derived: dict = field(default_factory=dict, init=False, compare=False, repr=False)
 
     def __post_init__(self):
-        self.xyz1 = np.ascontiguousarray(self.xyz1, dtype=np.float64).reshape(-1, 3)
-        self.xyz2 = np.ascontiguousarray(self.xyz2, dtype=np.float64).reshape(-1, 3)
+        self.xyz1, self.xyz2 = _points(self.xyz1), _points(self.xyz2)
         self.T_1_2 = np.asarray(self.T_1_2, dtype=np.float64).reshape(4, 4)
         self.lidars1, self.lidars2 = tuple(self.lidars1), tuple(self.lidars2)
         check_lidar_ids(self.lidars1, self.attributes1)
@@ -60,17 +59,37 @@ class RegisteredPair:
         again where asked for, not sent to another process (the figures' process)."""
         return {**self.__dict__, "neighbours": {}, "derived": {}}
 
-    def remembered(self, key, make: Callable[[], object]):
-        """``make()``, made once for the clouds and pose as they are now (kept in ``derived``
-        under ``key``; made again once they were replaced). What it returns is shared: not to be
-        changed. Two threads asking at once may both make it: the same value."""
+    def remembered(self, key, make: Callable[[], object], clouds: tuple[int, ...] = (1, 2)):
+        """``make()``, made once for the ``clouds`` it is made of as they are now, with sensor
+        2's pose where cloud 2 is one of them (kept in ``derived`` under ``key``; made again once
+        they were replaced). What it returns is shared: not to be changed. Two threads asking at
+        once may both make it: the same value."""
+        made_of = self._made_of(clouds)
         known = self.derived.get(key)
-        same_clouds = known is not None and known[0] is self.xyz1 and known[1] is self.xyz2
-        if same_clouds and np.array_equal(known[2], self.T_1_2):
+        if known is not None and all(
+            was is now if isinstance(now, np.ndarray) else was == now for was, now in zip(known, made_of)
+        ):
             return known[3]
         value = make()
-        self.derived[key] = (self.xyz1, self.xyz2, self.T_1_2.copy(), value)
+        self.derived[key] = (*made_of, value)
         return value
+
+    def _made_of(self, clouds: tuple[int, ...]) -> tuple:
+        """What a value derived from ``clouds`` is made of: the arrays (the same objects) and
+        sensor 2's pose (an equal one), None for what it does not depend on."""
+        with_2 = 2 in clouds
+        return (
+            self.xyz1 if 1 in clouds else None,
+            self.xyz2 if with_2 else None,
+            tuple(self.T_1_2.ravel().tolist()) if with_2 else None,
+        )
+
+    def with_cloud2(self, xyz2: np.ndarray, T_1_2: np.ndarray) -> RegisteredPair:
+        """The pair with cloud 2 at ``xyz2`` and sensor 2 at ``T_1_2``; what was derived from
+        cloud 1 alone passed on."""
+        moved = replace(self, xyz2=xyz2, T_1_2=T_1_2)
+        moved.derived.update({key: known for key, known in self.derived.items() if known[1] is None})
+        return moved
 
     @property
     def origin1(self) -> np.ndarray:
@@ -193,6 +212,13 @@ def write_pair(path: str | Path, pair: RegisteredPair, extra_meta: dict | None =
     meta = pair.metadata()
     meta.update(extra_meta or {})
     write_table(path, pair.to_columns(), meta)
+
+
+def _points(xyz) -> np.ndarray:
+    """(N, 3) contiguous float64 points: the array itself where it is one already (what was
+    derived from it stays valid for a pair made with it, ``RegisteredPair.remembered``)."""
+    points = np.ascontiguousarray(xyz, dtype=np.float64)
+    return points if points.ndim == 2 and points.shape[1] == 3 else points.reshape(-1, 3)
 
 
 def read_pair(path: str | Path) -> tuple[RegisteredPair, dict]:

@@ -125,3 +125,18 @@ def test_the_remembered_trees_answer_as_trees_made_afresh(rig_pair):
     np.testing.assert_array_equal(
         cloud_tree(pair, 2, own_frame=True).query(queries)[0], cKDTree(own_frame_points(pair)[1]).query(queries)[0]
     )
+
+
+def test_what_depends_on_cloud_1_alone_survives_moving_cloud_2(rig_pair):
+    """``with_cloud2`` (``realign``'s moved pairs): cloud 1's images and trees are passed on and
+    still those made afresh, cloud 2's are made again for its new place."""
+    pair = replace(rig_pair)
+    images1, images2 = fs.lidar_images(pair, 1), fs.lidar_images(pair, 2)
+    tree1 = cloud_tree(pair, 1, own_frame=True)
+    T = pose_from_xyzrpy([0.3, -0.2, 0, 0, 0, 0.02])
+    moved = pair.with_cloud2(pair.xyz2 @ T[:3, :3].T + T[:3, 3], T @ pair.T_1_2)
+    assert fs.lidar_images(moved, 1) is images1 and cloud_tree(moved, 1, own_frame=True) is tree1
+    assert_same_images(fs.lidar_images(moved, 1), fresh_images(moved, 1))
+    assert fs.lidar_images(moved, 2) is not images2
+    assert_same_images(fs.lidar_images(moved, 2), fresh_images(moved, 2))
+    assert fs.lidar_images(pair, 2) is images2  # the pair it came from keeps its own

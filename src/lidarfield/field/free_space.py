@@ -365,6 +365,7 @@ def lidar_images(pair: RegisteredPair, cloud: int, image_of=None) -> list[tuple[
     return pair.remembered(
         ("range images", cloud),
         lambda: _lidar_images(pair, cloud, lambda own, view, ring: sensor_image(own, view.sensor, ring)),
+        (cloud,),
     )
 
 

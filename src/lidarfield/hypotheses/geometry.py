@@ -48,7 +48,7 @@ def cloud_tree(pair: RegisteredPair, cloud: int, own_frame: bool = False):
         xyz = own_frame_points(pair)[cloud - 1] if own_frame else (pair.xyz1 if cloud == 1 else pair.xyz2)
         return cKDTree(xyz)
 
-    return pair.remembered(("own-frame tree" if own_frame else "tree", cloud), make)
+    return pair.remembered(("own-frame tree" if own_frame else "tree", cloud), make, (cloud,))
 
 
 def elevation_deg(xyz: np.ndarray) -> np.ndarray:

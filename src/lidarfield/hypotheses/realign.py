@@ -67,7 +67,7 @@ same to the bit as made afresh (tested on simulated and real scans); on the driv
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -133,7 +133,7 @@ def realign(pair: RegisteredPair, params: Params) -> Outcome:
     if pair.sensor1 is not None and pair.sensor2 is not None and (pair.registration or {}).get("method") != "identity":
         # What only one sensor saw has no counterpart to match; where the sensors were is known
         # (an identity registration does not say) once the first fit has brought them close.
-        moved = replace(pair, xyz2=pair.xyz2 @ T[:3, :3].T + T[:3, 3], T_1_2=T @ pair.T_1_2)
+        moved = pair.with_cloud2(pair.xyz2 @ T[:3, :3].T + T[:3, 3], T @ pair.T_1_2)  # cloud 1's images kept
         shared1, shared2 = shared_points(moved)
         target = target.subset(pair.xyz1, shared1, pair.sensor1, params)
         T, result, source = _icp(target.cloud, pair.xyz2[shared2], params, T)
@@ -150,7 +150,7 @@ def realign(pair: RegisteredPair, params: Params) -> Outcome:
     mapped = np.asarray(source.points)[pairs[:, 0]] @ T[:3, :3].T + T[:3, 3]
     refinement = np.eye(4)
     if params.field_refinement and pair.sensor1 is not None and pair.sensor2 is not None:  # both scan patterns
-        refinement = _field_refinement(replace(pair, xyz2=pair.xyz2 @ T[:3, :3].T + T[:3, 3], T_1_2=T @ pair.T_1_2))
+        refinement = _field_refinement(pair.with_cloud2(pair.xyz2 @ T[:3, :3].T + T[:3, 3], T @ pair.T_1_2))
         T = _rounded(refinement @ T)
     fitted = {
         **_fitted(

@@ -42,9 +42,10 @@ class RegisteredPair:
     # distances by (cloud, k). Not written to files, not compared, not carried by subset().
     neighbours: dict = field(default_factory=dict, compare=False, repr=False)
     # What was derived from the clouds and the pose and may be used again while they are the
-    # same (``remembered``): each cloud's range images on its lidars' models, its k-d tree in
-    # its own sensor's frame. A stage's field, ``moving_objects``, ``shadow`` and the carried
-    # body look at the same clouds. Not passed on by ``replace`` or ``subset``.
+    # same (``remembered``): each cloud's range images on its lidars' models, its k-d trees in
+    # frame 1 and in its own sensor's frame. A stage's field, ``moving_objects``, ``shadow`` and
+    # the carried body look at the same clouds. Not passed on by ``replace`` or ``subset``;
+    # ``with_cloud2`` passes on what cloud 1 alone was made into.
     derived: dict = field(default_factory=dict, init=False, compare=False, repr=False)
 
     def __post_init__(self):

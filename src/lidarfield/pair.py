@@ -6,6 +6,8 @@ Parquet files hold (column ``cloud`` = 1 or 2, ``x, y, z`` in frame 1, plus attr
 
 from __future__ import annotations
 
+import threading
+import weakref
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -70,9 +72,11 @@ class RegisteredPair:
         if known is not None and all(
             was is now if isinstance(now, np.ndarray) else was == now for was, now in zip(known, made_of)
         ):
+            _holding(self)
             return known[3]
         value = make()
         self.derived[key] = (*made_of, value)
+        _holding(self)
         return value
 
     def _made_of(self, clouds: tuple[int, ...]) -> tuple:
@@ -89,7 +93,8 @@ class RegisteredPair:
         """The pair with cloud 2 at ``xyz2`` and sensor 2 at ``T_1_2``; what was derived from
         cloud 1 alone passed on."""
         moved = replace(self, xyz2=xyz2, T_1_2=T_1_2)
-        moved.derived.update({key: known for key, known in self.derived.items() if known[1] is None})
+        kept = dict(self.derived)  # a copy at once: another thread may let it go meanwhile (_holding)
+        moved.derived.update({key: known for key, known in kept.items() if known[1] is None})
         return moved
 
     @property
@@ -213,6 +218,26 @@ def write_pair(path: str | Path, pair: RegisteredPair, extra_meta: dict | None =
     meta = pair.metadata()
     meta.update(extra_meta or {})
     write_table(path, pair.to_columns(), meta)
+
+
+# The pairs that keep what they derived (``RegisteredPair.remembered``), the last asked for
+# last: only the last ``DERIVED_PAIRS`` keep it, so that a caller holding every stage's pair
+# (``lidarfield run``, ``explain``) holds about one stage's worth. A range image's sparse tables
+# are the bulk: 75 MB for an 80-channel scan's 1,800 columns, whatever its number of points.
+DERIVED_PAIRS = 3
+_HOLDERS: list[weakref.ref] = []
+_HOLDERS_LOCK = threading.Lock()
+
+
+def _holding(pair: RegisteredPair) -> None:
+    """``pair`` is the last asked for; the pairs before the last ``DERIVED_PAIRS`` let go."""
+    with _HOLDERS_LOCK:
+        _HOLDERS[:] = [held for held in _HOLDERS if held() is not None and held() is not pair]
+        _HOLDERS.append(weakref.ref(pair))
+        while len(_HOLDERS) > DERIVED_PAIRS:
+            oldest = _HOLDERS.pop(0)()
+            if oldest is not None:
+                oldest.derived.clear()
 
 
 def _points(xyz) -> np.ndarray:

@@ -140,3 +140,17 @@ def test_what_depends_on_cloud_1_alone_survives_moving_cloud_2(rig_pair):
     assert fs.lidar_images(moved, 2) is not images2
     assert_same_images(fs.lidar_images(moved, 2), fresh_images(moved, 2))
     assert fs.lidar_images(pair, 2) is images2  # the pair it came from keeps its own
+
+
+def test_only_the_last_pairs_asked_for_keep_what_they_derived(rig_pair):
+    """A caller holding every stage's pair holds about one stage's images and trees: the pairs
+    before the last ``DERIVED_PAIRS`` asked for let theirs go (and make them again if asked)."""
+    from lidarfield.pair import DERIVED_PAIRS
+
+    pairs = [replace(rig_pair) for _ in range(DERIVED_PAIRS + 2)]
+    images = [fs.lidar_images(p, 1) for p in pairs]
+    assert [bool(p.derived) for p in pairs] == [False] * 2 + [True] * DERIVED_PAIRS
+    assert fs.lidar_images(pairs[-1], 1) is images[-1]  # still kept: the same object
+    again = fs.lidar_images(pairs[0], 1)  # let go: made again, the same image
+    assert again is not images[0]
+    assert_same_images(again, images[0])

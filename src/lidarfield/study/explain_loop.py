@@ -178,6 +178,7 @@ def explain_pair(
         result.steps.append(step_row(level, table, chosen, current, following, explain))
         result.stages.append(following)
         log.info("step %d: %s", level, format_step(result.steps[-1]))
+        current.stage.pair.derived.clear()  # its images and trees: its suggestions are made
         current = following
         if on_stage is not None:
             on_stage(result.stages)

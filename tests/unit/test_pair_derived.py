@@ -154,3 +154,25 @@ def test_only_the_last_pairs_asked_for_keep_what_they_derived(rig_pair):
     again = fs.lidar_images(pairs[0], 1)  # let go: made again, the same image
     assert again is not images[0]
     assert_same_images(again, images[0])
+
+
+def test_an_image_shared_by_threads_gives_each_the_extremes_it_gives_alone(rig_pair):
+    """A pair's images are shared by the candidates' threads: their sparse tables, made as
+    asked for, are extended by one thread at a time (two appending the same level at once made
+    a wrong table, and moving_objects' evidence wrong, on the real OS1-128 pair)."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    (_, image), *_ = fresh_images(rig_pair, 1)
+    rows, columns = image.nearest.shape
+    rng = np.random.default_rng(2)
+    first = rng.integers(0, rows, 5000)
+    last = np.minimum(first + rng.integers(0, rows, 5000), rows - 1)
+    column = rng.integers(0, columns, 5000)
+    alone = {(c, f): image.extreme(first, last, column, c, f) for c in (0, 1, 3) for f in (False, True)}
+    for _ in range(30):
+        (_, shared), *_ = fresh_images(rig_pair, 1)
+        jobs = [(c, f) for c in (0, 1, 3) for f in (False, True) for _ in range(4)]
+        with ThreadPoolExecutor(8) as pool:
+            got = list(pool.map(lambda job: shared.extreme(first, last, column, *job), jobs))
+        for job, values in zip(jobs, got):
+            np.testing.assert_array_equal(values, alone[job])

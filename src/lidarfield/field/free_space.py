@@ -36,6 +36,7 @@ to tell the change of viewpoint on a surface both sensors saw from content only 
 from __future__ import annotations
 
 import math
+import threading
 from dataclasses import dataclass, field
 from functools import cached_property
 
@@ -76,6 +77,9 @@ class RangeImage:
     min_range_m: float = 0.0
     # per (columns on each side, farthest): the levels of a sparse table of the rows' extremes, made as asked for
     _tables: dict = field(default_factory=dict, compare=False, repr=False)
+    # a pair's images are shared by the candidates' threads (RegisteredPair.remembered): one
+    # thread at a time extends a table, or two would append the same level twice
+    _tables_lock: threading.Lock = field(default_factory=threading.Lock, compare=False, repr=False)
 
     @property
     def elevation_limits(self) -> tuple[float, float]:
@@ -138,6 +142,10 @@ class RangeImage:
     def _level(self, columns: int, farthest: bool, level: int) -> np.ndarray:
         """Level ``level`` of the sparse table of the extremes over ``columns`` on each side:
         the extreme over rows i..i + 2^level - 1 (past the last row: the last row's)."""
+        with self._tables_lock:
+            return self._made_level(columns, farthest, level)
+
+    def _made_level(self, columns: int, farthest: bool, level: int) -> np.ndarray:
         levels = self._tables.get((columns, farthest))
         if levels is None:
             from scipy.ndimage import maximum_filter1d, minimum_filter1d

@@ -16,10 +16,13 @@ from lidarfield.simulation.raycast import simulate_scan
 from lidarfield.simulation.scene import load_scene
 
 
-def ego_car_pair(sensor: str, points: int | None = None) -> RegisteredPair:
-    """The pair registered by the truth, seen by the preset ``sensor``; each cloud subsampled to
+def ego_car_pair(sensor: str, points: int | None = None, azimuth_resolution_deg: float | None = None) -> RegisteredPair:
+    """The pair registered by the truth, seen by the preset ``sensor`` (at
+    ``azimuth_resolution_deg`` instead of its own step, when given); each cloud subsampled to
     ``points`` (fixed seed) when given."""
     scene, model = load_scene("paper-intersection-ego-car"), PRESETS[sensor]
+    if azimuth_resolution_deg is not None:
+        model = dataclasses.replace(model, azimuth_resolution_deg=azimuth_resolution_deg)
     scans = [
         simulate_scan(scene, model, pose_from_xyzrpy(pose), time_s=t, seed=seed, range_noise_m=0.02)
         for seed, pose, t in ((1, [0, 0, 2, 0, 0, 0], 0.0), (2, [1, 0, 2, 0, 0, 0.0037], 0.5))

@@ -46,8 +46,8 @@ class RegisteredPair:
     # What was derived from the clouds and the pose and may be used again while they are the
     # same (``remembered``): each cloud's range images on its lidars' models, its k-d trees in
     # frame 1 and in its own sensor's frame. A stage's field, ``moving_objects``, ``shadow`` and
-    # the carried body look at the same clouds. Not passed on by ``replace`` or ``subset``;
-    # ``with_cloud2`` passes on what cloud 1 alone was made into.
+    # the carried body look at the same clouds. Not passed on by ``replace``; ``subset`` and
+    # ``with_cloud2`` pass on what the clouds they keep (the same arrays) alone were made into.
     derived: dict = field(default_factory=dict, init=False, compare=False, repr=False)
 
     def __post_init__(self):
@@ -69,9 +69,7 @@ class RegisteredPair:
         once may both make it: the same value."""
         made_of = self._made_of(clouds)
         known = self.derived.get(key)
-        if known is not None and all(
-            was is now if isinstance(now, np.ndarray) else was == now for was, now in zip(known, made_of)
-        ):
+        if known is not None and _made_of_same(known, made_of):
             _holding(self)
             return known[3]
         value = make()
@@ -92,10 +90,17 @@ class RegisteredPair:
     def with_cloud2(self, xyz2: np.ndarray, T_1_2: np.ndarray) -> RegisteredPair:
         """The pair with cloud 2 at ``xyz2`` and sensor 2 at ``T_1_2``; what was derived from
         cloud 1 alone passed on."""
-        moved = replace(self, xyz2=xyz2, T_1_2=T_1_2)
+        return self._passing_derived(replace(self, xyz2=xyz2, T_1_2=T_1_2))
+
+    def _passing_derived(self, other: RegisteredPair) -> RegisteredPair:
+        """``other``, made from this pair, given what this pair derived from the clouds (and the
+        pose) that ``other`` has as they were: the same arrays, an equal pose."""
         kept = dict(self.derived)  # a copy at once: another thread may let it go meanwhile (_holding)
-        moved.derived.update({key: known for key, known in kept.items() if known[1] is None})
-        return moved
+        for key, known in kept.items():
+            clouds = tuple(cloud for cloud, was in ((1, known[0]), (2, known[1])) if was is not None)
+            if _made_of_same(known, other._made_of(clouds)):
+                other.derived[key] = known
+        return other
 
     @property
     def origin1(self) -> np.ndarray:
@@ -132,19 +137,26 @@ class RegisteredPair:
         return origins
 
     def subset(self, keep1: np.ndarray, keep2: np.ndarray) -> "RegisteredPair":
-        return RegisteredPair(
-            self.xyz1[keep1],
-            self.xyz2[keep2],
-            self.T_1_2,
-            self.sensor1,
-            self.sensor2,
-            {k: v[keep1] for k, v in self.attributes1.items()},
-            {k: v[keep2] for k, v in self.attributes2.items()},
-            self.registration,
-            self.sensor_fit,
-            self.sweeps,
-            self.lidars1,
-            self.lidars2,
+        """The pair of the points ``keep1`` and ``keep2`` (boolean masks or rows). A cloud kept
+        whole (a mask of every point) is the same array, its attributes' too, and what was
+        derived from it alone is passed on: a correction's stage keeps the other cloud as it was
+        (the clouds are never changed in place)."""
+        whole1, whole2 = _whole(keep1, len(self.xyz1)), _whole(keep2, len(self.xyz2))
+        return self._passing_derived(
+            RegisteredPair(
+                self.xyz1 if whole1 else self.xyz1[keep1],
+                self.xyz2 if whole2 else self.xyz2[keep2],
+                self.T_1_2,
+                self.sensor1,
+                self.sensor2,
+                {k: v if whole1 else v[keep1] for k, v in self.attributes1.items()},
+                {k: v if whole2 else v[keep2] for k, v in self.attributes2.items()},
+                self.registration,
+                self.sensor_fit,
+                self.sweeps,
+                self.lidars1,
+                self.lidars2,
+            )
         )
 
     def stamp(self, cloud: int) -> float | None:
@@ -238,6 +250,18 @@ def _holding(pair: RegisteredPair) -> None:
             oldest = _HOLDERS.pop(0)()
             if oldest is not None:
                 oldest.derived.clear()
+
+
+def _made_of_same(known: tuple, made_of: tuple) -> bool:
+    """Whether a ``derived`` entry was made of what ``made_of`` (``_made_of``) names: the same
+    arrays, an equal pose."""
+    return all(was is now if isinstance(now, np.ndarray) else was == now for was, now in zip(known, made_of))
+
+
+def _whole(keep: np.ndarray, count: int) -> bool:
+    """Whether ``keep`` is a mask of all ``count`` points."""
+    keep = np.asarray(keep)
+    return keep.dtype == bool and keep.shape == (count,) and bool(keep.all())
 
 
 def _points(xyz) -> np.ndarray:

@@ -1,7 +1,8 @@
 """What a pair derives from its clouds made once (``RegisteredPair.remembered``, issue 38): its
 range images and k-d trees are those made afresh (the plain path), on a two-lidar rig (two
 VLP-32C, uneven channels, one upside down) and a real pair; made again once the points or the
-pose change; not passed on by ``replace``, ``subset`` or a pickle; and ``moving_objects``,
+pose change; not passed on by ``replace`` or a pickle, passed on by ``subset`` for a cloud kept
+whole (a correction's stage); and ``moving_objects``,
 ``shadow``, the carried body and the field's shared points find the same on a pair that
 remembers them as on one that does not."""
 
@@ -80,9 +81,36 @@ def test_the_memo_is_not_passed_on(rig_pair):
     fs.lidar_images(pair, 1)
     assert pair.derived
     assert not replace(pair).derived
-    assert not pair.subset(np.ones(len(pair.xyz1), bool), np.ones(len(pair.xyz2), bool)).derived
     back = pickle.loads(pickle.dumps(pair))
     assert not back.derived and np.array_equal(back.xyz2, pair.xyz2) and np.array_equal(back.T_1_2, pair.T_1_2)
+
+
+def test_a_subset_keeps_a_whole_cloud_and_what_was_made_of_it(rig_pair):
+    """``subset`` of every point of cloud 1 and some of cloud 2 (a stage that removed points of
+    cloud 2 only, or a correction's, which keeps all): cloud 1 is the same array with its
+    images and trees, still those made afresh; cloud 2's are made again for its survivors;
+    the pair it came from keeps its own."""
+    pair = replace(rig_pair)
+    images1, images2 = fs.lidar_images(pair, 1), fs.lidar_images(pair, 2)
+    tree1, tree2 = cloud_tree(pair, 1, own_frame=True), cloud_tree(pair, 2, own_frame=False)
+    every1 = np.ones(len(pair.xyz1), bool)
+    some2 = np.arange(len(pair.xyz2)) % 7 != 0
+    kept = pair.subset(every1, some2)
+    assert kept.xyz1 is pair.xyz1 and all(kept.attributes1[k] is v for k, v in pair.attributes1.items())
+    np.testing.assert_array_equal(kept.xyz2, pair.xyz2[some2])
+    assert fs.lidar_images(kept, 1) is images1 and cloud_tree(kept, 1, own_frame=True) is tree1
+    assert_same_images(fs.lidar_images(kept, 1), fresh_images(kept, 1))
+    assert fs.lidar_images(kept, 2) is not images2 and cloud_tree(kept, 2, own_frame=False) is not tree2
+    assert_same_images(fs.lidar_images(kept, 2), fresh_images(kept, 2))
+    assert fs.lidar_images(pair, 2) is images2 and cloud_tree(pair, 2, own_frame=False) is tree2
+    # kept whole, both: everything passed on; the same mask as rows (not a mask): copies, nothing
+    both = pair.subset(every1, np.ones(len(pair.xyz2), bool))
+    assert both.xyz2 is pair.xyz2 and fs.lidar_images(both, 2) is images2
+    rows = pair.subset(np.arange(len(pair.xyz1)), np.arange(len(pair.xyz2)))
+    assert rows.xyz1 is not pair.xyz1 and not rows.derived
+    # a correction then moving sensor 2 (as parsed_stage does): what needs the pose is made again
+    both.T_1_2 = pose_from_xyzrpy([0.5, 0, 0, 0, 0, 0]) @ both.T_1_2
+    assert cloud_tree(both, 2, own_frame=True) is not cloud_tree(pair, 2, own_frame=True)
 
 
 @pytest.mark.parametrize("source", ["rig", "hdl32"])

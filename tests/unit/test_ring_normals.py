@@ -123,3 +123,41 @@ def test_the_one_ring_test_of_some_points_is_the_whole_clouds_for_them(expd, k):
             one_ring_points(xyz, PRESETS[sensor].elevation_deg, 1.0, k, rows=rows), whole[rows]
         )
         assert one_ring_points(xyz, PRESETS[sensor].elevation_deg, 1.0, k, rows=rows[:0]).shape == (0,)
+
+
+@pytest.mark.parametrize("k", [9, 30])
+def test_the_one_ring_test_after_a_removal_is_a_fresh_ones(expd, k):
+    """``one_ring_after_removal`` (``Target.subset``'s points that lost a neighbour, tested
+    again only where their witness went) against the test made afresh on the kept points, on
+    the real VLP-16 scan (one-ring points lose and gain their status) and the 80-channel drive:
+    the same answers, and every witness a kept point of another channel, strictly nearer than
+    the point's k-th neighbour within the radius, or all of them fewer."""
+    from scipy.spatial import cKDTree
+
+    from lidarfield.hypotheses.ring_normals import nearest_channels, one_ring_after_removal, witnessed_one_ring
+    from lidarfield.io import read_scan
+
+    rng = np.random.default_rng(k)
+    scans = {"vlp16": read_scan(expd / "Cloud1_ExpD.txt").xyz, "paper-sim-80": drive_pair().xyz1}
+    for sensor, xyz in scans.items():
+        xyz = xyz[np.isfinite(xyz).all(axis=1)]
+        elevation = PRESETS[sensor].elevation_deg
+        one_ring, witness = witnessed_one_ring(xyz, elevation, 1.0, k)
+        # removed: blobs (what a sensor did not share) and scattered points (thinning)
+        centres = xyz[rng.choice(len(xyz), 40, replace=False)]
+        blob, _ = cKDTree(centres).query(xyz, distance_upper_bound=3.0)
+        keep = np.isinf(blob) & (rng.random(len(xyz)) > 0.05)
+        kept = xyz[keep]
+        near_distance, _ = cKDTree(xyz[~keep]).query(kept, distance_upper_bound=1.0 + 1e-9)
+        near = np.flatnonzero(np.isfinite(near_distance))
+        carried, witnesses = one_ring_after_removal(one_ring, witness, keep, kept, near, elevation, 1.0, k)
+        fresh, _ = witnessed_one_ring(kept, elevation, 1.0, k)
+        np.testing.assert_array_equal(carried, fresh)
+        assert (~fresh[near]).any() and fresh[near].any() == (sensor == "vlp16" or k < 30)  # as the whole cloud's
+        has = np.flatnonzero(witnesses >= 0)
+        assert not carried[has].any() and len(has) > 0.5 * np.count_nonzero(~carried)
+        _, channel = nearest_channels(kept, elevation)
+        assert np.all(channel[witnesses[has]] != channel[has])
+        distance, _ = cKDTree(kept).query(kept[has], k=min(k, len(kept)), distance_upper_bound=1.0)
+        to_witness = np.linalg.norm(kept[witnesses[has]] - kept[has], axis=1)
+        assert np.all((to_witness < distance[:, -1]) | (np.isinf(distance[:, -1]) & (to_witness < 1.0)))

@@ -77,7 +77,7 @@ from ..pair import RegisteredPair
 from ..poses import skew
 from .outcome import Outcome
 from .params import doc
-from .ring_normals import one_ring_points, ring_normals
+from .ring_normals import one_ring_after_removal, ring_normals, witnessed_one_ring
 
 MIN_POINTS = 10  # per downsampled cloud, and correspondences: 6 unknowns and a residual's sigma
 # Above this share of the kept points within twice normal_radius_m of a dropped one (the points
@@ -188,12 +188,14 @@ class Target:
     normals, from its neighbours within ``normal_radius_m`` and, with sensor 1's model and no
     downsampling, from its rings where its neighbours hold one ring (``ring_normals``). Without
     downsampling it keeps what its normals were made of, so that a subset's are found again
-    only where they can differ (``subset``): ``surface``, the neighbours' normals, and
-    ``one_ring``, the points given their rings' (None without sensor 1's model)."""
+    only where they can differ (``subset``): ``surface``, the neighbours' normals,
+    ``one_ring``, the points given their rings', and ``witness``, the other points' neighbour
+    on another ring (``witnessed_one_ring``; both None without sensor 1's model)."""
 
     cloud: object
     surface: np.ndarray | None = None
     one_ring: np.ndarray | None = None
+    witness: np.ndarray | None = None
 
     @classmethod
     def of(cls, xyz1: np.ndarray, sensor1, params: Params) -> "Target":
@@ -204,11 +206,15 @@ class Target:
         surface = _surface_normals(cloud, params)
         if params.voxel_m > 0:  # its points are voxels': no rings, no subset of them
             return cls(cloud)
-        one_ring = None if sensor1 is None else one_ring_points(xyz1, sensor1.elevation_deg, *_neighbourhood(params))
-        return cls._with_normals(cloud, surface, one_ring, sensor1, params)
+        one_ring, witness = (
+            (None, None)
+            if sensor1 is None
+            else witnessed_one_ring(xyz1, sensor1.elevation_deg, *_neighbourhood(params))
+        )
+        return cls._with_normals(cloud, surface, one_ring, witness, sensor1, params)
 
     @classmethod
-    def _with_normals(cls, cloud, surface: np.ndarray, one_ring, sensor1, params: Params) -> "Target":
+    def _with_normals(cls, cloud, surface: np.ndarray, one_ring, witness, sensor1, params: Params) -> "Target":
         import open3d as o3d
 
         normals = surface
@@ -216,23 +222,25 @@ class Target:
             xyz = np.asarray(cloud.points)
             normals = ring_normals(xyz, surface, sensor1.elevation_deg, *_neighbourhood(params), one_ring=one_ring)
         cloud.normals = o3d.utility.Vector3dVector(normals)
-        return cls(cloud, surface, one_ring)
+        return cls(cloud, surface, one_ring, witness)
 
     def subset(self, xyz1: np.ndarray, keep: np.ndarray, sensor1, params: Params) -> "Target":
         """``Target.of`` the points ``keep`` of ``xyz1``, the cloud it was made of, the same to the bit:
         a point's neighbours' normal and one-ring test depend only on the points within
         ``normal_radius_m``, so they are found again only for the kept points that near to a
         dropped one: the normals from the kept points near enough to be their neighbours (from
-        all, above ``LOCAL_SHARE_MAX``), the test among all kept points; the rings' normals,
-        which reach farther along a ring, are found again for all."""
+        all, above ``LOCAL_SHARE_MAX``), the test among all kept points where a point's witness
+        was dropped (``one_ring_after_removal``); the rings' normals, which reach farther along
+        a ring, are found again for all."""
         from ..registration.matching import point_cloud
 
         if self.surface is None:  # downsampled: made again from the kept points
             return Target.of(xyz1[keep], sensor1, params)
         kept, dropped = xyz1[keep], xyz1[~keep]
         _require_points(len(kept), 1, params)
-        surface, one_ring = self.surface[keep], None if self.one_ring is None else self.one_ring[keep]
+        surface, one_ring, witness = self.surface[keep], self.one_ring, self.witness
         cloud = point_cloud(kept, 0.0, 0.0)
+        near = np.zeros(0, dtype=np.int64)
         if len(dropped):
             from scipy.spatial import cKDTree
 
@@ -245,9 +253,11 @@ class Target:
             elif len(near):
                 local_normals = _surface_normals(point_cloud(kept[local], 0.0, 0.0), params)
                 surface[near] = local_normals[distance[local] <= radius]
-            if one_ring is not None and len(near):
-                one_ring[near] = one_ring_points(kept, sensor1.elevation_deg, *_neighbourhood(params), rows=near)
-        return Target._with_normals(cloud, surface, one_ring, sensor1, params)
+        if one_ring is not None:
+            one_ring, witness = one_ring_after_removal(
+                one_ring, witness, keep, kept, near, sensor1.elevation_deg, *_neighbourhood(params)
+            )
+        return Target._with_normals(cloud, surface, one_ring, witness, sensor1, params)
 
 
 def _surface_normals(cloud, params: Params) -> np.ndarray:

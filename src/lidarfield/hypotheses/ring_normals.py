@@ -71,11 +71,46 @@ def one_ring_points(
     channel (the nearest of ``elevation_deg``): the points ``ring_normals`` gives their rings'
     normals. It depends only on the points within ``radius_m``. ``rows``: only those points'
     answers (their neighbours still among all of ``xyz``)."""
+    return witnessed_one_ring(xyz, elevation_deg, radius_m, k, rows)[0]
+
+
+def witnessed_one_ring(
+    xyz: np.ndarray, elevation_deg, radius_m: float, k: int, rows: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """``one_ring_points`` and, for each point that is not, a witness: the index of a neighbour
+    on another channel strictly nearer than its ``k``-th (among its ``k`` nearest however
+    distance ties fall), -1 where none is known (``one_ring_after_removal``)."""
     from scipy.spatial import cKDTree
 
     _, channel = nearest_channels(xyz, elevation_deg)
     rows = np.arange(len(xyz)) if rows is None else np.asarray(rows)
-    return _one_ring(cKDTree(xyz), xyz, channel, rows, radius_m, min(k, len(xyz)))
+    return _one_ring(cKDTree(xyz), channel, xyz[rows], channel[rows], radius_m, min(k, len(xyz)))
+
+
+def one_ring_after_removal(
+    one_ring: np.ndarray,
+    witness: np.ndarray,
+    keep: np.ndarray,
+    kept: np.ndarray,
+    near: np.ndarray,
+    elevation_deg,
+    radius_m: float,
+    k: int,
+) -> tuple[np.ndarray, np.ndarray]:
+    """``witnessed_one_ring`` of the points ``kept`` (the points ``keep`` of the cloud that
+    ``one_ring`` and ``witness`` answer for), the same as found afresh: only the kept points
+    ``near`` a removed one (within ``radius_m``; rows of ``kept``) can change, and of those
+    not the ones whose witness is kept. Removing points only makes a point's other neighbours
+    nearer in rank and its ``k``-th neighbour farther, so a kept witness stays one of its ``k``
+    nearest, strictly nearer than the ``k``-th. The others are tested again among ``kept``."""
+    one_ring, witness = one_ring[keep], witness[keep]
+    held = witness >= 0
+    held[held] = keep[witness[held]]
+    witness = np.where(held, (np.cumsum(keep) - 1)[np.maximum(witness, 0)], -1)  # numbered among the kept
+    stale = near[~held[near]]
+    if len(stale):
+        one_ring[stale], witness[stale] = witnessed_one_ring(kept, elevation_deg, radius_m, k, stale)
+    return one_ring, witness
 
 
 def nearest_channels(xyz: np.ndarray, elevation_deg) -> tuple[np.ndarray, np.ndarray]:
@@ -108,28 +143,48 @@ def _neighbouring_rings(xyz: np.ndarray, own: np.ndarray, c: int, channels: np.n
     return sides, nearest
 
 
-def _one_ring(tree, xyz: np.ndarray, channel: np.ndarray, rows: np.ndarray, radius_m: float, k: int) -> np.ndarray:
-    """(len(rows),) whether each of the points ``rows``' ``k`` nearest neighbours within
-    ``radius_m`` (``tree`` of ``xyz``) all lie on its ``channel``. A point whose first
-    ``FIRST_NEIGHBOURS`` hold another channel's point strictly nearer than the farthest of them
-    is not (that point is among the ``k`` nearest however distance ties fall), nor is one with
-    another channel's point among fewer (they are all its neighbours within the radius); the
-    others are searched for all ``k``."""
-    n = len(xyz)
-    padded = np.append(channel, -1)  # the tree's index of a missing neighbour is n
-    points, own = xyz[rows], channel[rows]
-    one_ring = np.ones(len(rows), dtype=bool)
-    pending = np.arange(len(rows))
+def _one_ring(
+    tree, channel: np.ndarray, points: np.ndarray, own: np.ndarray, radius_m: float, k: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """Whether each of ``points`` (on channels ``own``) has its ``k`` nearest neighbours within
+    ``radius_m`` (``tree`` of the points ``channel`` numbers) all on its channel, and its
+    witness (``witnessed_one_ring``). A point whose first ``FIRST_NEIGHBOURS`` hold another
+    channel's point strictly nearer than the farthest of them is not (that point is among the k
+    nearest however distance ties fall), nor is one with another channel's point among fewer
+    (they are all its neighbours within the radius); the others are searched for all ``k``."""
+    one_ring = np.ones(len(points), dtype=bool)
+    witness = np.full(len(points), -1, dtype=np.int64)
+    pending = np.arange(len(points))
     if FIRST_NEIGHBOURS < k:
-        distance, index = tree.query(points, k=FIRST_NEIGHBOURS, distance_upper_bound=radius_m)
-        other = (padded[index] != own[:, None]) & (index < n)
-        settled = np.any(other & (distance < distance[:, -1:]), axis=1) | ~np.isfinite(distance[:, -1])
-        one_ring[settled] = ~np.any(other[settled], axis=1)
+        other, sure, index, fewer = _other_channels(tree, channel, points, own, FIRST_NEIGHBOURS, radius_m)
+        settled = sure.any(axis=1) | fewer
+        one_ring[settled] = ~other[settled].any(axis=1)
+        witness[settled] = _first(sure[settled], index[settled])
         pending = np.flatnonzero(~settled)
-    _, index = tree.query(points[pending], k=k, distance_upper_bound=radius_m)
-    neighbour_channel = padded[index.reshape(len(pending), k)]
-    one_ring[pending] = np.all((neighbour_channel == own[pending, None]) | (neighbour_channel < 0), axis=1)
-    return one_ring
+    other, sure, index, _ = _other_channels(tree, channel, points[pending], own[pending], k, radius_m)
+    one_ring[pending] = ~other.any(axis=1)
+    witness[pending] = _first(sure, index)
+    return one_ring, witness
+
+
+def _other_channels(tree, channel: np.ndarray, points: np.ndarray, own: np.ndarray, k: int, radius_m: float):
+    """Each point's ``k`` nearest within ``radius_m`` (``tree`` of the points ``channel``
+    numbers): which lie on another channel than ``own``; which of those are among its ``k``
+    nearest however distance ties fall (strictly nearer than the ``k``-th, or all, when fewer
+    than ``k`` lie within the radius); their indices (``len(channel)`` where missing); and
+    whether fewer than ``k`` lie within the radius."""
+    distance, index = tree.query(points, k=k, distance_upper_bound=radius_m)
+    distance, index = distance.reshape(len(points), k), index.reshape(len(points), k)
+    padded = np.append(channel, -1)  # the tree's index of a missing neighbour is len(channel)
+    other = (padded[index] != own[:, None]) & (index < len(channel))
+    fewer = ~np.isfinite(distance[:, -1])
+    sure = other & ((distance < distance[:, -1:]) | fewer[:, None])
+    return other, sure, index, fewer
+
+
+def _first(sure: np.ndarray, index: np.ndarray) -> np.ndarray:
+    """Per row the index of its first ``sure`` neighbour, -1 where none."""
+    return np.where(sure.any(axis=1), index[np.arange(len(index)), sure.argmax(axis=1)], -1)
 
 
 def _ring_normal(ring: np.ndarray, sides: list[np.ndarray], nearest: list[np.ndarray]) -> np.ndarray:

@@ -250,6 +250,20 @@ def _sim_rig_scan(scene, pose, t, seed) -> Scan:
     return _posed(Scan(xyz, attributes, lidars[0].sensor, lidars=lidars), pose)
 
 
+def traffic_rig_pair():
+    """The rig at the intersection with traffic, registered by the truth: scan 2 1.6 m on and
+    0.3 s later, the cars moved."""
+    from lidarfield.registration import register_pair
+    from lidarfield.simulation.scene import load_scene
+
+    scene = load_scene("paper-intersection-traffic")
+    scans = [
+        _sim_rig_scan(scene, pose_from_xyzrpy(p), t, k)
+        for k, (p, t) in enumerate((([0, 0, 2, 0, 0, 0], 0.0), ([1.5, 0.5, 2, 0, 0, 0.1], 0.3)))
+    ]
+    return register_pair(*scans, "truth")
+
+
 def _intersection_drive(frames: int) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
     """Issue 27's drive (tests/helpers/drive.py), 2 m up: 3 m/s round the crossing's centre,
     10 Hz; per scan its pose and the sensor's velocities in its own frame."""

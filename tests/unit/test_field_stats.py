@@ -6,6 +6,7 @@ import json
 import math
 
 import numpy as np
+import pytest
 
 from helpers.clouds import voxel_centre_clouds
 from lidarfield.analysis.field_stats import field_statistics, summary_json_safe, weighted_rigid_transform
@@ -125,3 +126,32 @@ def test_no_valid_voxel_gives_nan_and_strict_json():
     assert math.isnan(stats["max_magnitude"]) and math.isnan(stats["rigid_energy_share"])
     text = json.dumps(summary_json_safe(stats), allow_nan=False)
     assert json.loads(text)["p95_magnitude"] is None
+
+
+@pytest.mark.parametrize("source", ["rig", "hdl32"])
+def test_a_fields_depth_edges_found_by_a_second_thread_are_those_found_alone(source, monkeypatch, request):
+    """``analyse_field`` finds the depth edges by a second thread where two cores are usable:
+    the same columns and statistics to the bit as on one, on the two-lidar rig (two VLP-32C,
+    one upside down) and the real HDL-32E pair, whose depth-edge tags are not empty."""
+    from dataclasses import replace
+
+    from helpers.fault_zoo import traffic_rig_pair
+    from helpers.real_pairs import pair_at, real_pair
+    from lidarfield.analysis.field_stats import analyse_field
+    from lidarfield.analysis.tags import tag_column
+
+    if source == "rig":
+        pair = traffic_rig_pair()
+    else:
+        pair = pair_at(real_pair(request.getfixturevalue("shared_data"), source))
+    settings = FieldSettings(SphericalGrid(), min_points=10)
+    found = {}
+    for threads in ("1", "2"):
+        monkeypatch.setenv("OMP_NUM_THREADS", threads)
+        found[threads] = analyse_field(replace(pair), settings)  # a copy: nothing remembered from the other
+    (alone, stats_alone), (beside, stats_beside) = found["1"], found["2"]
+    assert alone.keys() == beside.keys()
+    for name in alone:
+        np.testing.assert_array_equal(alone[name], beside[name], err_msg=name)
+    assert json.dumps(summary_json_safe(stats_alone)) == json.dumps(summary_json_safe(stats_beside))
+    assert np.count_nonzero(alone[tag_column("depth_edge")]) > 0

@@ -24,16 +24,9 @@ from lidarfield.poses import pose_from_xyzrpy
 
 @pytest.fixture(scope="module")
 def rig_pair():
-    from helpers.fault_zoo import _sim_rig_scan
-    from lidarfield.registration import register_pair
-    from lidarfield.simulation.scene import load_scene
+    from helpers.fault_zoo import traffic_rig_pair
 
-    scene = load_scene("paper-intersection-traffic")
-    scans = [
-        _sim_rig_scan(scene, pose_from_xyzrpy(p), t, k)
-        for k, (p, t) in enumerate((([0, 0, 2, 0, 0, 0], 0.0), ([1.5, 0.5, 2, 0, 0, 0.1], 0.3)))
-    ]
-    pair = register_pair(*scans, "truth")
+    pair = traffic_rig_pair()
     assert len(pair.lidars(1)) == len(pair.lidars(2)) == 2
     return pair
 

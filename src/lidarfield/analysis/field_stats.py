@@ -29,18 +29,22 @@ figure is undefined, e.g. no valid voxel; ``summary_json_safe`` turns NaN into n
 from __future__ import annotations
 
 import math
+from concurrent.futures import ThreadPoolExecutor
+from contextlib import nullcontext
 
 import numpy as np
 
 from ..defaults import default
+from ..field.channels import pair_binning
 from ..field.grid import FieldSettings
 from ..field.kernel import NORMAL_READ_COLUMN, SURFACE_COLUMNS, WHITENED_COLUMNS
 from ..field.pair_field import pair_field
 from ..field.rigid_fit import RigidFit, field_rigid_part
+from ..hypotheses.outliers import neighbour_threads
 from ..pair import RegisteredPair
 from ..poses import weighted_rigid_transform  # noqa: F401 (re-exported: the tests' Kabsch)
 from .randomness import neighbour_pairs, randomness_tests
-from .tags import energy_shares, voxel_energy, voxel_tags
+from .tags import depth_edges, energy_shares, voxel_energy, voxel_tags
 
 STATISTIC_KEYS = (
     "voxels",
@@ -67,10 +71,15 @@ STATISTIC_KEYS = (
 
 def analyse_field(pair: RegisteredPair, settings: FieldSettings) -> tuple[dict[str, np.ndarray], dict]:
     """The field of a pair (``pair_field``) with its tag columns, and its statistics (with the
-    edges used and why)."""
-    columns, binning, ids = pair_field(pair, settings)
-    rigid = field_rigid_part(columns)  # fitted once: the tags and the statistics both read it
-    columns.update(voxel_tags(columns, pair, binning.settings, ids, rigid))
+    edges used and why). Where more than one core is usable (``neighbour_threads``, as for the
+    candidates), the depth edges, which need no field, are found by a second thread meanwhile."""
+    binning = pair_binning(settings, pair)
+    with ThreadPoolExecutor(1) if neighbour_threads() > 1 else nullcontext() as pool:
+        on_edge = None if pool is None else pool.submit(depth_edges, pair, binning.settings)
+        columns, binning, ids = pair_field(pair, settings, binning)
+        rigid = field_rigid_part(columns)  # fitted once: the tags and the statistics both read it
+        on_edge = None if on_edge is None else on_edge.result()
+    columns.update(voxel_tags(columns, pair, binning.settings, ids, rigid, on_edge))
     return columns, {**field_statistics(columns, binning.settings, rigid), **binning.statistics()}
 
 

@@ -78,10 +78,12 @@ def voxel_tags(
     settings: FieldSettings,
     ids: tuple[np.ndarray, np.ndarray] | None = None,
     rigid: tuple[RigidFit, np.ndarray] | None = None,
+    on_edge: list[np.ndarray] | None = None,
 ) -> dict[str, np.ndarray]:
     """``{tag_column(tag): bool (V,)}`` for the field ``columns`` of ``pair`` (binned about
-    sensor 1); ``ids``: each cloud's voxel ids, and ``rigid``: the field's
-    ``field_rigid_part``, when the caller has them."""
+    sensor 1); ``ids``: each cloud's voxel ids, ``rigid``: the field's ``field_rigid_part``,
+    and ``on_edge``: each cloud's points on a depth edge (``depth_edges``), when the caller
+    has them."""
     valid = np.asarray(columns["valid"], dtype=bool)
     voxel = np.asarray(columns["voxel"], dtype=np.int64)
     ids = ids or tuple(settings.grid.assign(xyz) for xyz in (pair.xyz1, pair.xyz2))
@@ -95,7 +97,7 @@ def voxel_tags(
     tags = {
         "fov_edge": point_tag(_near_fov_edge(pair)),
         "near_sensor": point_tag([_near_a_sensor(xyz, pair) for xyz in (pair.xyz1, pair.xyz2)]),
-        "depth_edge": point_tag(_on_depth_edge(pair, settings)),
+        "depth_edge": point_tag(depth_edges(pair, settings) if on_edge is None else on_edge),
         **vector_tags(columns, rigid),
         "count_imbalance": _imbalanced(columns["n1"], columns["n2"]),
     }
@@ -154,7 +156,9 @@ def _near_a_sensor(xyz: np.ndarray, pair: RegisteredPair) -> np.ndarray:
     return (np.linalg.norm(xyz, axis=1) < NEAR_SENSOR_M) | (np.linalg.norm(xyz - pair.origin2, axis=1) < NEAR_SENSOR_M)
 
 
-def _on_depth_edge(pair: RegisteredPair, settings: FieldSettings) -> list[np.ndarray]:
+def depth_edges(pair: RegisteredPair, settings: FieldSettings) -> list[np.ndarray]:
+    """Each cloud's points on a depth edge: those ``shadow`` removes on the field's own cells
+    (``settings``' grid, channel-aware edges included). Needs no field."""
     from ..hypotheses.shadow import Params, angular_config, shadow
 
     grid = settings.grid  # the field's own cells, channel-aware edges included

@@ -8,18 +8,19 @@ from __future__ import annotations
 import numpy as np
 
 from ..pair import RegisteredPair
-from .channels import pair_binning
+from .channels import Binning, pair_binning
 from .free_space import shared_points
 from .grid import FieldSettings
 from .kernel import field_from_voxel_ids
 from .significance import ScanPattern, Viewpoint
 
 
-def pair_field(pair: RegisteredPair, settings: FieldSettings):
+def pair_field(pair: RegisteredPair, settings: FieldSettings, binning: Binning | None = None):
     """The field's columns of a pair, binned about sensor 1 on the grid of ``settings`` made
-    channel-aware for the pair (``field.channels``), with each cloud's scan pattern and the
-    change of viewpoint in its vectors' covariance; the binning and both clouds' voxel ids."""
-    binning = pair_binning(settings, pair)
+    channel-aware for the pair (``field.channels``; ``binning``, when the caller has it), with
+    each cloud's scan pattern and the change of viewpoint in its vectors' covariance; the
+    binning and both clouds' voxel ids."""
+    binning = binning or pair_binning(settings, pair)
     settings = binning.settings
     ids = settings.grid.assign(pair.xyz1), settings.grid.assign(pair.xyz2)  # binned once: the tags need them too
     shared = shared_points(pair)

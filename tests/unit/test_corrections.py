@@ -281,16 +281,17 @@ def test_a_correcting_stages_files_and_summary_row(tmp_path):
     )
 
 
-def test_a_stack_searches_a_moved_cloud_anew():
-    """Neighbour distances from stage to stage in memory: a stage that moved cloud 2 has it
-    searched anew (a rigid motion keeps distances only up to rounding), a removing stage after
-    it carries them on; every stage's equal a new search, to the bit."""
+def test_a_stack_carries_the_distances_of_a_cloud_moved_as_a_whole():
+    """Neighbour distances from stage to stage in memory: a stage that moved cloud 2 with
+    sensor 2's pose (the shift plugin) carries them, measured again at the new places, and a
+    removing stage after it carries them on; every stage's equal a new search, to the bit."""
     from lidarfield.hypotheses.outliers import cloud_neighbour_distances
 
     rng = np.random.default_rng(2)
     pair = RegisteredPair(rng.normal(scale=6, size=(3000, 3)), rng.normal(scale=6, size=(2500, 3)))
     stack = [{"crop": {"max_range_m": 12}}, SHIFT, {"crop": {"max_range_m": 9}}]
     for stage in apply_stack(pair, stack, ROOT, GRID):
+        assert stage.level < 2 or set(stage.pair.neighbours) == {(1, 20), (2, 20)}  # carried, not asked
         for cloud in (1, 2):
             cloud_neighbour_distances(stage.pair, cloud, 20)  # as the outliers candidate asks
         for (cloud, k), known in stage.pair.neighbours.items():

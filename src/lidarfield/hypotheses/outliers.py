@@ -17,7 +17,10 @@ The search is the expensive part (0.15 s per 50,000 points), and the stages of a
 search again clouds that differ from the stage before by the few points it removed. So the
 neighbour distances of a cloud are kept (:class:`NeighbourDistances`, memoised on the pair) and
 carried to its survivors by :func:`after_removal`: only the points whose neighbourhood reached
-a removed point are searched again, and the result is exactly a new search's.
+a removed point are searched again, and the result is exactly a new search's. A cloud a stage
+moved as a whole (``realign``) keeps its neighbours (:func:`after_rigid_move`): their distances
+are measured again at the new places, as a search measures them, and only the points whose
+(k+1)-th neighbour came too near to tell are searched again.
 """
 
 from __future__ import annotations
@@ -61,6 +64,8 @@ class NeighbourDistances:
     k: int
     mean: np.ndarray  # mean distance: the outlier score
     reach: np.ndarray  # distance to the k-th: no point closer than this is outside the k
+    index: np.ndarray  # (N, k) the k (rows of the cloud)
+    beyond: np.ndarray  # no point outside the k is nearer than this (the (k+1)-th's distance, or less)
 
     def __len__(self) -> int:
         return len(self.mean)
@@ -72,9 +77,8 @@ def neighbour_distances(xyz: np.ndarray, k: int, workers: int | None = None) -> 
     xyz = np.asarray(xyz, dtype=np.float64)
     k = min(k, len(xyz))
     if k == 0:
-        return NeighbourDistances(0, np.zeros(0), np.zeros(0))
-    mean, reach = _search(xyz, xyz, k, workers)
-    return NeighbourDistances(k, mean, reach)
+        return NeighbourDistances(0, np.zeros(0), np.zeros(0), np.zeros((0, 0), np.int64), np.zeros(0))
+    return NeighbourDistances(k, *_search(xyz, xyz, k, workers))
 
 
 def after_removal(
@@ -92,15 +96,55 @@ def after_removal(
     kept = xyz_before[keep]
     if before.k == 0 or len(kept) < before.k:  # fewer points than neighbours: k changes
         return neighbour_distances(kept, before.k, workers)
-    mean, reach = before.mean[keep], before.reach[keep]
     removed = xyz_before[~keep]
-    if len(removed) == 0 or len(kept) == 0:
-        return NeighbourDistances(before.k, mean, reach)
-    reached = _reaches(kept, reach, removed, workers)
-    if reached.any():
-        mean, reach = mean.copy(), reach.copy()
-        mean[reached], reach[reached] = _search(kept, kept[reached], before.k, workers)
-    return NeighbourDistances(before.k, mean, reach)
+    if len(removed) == 0:
+        return before
+    # the survivors' neighbours, numbered among the survivors (right where none was removed)
+    index = (np.cumsum(keep) - 1)[before.index[keep]]
+    carried = [before.mean[keep], before.reach[keep], index, before.beyond[keep]]
+    if len(kept):
+        _search_again(carried, kept, _reaches(kept, carried[1], removed, workers), before.k, workers)
+    return NeighbourDistances(before.k, *carried)
+
+
+def after_rigid_move(before: NeighbourDistances, xyz_after: np.ndarray, drift_m: float = 0.0, workers=None):
+    """The neighbour distances of a cloud's points moved together (the same rows) to
+    ``xyz_after``, each at most ``drift_m`` from where one rigid motion took it: equal to
+    :func:`neighbour_distances` of ``xyz_after``, bit for bit. Such a move changes a distance by
+    at most twice the drift (and rounding), so where a point's k-th distance, measured again at
+    the new places as a search measures it, stays nearer than its ``beyond`` less that, its k
+    are still its k nearest; the others are searched again."""
+    xyz_after = np.asarray(xyz_after, dtype=np.float64)
+    if before.k == 0 or len(before.index) == 0:
+        return before
+    distance = np.empty(before.index.shape)
+    for j, column in enumerate(before.index.T):  # one neighbour at a time: no (N, k, 3) array
+        delta = xyz_after - xyz_after[column]
+        distance[:, j] = np.sqrt(delta[:, 0] * delta[:, 0] + delta[:, 1] * delta[:, 1] + delta[:, 2] * delta[:, 2])
+    index = before.index.copy()
+    unsorted = np.flatnonzero(np.any(distance[:, 1:] < distance[:, :-1], axis=1))  # rounding swapped near ties
+    if len(unsorted):
+        order = np.argsort(distance[unsorted], axis=1, kind="stable")
+        distance[unsorted] = np.take_along_axis(distance[unsorted], order, axis=1)
+        index[unsorted] = np.take_along_axis(index[unsorted], order, axis=1)
+    margin = 2 * drift_m + MOVE_ROUNDING_M
+    carried = [_mean(distance), distance[:, -1].copy(), index, before.beyond - margin]
+    _search_again(carried, xyz_after, ~(distance[:, -1] < carried[3]), before.k, workers)
+    return NeighbourDistances(before.k, *carried)
+
+
+# A rigid motion computed in floating point keeps a distance between points up to ~1e-13 m
+# (coordinates of hundreds of metres): far inside this.
+MOVE_ROUNDING_M = 1e-9
+
+
+def _search_again(carried: list, cloud: np.ndarray, rows: np.ndarray, k: int, workers: int | None) -> None:
+    """``carried`` (mean, reach, index, beyond) with the points ``rows`` (a mask) searched anew
+    in ``cloud``."""
+    rows = np.flatnonzero(rows)
+    if len(rows):
+        for values, found in zip(carried, _search(cloud, cloud[rows], k, workers)):
+            values[rows] = found
 
 
 def _reaches(points: np.ndarray, reach: np.ndarray, others: np.ndarray, workers: int | None) -> np.ndarray:
@@ -125,19 +169,26 @@ def _reaches(points: np.ndarray, reach: np.ndarray, others: np.ndarray, workers:
     return reached
 
 
-def _search(cloud: np.ndarray, points: np.ndarray, k: int, workers: int | None) -> tuple[np.ndarray, np.ndarray]:
-    """Mean and k-th distance from each of ``points`` to its ``k`` nearest in ``cloud``."""
+def _search(cloud: np.ndarray, points: np.ndarray, k: int, workers: int | None):
+    """Mean and k-th distance from each of ``points`` to its ``k`` nearest in ``cloud``, those
+    k (rows of ``cloud``, nearest first) and the distance of the next (inf where none)."""
     from scipy.spatial import cKDTree  # a third of a second: only when this hypothesis runs
 
+    found = min(k + 1, len(cloud))
     # An unbalanced tree (split at the midpoint) builds and answers faster on scans; exact all the same.
-    distances, _ = cKDTree(cloud, balanced_tree=False).query(points, k=k, workers=_workers(workers))
-    distances = distances.reshape(len(points), k)
-    # Summed nearest first, one neighbour at a time, as Open3D does: numpy's pairwise row sum
-    # rounds differently, which moves scores at the threshold by an ulp.
-    total = np.zeros(len(points))
+    distances, index = cKDTree(cloud, balanced_tree=False).query(points, k=found, workers=_workers(workers))
+    distances, index = distances.reshape(len(points), found), index.reshape(len(points), found)
+    beyond = distances[:, k] if found > k else np.full(len(points), np.inf)
+    return _mean(distances[:, :k]), distances[:, k - 1].copy(), index[:, :k], beyond
+
+
+def _mean(distances: np.ndarray) -> np.ndarray:
+    """Each row's mean, summed nearest first, one neighbour at a time, as Open3D does: numpy's
+    pairwise row sum rounds differently, which moves scores at the threshold by an ulp."""
+    total = np.zeros(len(distances))
     for column in distances.T:
         total += column
-    return total / k, distances[:, -1].copy()
+    return total / distances.shape[1]
 
 
 def _workers(workers: int | None) -> int:
@@ -179,16 +230,27 @@ def cloud_neighbour_distances(pair: RegisteredPair, cloud: int, k: int) -> Neigh
 
 
 def carry_neighbours(
-    before: RegisteredPair, keep1: np.ndarray, keep2: np.ndarray, after: RegisteredPair, skip: tuple[int, ...] = ()
+    before: RegisteredPair, keep1: np.ndarray, keep2: np.ndarray, after: RegisteredPair, moved: tuple[int, ...] = ()
 ) -> None:
     """Give ``after`` (``before``'s survivors) every neighbour distance ``before`` has, carried
-    by :func:`after_removal`, except for the clouds in ``skip`` (moved by a correction: their
-    distances are searched anew when asked for)."""
+    by :func:`after_removal`; for the clouds in ``moved`` (by a correction) then by
+    :func:`after_rigid_move` where the cloud moved as a whole with sensor 2's pose (cloud 2) or
+    stayed (cloud 1), to ``RIGID_DRIFT_M``; else not (searched anew when asked for)."""
     for (cloud, k), distances in before.neighbours.items():
-        if cloud in skip:
-            continue
         xyz, keep = (before.xyz1, keep1) if cloud == 1 else (before.xyz2, keep2)
-        after.neighbours[(cloud, k)] = after_removal(distances, xyz, keep)
+        if cloud not in moved:
+            after.neighbours[(cloud, k)] = after_removal(distances, xyz, keep)
+            continue
+        now = after.xyz1 if cloud == 1 else after.xyz2
+        T = after.T_1_2 @ np.linalg.inv(before.T_1_2) if cloud == 2 else np.eye(4)
+        drift = np.linalg.norm(now - (xyz[keep] @ T[:3, :3].T + T[:3, 3]), axis=1)
+        if len(drift) and drift.max() <= RIGID_DRIFT_M:
+            after.neighbours[(cloud, k)] = after_rigid_move(after_removal(distances, xyz, keep), now, drift.max())
+
+
+# A moved cloud whose points lie this near where one rigid motion (sensor 2's change of pose)
+# takes them keeps its neighbours (``after_rigid_move``); realign's lie within rounding of it.
+RIGID_DRIFT_M = 1e-6
 
 
 def outliers(pair: RegisteredPair, params: Params) -> tuple[np.ndarray, np.ndarray]:

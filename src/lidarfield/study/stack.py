@@ -167,9 +167,9 @@ def following_stage(
     derived from ``previous``'s points carried over."""
     stage = parsed_stage(previous.pair, name, params, level, base_dir, outcome)
     # what the caller derived from the previous stage's points (its suggestions' outlier
-    # scores), carried over exactly for less than a new search costs; a cloud the stage
-    # moved is searched anew when needed (carrying assumes unmoved points)
-    carry_neighbours(previous.pair, stage.keep1, stage.keep2, stage.pair, skip=moved_clouds(stage))
+    # scores), carried over exactly for less than a new search costs; a cloud the stage moved
+    # as a whole too, others are searched anew when needed
+    carry_neighbours(previous.pair, stage.keep1, stage.keep2, stage.pair, moved=moved_clouds(stage))
     return stage
 
 

@@ -182,11 +182,14 @@ def test_a_correcting_plugin_through_apply_stack():
     assert list(columns)[-2:] == ["hypothesis", "row"]
     back = shift.pair.xyz2[columns["row"][columns["cloud"] == 2]]
     assert np.array_equal(back, outliers.removed.xyz2)
-    # The neighbour distances the outliers stage used: cloud 2 searched anew after the shift,
-    # cloud 1 carried; both what a new search finds.
+    # The neighbour distances carried to the outliers stage's survivors: cloud 2's past the
+    # shift (moved as a whole) and the removal, cloud 1's past the removal; both what a new
+    # search finds.
+    from lidarfield.hypotheses.outliers import cloud_neighbour_distances
+
     for cloud in (1, 2):
         xyz = outliers.pair.xyz1 if cloud == 1 else outliers.pair.xyz2
-        known = outliers.pair.neighbours[(cloud, 20)]
+        known = cloud_neighbour_distances(outliers.pair, cloud, 20)
         expected = neighbour_distances(xyz, 20)
         np.testing.assert_array_equal(known.mean, expected.mean)
         np.testing.assert_array_equal(known.reach, expected.reach)

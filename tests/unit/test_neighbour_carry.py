@@ -91,7 +91,8 @@ def test_apply_stack_carries_what_the_previous_stage_searched(expd):
     for stage in apply_stack(pair, stack, study_grid=GRID):
         if stage.level:
             assert set(stage.pair.neighbours) == {(1, 20), (2, 20)}
-            for (cloud, k), carried in stage.pair.neighbours.items():
+            for cloud, k in stage.pair.neighbours:
+                carried = cloud_neighbour_distances(stage.pair, cloud, k)  # carried when first asked for
                 assert_same(carried, neighbour_distances(stage.pair.xyz1 if cloud == 1 else stage.pair.xyz2, k))
         (
             cloud_neighbour_distances(stage.pair, 1, 20),
@@ -154,7 +155,15 @@ def test_a_stage_that_moves_a_cloud_as_a_whole_carries_its_distances_and_one_tha
     rigid = RegisteredPair(before.xyz1, moved, T @ before.T_1_2)
     carry_neighbours(before, every1, every2, rigid, moved=(2,))
     assert set(rigid.neighbours) == {(1, 20), (2, 20)}
-    assert_same(rigid.neighbours[(2, 20)], neighbour_distances(moved, 20))
+    assert_same(cloud_neighbour_distances(rigid, 2, 20), neighbour_distances(moved, 20))
+    assert_same(cloud_neighbour_distances(rigid, 1, 20), neighbour_distances(before.xyz1, 20))
+    # carried on again before anyone asked (a stage that removed some of cloud 2): found then
+    unasked = RegisteredPair(before.xyz1, moved, T @ before.T_1_2)
+    carry_neighbours(before, every1, every2, unasked, moved=(2,))
+    some2 = np.arange(len(moved)) % 3 > 0
+    later = RegisteredPair(before.xyz1, moved[some2], unasked.T_1_2)
+    carry_neighbours(unasked, every1, some2, later)
+    assert_same(cloud_neighbour_distances(later, 2, 20), neighbour_distances(moved[some2], 20))
     scaled = RegisteredPair(before.xyz1, before.xyz2 * 1.001, before.T_1_2)
     carry_neighbours(before, every1, every2, scaled, moved=(2,))
     assert set(scaled.neighbours) == {(1, 20)}

@@ -222,30 +222,51 @@ def open3d_threshold(scores: np.ndarray, std_ratio: float) -> np.ndarray:
 
 
 def cloud_neighbour_distances(pair: RegisteredPair, cloud: int, k: int) -> NeighbourDistances:
-    """A cloud's neighbour distances, memoised on the pair (``pair.neighbours``)."""
+    """A cloud's neighbour distances, memoised on the pair (``pair.neighbours``): searched, or
+    carried from the stage before when first asked for (``CarriedDistances``)."""
     known = pair.neighbours.get((cloud, k))
     if known is None:
         known = pair.neighbours[(cloud, k)] = neighbour_distances(pair.xyz1 if cloud == 1 else pair.xyz2, k)
+    elif isinstance(known, CarriedDistances):
+        known = pair.neighbours[(cloud, k)] = known.distances()
     return known
+
+
+@dataclass(frozen=True)
+class CarriedDistances:
+    """A cloud's neighbour distances carried from the stage before (``before``, of the points
+    ``xyz_before``) to its points ``keep``, moved as a whole to ``moved_to`` (None: not moved):
+    found when first asked for, by the candidate that asks, not between two steps."""
+
+    before: NeighbourDistances | CarriedDistances
+    xyz_before: np.ndarray
+    keep: np.ndarray
+    moved_to: np.ndarray | None = None
+    drift_m: float = 0.0
+
+    def distances(self) -> NeighbourDistances:
+        before = self.before.distances() if isinstance(self.before, CarriedDistances) else self.before
+        carried = after_removal(before, self.xyz_before, self.keep)
+        return carried if self.moved_to is None else after_rigid_move(carried, self.moved_to, self.drift_m)
 
 
 def carry_neighbours(
     before: RegisteredPair, keep1: np.ndarray, keep2: np.ndarray, after: RegisteredPair, moved: tuple[int, ...] = ()
 ) -> None:
     """Give ``after`` (``before``'s survivors) every neighbour distance ``before`` has, carried
-    by :func:`after_removal`; for the clouds in ``moved`` (by a correction) then by
-    :func:`after_rigid_move` where the cloud moved as a whole with sensor 2's pose (cloud 2) or
-    stayed (cloud 1), to ``RIGID_DRIFT_M``; else not (searched anew when asked for)."""
+    by :func:`after_removal` when asked for; for the clouds in ``moved`` (by a correction) then
+    by :func:`after_rigid_move` where the cloud moved as a whole with sensor 2's pose (cloud 2)
+    or stayed (cloud 1), to ``RIGID_DRIFT_M``; else not (searched anew when asked for)."""
     for (cloud, k), distances in before.neighbours.items():
         xyz, keep = (before.xyz1, keep1) if cloud == 1 else (before.xyz2, keep2)
         if cloud not in moved:
-            after.neighbours[(cloud, k)] = after_removal(distances, xyz, keep)
+            after.neighbours[(cloud, k)] = CarriedDistances(distances, xyz, keep)
             continue
         now = after.xyz1 if cloud == 1 else after.xyz2
         T = after.T_1_2 @ np.linalg.inv(before.T_1_2) if cloud == 2 else np.eye(4)
         drift = np.linalg.norm(now - (xyz[keep] @ T[:3, :3].T + T[:3, 3]), axis=1)
         if len(drift) and drift.max() <= RIGID_DRIFT_M:
-            after.neighbours[(cloud, k)] = after_rigid_move(after_removal(distances, xyz, keep), now, drift.max())
+            after.neighbours[(cloud, k)] = CarriedDistances(distances, xyz, keep, now, float(drift.max()))
 
 
 # A moved cloud whose points lie this near where one rigid motion (sensor 2's change of pose)

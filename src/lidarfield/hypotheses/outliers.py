@@ -64,7 +64,7 @@ class NeighbourDistances:
     k: int
     mean: np.ndarray  # mean distance: the outlier score
     reach: np.ndarray  # distance to the k-th: no point closer than this is outside the k
-    index: np.ndarray  # (N, k) the k (rows of the cloud)
+    index: np.ndarray  # (N, k) the k nearest, nearest first (rows of the cloud, int32: half the memory)
     beyond: np.ndarray  # no point outside the k is nearer than this (the (k+1)-th's distance, or less)
 
     def __len__(self) -> int:
@@ -77,7 +77,7 @@ def neighbour_distances(xyz: np.ndarray, k: int, workers: int | None = None) -> 
     xyz = np.asarray(xyz, dtype=np.float64)
     k = min(k, len(xyz))
     if k == 0:
-        return NeighbourDistances(0, np.zeros(0), np.zeros(0), np.zeros((0, 0), np.int64), np.zeros(0))
+        return NeighbourDistances(0, np.zeros(0), np.zeros(0), np.zeros((0, 0), np.int32), np.zeros(0))
     return NeighbourDistances(k, *_search(xyz, xyz, k, workers))
 
 
@@ -100,7 +100,7 @@ def after_removal(
     if len(removed) == 0:
         return before
     # the survivors' neighbours, numbered among the survivors (right where none was removed)
-    index = (np.cumsum(keep) - 1)[before.index[keep]]
+    index = (np.cumsum(keep, dtype=np.int32) - 1)[before.index[keep]]
     carried = [before.mean[keep], before.reach[keep], index, before.beyond[keep]]
     if len(kept):
         _search_again(carried, kept, _reaches(kept, carried[1], removed, workers), before.k, workers)
@@ -179,7 +179,7 @@ def _search(cloud: np.ndarray, points: np.ndarray, k: int, workers: int | None):
     distances, index = cKDTree(cloud, balanced_tree=False).query(points, k=found, workers=_workers(workers))
     distances, index = distances.reshape(len(points), found), index.reshape(len(points), found)
     beyond = distances[:, k] if found > k else np.full(len(points), np.inf)
-    return _mean(distances[:, :k]), distances[:, k - 1].copy(), index[:, :k], beyond
+    return _mean(distances[:, :k]), distances[:, k - 1].copy(), index[:, :k].astype(np.int32), beyond
 
 
 def _mean(distances: np.ndarray) -> np.ndarray:

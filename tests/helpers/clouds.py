@@ -32,6 +32,26 @@ def synthetic_cloud(rng) -> np.ndarray:
     return xyz[rng.permutation(len(xyz))]
 
 
+def removals(xyz: np.ndarray, rng) -> dict[str, np.ndarray]:
+    """Keep-masks of the kinds of removal hypotheses make, and the edge cases."""
+    n = len(xyz)
+    azimuth = np.degrees(np.arctan2(xyz[:, 1], xyz[:, 0]))
+    _, inverse, counts = np.unique(xyz, axis=0, return_inverse=True, return_counts=True)
+    duplicated = np.flatnonzero(counts[inverse.ravel()] > 1)
+    some_copies = np.ones(n, dtype=bool)
+    some_copies[duplicated[::2]] = False  # one copy of a doubled point goes, its twin stays
+    few = np.zeros(n, dtype=bool)
+    few[:5] = True
+    return {
+        "a sector": ~((azimuth > 20) & (azimuth < 70)),
+        "scattered points": rng.random(n) > 0.05,
+        "some copies of duplicates": some_copies,
+        "nothing": np.ones(n, dtype=bool),
+        "all but fewer than k": few,
+        "everything": np.zeros(n, dtype=bool),
+    }
+
+
 def targets(
     per_voxel: int, seed: int, noise_m: float = 0.02, half_deg: float = 1.5, range_m: float = 10.0
 ) -> np.ndarray:

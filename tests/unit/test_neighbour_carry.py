@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from helpers.clouds import synthetic_cloud
+from helpers.clouds import removals, synthetic_cloud
 from lidarfield.hypotheses import outliers as outliers_module
 from lidarfield.hypotheses.outliers import after_removal, neighbour_distances
 from lidarfield.io import read_scan
@@ -20,26 +20,6 @@ def assert_same(carried, searched):
     assert carried.k == searched.k
     np.testing.assert_array_equal(carried.mean, searched.mean)
     np.testing.assert_array_equal(carried.reach, searched.reach)
-
-
-def removals(xyz: np.ndarray, rng) -> dict[str, np.ndarray]:
-    """Keep-masks of the kinds of removal hypotheses make, and the edge cases."""
-    n = len(xyz)
-    azimuth = np.degrees(np.arctan2(xyz[:, 1], xyz[:, 0]))
-    _, inverse, counts = np.unique(xyz, axis=0, return_inverse=True, return_counts=True)
-    duplicated = np.flatnonzero(counts[inverse.ravel()] > 1)
-    some_copies = np.ones(n, dtype=bool)
-    some_copies[duplicated[::2]] = False  # one copy of a doubled point goes, its twin stays
-    few = np.zeros(n, dtype=bool)
-    few[:5] = True
-    return {
-        "a sector": ~((azimuth > 20) & (azimuth < 70)),
-        "scattered points": rng.random(n) > 0.05,
-        "some copies of duplicates": some_copies,
-        "nothing": np.ones(n, dtype=bool),
-        "all but fewer than k": few,
-        "everything": np.zeros(n, dtype=bool),
-    }
 
 
 @pytest.mark.parametrize("seed", range(3))

@@ -121,7 +121,10 @@ class Planes:
     """The other cloud's planes: its k-d tree, and its points' normals (from ``normal_k``
     neighbours) computed where asked. Shared by the fits of one stage (``planes_of``): several
     threads may pair at once, each point's normal is computed alone (the same values whoever
-    computes it first), and only its reading and writing are locked."""
+    computes it first), and only its reading and writing are locked. Each normal's
+    neighbourhood is kept (``neighbours``: its ``normal_k`` nearest, -1 where unknown or where
+    a search may pick another), so that the next stage's planes can take the normal over
+    (``carried_planes``)."""
 
     def __init__(self, other: np.ndarray, normal_k: int):
         from scipy.spatial import cKDTree
@@ -129,6 +132,7 @@ class Planes:
         self.other, self.normal_k = other, normal_k
         self.tree = cKDTree(other, balanced_tree=False, compact_nodes=False)  # faster to build, as fast to query
         self.normals = np.full((len(other), 3), np.nan)
+        self.neighbours = np.full((len(other), normal_k), -1, dtype=np.int32)
         self.lock = threading.Lock()
 
     def pair(self, points: np.ndarray, max_distance: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -143,12 +147,45 @@ class Planes:
         needed = np.unique(index)
         with self.lock:
             missing = needed[np.isnan(self.normals[needed, 0])]
-        found = _normals(self.other, self.tree, missing, self.normal_k)  # outside the lock: the costly part
+        found, around = _normals(self.other, self.tree, missing, self.normal_k)  # outside the lock: the costly part
         with self.lock:
-            self.normals[missing] = found
+            self.normals[missing], self.neighbours[missing] = found, around
             n = self.normals[index]
         planar = np.isfinite(n).all(axis=1)
         return np.flatnonzero(paired)[planar], n[planar], self.other[index[planar]]
+
+
+def carried_planes(before: Planes, other: np.ndarray, keep: np.ndarray) -> Planes:
+    """The planes of ``other``, which is ``before.other[keep]``, given every normal of
+    ``before`` whose neighbourhood was kept whole: the same as computed anew, bit for bit.
+    Removing points brings no other point nearer, so a point whose ``normal_k`` nearest all
+    stay, each strictly nearer than the next and than any other point (``_normals``), has
+    them still, in the same order: the same covariance, the same normal. The others are
+    computed when asked."""
+    planes = Planes(other, before.normal_k)
+    rows = np.flatnonzero(keep)  # each survivor's row before
+    with before.lock:
+        around, normals = before.neighbours[rows], before.normals[rows]
+    known = np.flatnonzero(around[:, 0] >= 0)
+    whole = known[keep[around[known]].all(axis=1)]
+    planes.normals[whole] = normals[whole]
+    planes.neighbours[whole] = (np.cumsum(keep, dtype=np.int32) - 1)[around[whole]]  # numbered among the survivors
+    return planes
+
+
+@dataclass(frozen=True)
+class CarriedPlanes:
+    """The planes of ``other`` (the points ``keep`` of ``before``'s cloud), made from
+    ``before`` (``carried_planes``) when first asked for: by the fit that asks, not between two
+    steps."""
+
+    before: Planes | CarriedPlanes
+    other: np.ndarray
+    keep: np.ndarray
+
+    def planes(self) -> Planes:
+        before = self.before.planes() if isinstance(self.before, CarriedPlanes) else self.before
+        return carried_planes(before, self.other, self.keep)
 
 
 class Pairing:
@@ -199,24 +236,39 @@ class Pairing:
 
 def planes_of(other: np.ndarray, normal_k: int) -> Planes:
     """The planes of ``other``: those made for the same array object and ``normal_k`` while it
-    lives (``SHARED_PLANES``), else new ones. A stage's candidates pair the same cloud with its
-    planes three times (``range_calibration`` alone and with the pose, ``elevation_calibration``):
-    its tree is built, and each normal computed, once."""
+    lives (``SHARED_PLANES``), or carried to it from the stage before (``carry_planes``), else
+    new ones. A stage's candidates pair the same cloud with its planes three times
+    (``range_calibration`` alone and with the pose, ``elevation_calibration``): its tree is
+    built, and each normal computed, once."""
     key = (id(other), normal_k)
     with SHARED_PLANES_LOCK:
         known = SHARED_PLANES.get(key)
-        if known is not None and known.other is other:
+        if isinstance(known, Planes) and known.other is other:
             return known
-        planes = Planes(other, normal_k)
+        carried = isinstance(known, CarriedPlanes) and known.other is other
+        planes = known.planes() if carried else Planes(other, normal_k)
         SHARED_PLANES.clear()  # one cloud's at a time: a stage's, not a study's
         SHARED_PLANES[key] = planes
         return planes
 
 
-# The planes of the last cloud asked for, by its array object. They hold that cloud (and its
-# tree) alive until another cloud's planes are asked for: one cloud at a time, so its id cannot
-# be reused meanwhile. A stage's clouds are not changed in place (a correction makes new ones).
-SHARED_PLANES: dict[tuple[int, int], Planes] = {}
+def carry_planes(before: RegisteredPair, keep1: np.ndarray, keep2: np.ndarray, after: RegisteredPair) -> None:
+    """Pass the planes of ``before``'s clouds (in ``SHARED_PLANES``) on to ``after``'s clouds
+    that are their survivors ``keep1``, ``keep2`` (``CarriedPlanes``). A cloud kept whole is the
+    same array and keeps its planes as they are; a cloud the stage moved keeps none."""
+    with SHARED_PLANES_LOCK:
+        for (_, normal_k), known in list(SHARED_PLANES.items()):
+            for was, keep, now in ((before.xyz1, keep1, after.xyz1), (before.xyz2, keep2, after.xyz2)):
+                cut = now is not was and keep.dtype == bool and len(now) == np.count_nonzero(keep)
+                if known.other is was and cut and np.array_equal(now, was[keep]):
+                    SHARED_PLANES[(id(now), normal_k)] = CarriedPlanes(known, now, keep)
+
+
+# The planes of the last cloud asked for, by its array object, and those carried to the next
+# stage's clouds. They hold those clouds (and the tree) alive until another cloud's planes are
+# made: so an id cannot be reused meanwhile. A stage's clouds are not changed in place (a
+# correction makes new ones).
+SHARED_PLANES: dict[tuple[int, int], Planes | CarriedPlanes] = {}
 SHARED_PLANES_LOCK = threading.Lock()
 
 
@@ -438,14 +490,27 @@ def _huber(residual: np.ndarray) -> np.ndarray:
     return np.where(a <= 1, 1.0, 1.0 / np.maximum(a, 1e-300))
 
 
-def _normals(points: np.ndarray, tree, index: np.ndarray, k: int) -> np.ndarray:
+def _normals(points: np.ndarray, tree, index: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
     """The normals of ``points[index]``: the covariance's smallest eigenvector of the ``k``
     nearest points; a neighbourhood that is no plane (a line, or a blob) gets -inf (unused).
     (The plane through the point itself, not through the neighbours' mean: on the simulated
-    intersection the mean, pulled off curved and bent surfaces, doubled the fit's bias.)"""
+    intersection the mean, pulled off curved and bent surfaces, doubled the fit's bias.) And
+    each row's ``k`` nearest (``Planes.neighbours``): -1 where two of the ``k`` + 1 nearest are
+    equally near (which one a search picks may change) or the cloud has no more than ``k``
+    points."""
+    around = np.full((len(index), k), -1, dtype=np.int32)
     if len(index) == 0:
-        return np.empty((0, 3))
-    _, neighbours = tree.query(points[index], k=k)
+        return np.empty((0, 3)), around
+    reach = min(k + 1, len(points))
+    distance, neighbours = tree.query(points[index], k=reach)
+    distinct = np.zeros(len(index), dtype=bool)
+    if reach > k:
+        distinct = np.all(distance[:, 1:] > distance[:, :-1], axis=1)
+    neighbours = neighbours[:, :k]
+    around[distinct] = neighbours[distinct]
+    tied = np.flatnonzero(~distinct)
+    if len(tied):  # the k nearest as a search of k picks among the equally near
+        neighbours[tied] = tree.query(points[index[tied]], k=k)[1]
     local = points[neighbours]
     local = local - local.mean(axis=1, keepdims=True)
     covariance = np.einsum("nki,nkj->nij", local, local) / k
@@ -453,7 +518,7 @@ def _normals(points: np.ndarray, tree, index: np.ndarray, k: int) -> np.ndarray:
     normal = vectors[:, :, 0]
     planar = (values[:, 1] > 0.05 * values[:, 2]) & (values[:, 0] < 0.1 * values[:, 1])
     normal[~planar] = -np.inf
-    return normal
+    return normal, around
 
 
 def _groups(ring: np.ndarray | None, candidates: np.ndarray) -> tuple[dict, np.ndarray]:

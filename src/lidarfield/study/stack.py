@@ -24,6 +24,7 @@ import numpy as np
 from ..hypotheses import parse_stack, parse_step, run_step, step_spec
 from ..hypotheses.outcome import Outcome, displacement, reasons_of_removed
 from ..hypotheses.outliers import carry_neighbours
+from ..hypotheses.range_calibration import carry_planes
 from ..hypotheses.steps import step_name
 from ..pair import RegisteredPair
 from ..storage.stage_ids import canonical_json
@@ -167,9 +168,11 @@ def following_stage(
     derived from ``previous``'s points carried over."""
     stage = parsed_stage(previous.pair, name, params, level, base_dir, outcome)
     # what the caller derived from the previous stage's points (its suggestions' outlier
-    # scores), carried over exactly for less than a new search costs; a cloud the stage moved
-    # as a whole too, others are searched anew when needed
+    # scores and the calibrations' normals), carried over exactly for less than a new search
+    # costs; outlier scores of a cloud the stage moved as a whole too, others are searched anew
+    # when needed
     carry_neighbours(previous.pair, stage.keep1, stage.keep2, stage.pair, moved=moved_clouds(stage))
+    carry_planes(previous.pair, stage.keep1, stage.keep2, stage.pair)
     return stage
 
 

@@ -10,7 +10,6 @@ from helpers.clouds import synthetic_cloud
 from lidarfield.hypotheses import apply_step
 from lidarfield.hypotheses.outliers import (
     neighbour_distances,
-    neighbour_threads,
     open3d_threshold,
     statistical_inliers,
 )
@@ -88,12 +87,3 @@ def test_clouds_of_at_most_k_points(n):
     assert statistical_inliers(xyz, 20, 2.0).all()
     keep1, keep2 = apply_step(RegisteredPair(xyz, xyz[:1]), {"outliers": {}})
     assert keep1.all() and keep2.all()
-
-
-def test_threads_follow_the_jobs_setting(monkeypatch):
-    monkeypatch.setenv("OMP_NUM_THREADS", "1")
-    assert neighbour_threads() == 1
-    monkeypatch.setenv("OMP_NUM_THREADS", "3")
-    assert neighbour_threads() == 3
-    monkeypatch.delenv("OMP_NUM_THREADS")
-    assert neighbour_threads() >= 1

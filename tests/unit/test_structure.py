@@ -149,4 +149,4 @@ def test_a_cartesian_field_from_the_command_line_bins_on_the_schema_cell():
 def test_the_loose_top_level_modules_are_the_base_layer():
     """A new module goes into a part (docs/development.md lists them), not beside these."""
     loose = {p.stem for p in PACKAGE.glob("*.py")} - {"__init__", "__main__"}
-    assert loose == {"errors", "checks", "defaults", "yaml_file", "poses", "scan", "pair"}
+    assert loose == {"errors", "checks", "defaults", "yaml_file", "threads", "poses", "scan", "pair"}

@@ -40,9 +40,9 @@ from ..field.grid import FieldSettings
 from ..field.kernel import NORMAL_READ_COLUMN, SURFACE_COLUMNS, WHITENED_COLUMNS
 from ..field.pair_field import pair_field
 from ..field.rigid_fit import RigidFit, field_rigid_part
-from ..hypotheses.outliers import neighbour_threads
 from ..pair import RegisteredPair
 from ..poses import weighted_rigid_transform  # noqa: F401 (re-exported: the tests' Kabsch)
+from ..threads import usable_threads
 from .randomness import neighbour_pairs, randomness_tests
 from .tags import depth_edges, energy_shares, voxel_energy, voxel_tags
 
@@ -71,10 +71,10 @@ STATISTIC_KEYS = (
 
 def analyse_field(pair: RegisteredPair, settings: FieldSettings) -> tuple[dict[str, np.ndarray], dict]:
     """The field of a pair (``pair_field``) with its tag columns, and its statistics (with the
-    edges used and why). Where more than one core is usable (``neighbour_threads``, as for the
+    edges used and why). Where more than one core is usable (``usable_threads``, as for the
     candidates), the depth edges, which need no field, are found by a second thread meanwhile."""
     binning = pair_binning(settings, pair)
-    with ThreadPoolExecutor(1) if neighbour_threads() > 1 else nullcontext() as pool:
+    with ThreadPoolExecutor(1) if usable_threads() > 1 else nullcontext() as pool:
         on_edge = None if pool is None else pool.submit(depth_edges, pair, binning.settings)
         columns, binning, ids = pair_field(pair, settings, binning)
         rigid = field_rigid_part(columns)  # fitted once: the tags and the statistics both read it

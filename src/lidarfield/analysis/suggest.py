@@ -89,7 +89,7 @@ before it is reused. Plugin candidates are always run: their source can change u
 parameters.
 
 The candidates a stage runs are independent: they are evaluated by a pool of threads
-(``candidate_threads``: the usable cores, one in a workflow job), each row then completed and
+(``threads.usable_threads``: the usable cores, one in a workflow job), each row then completed and
 ranked in the candidates' order, so the table is the serial one bit for bit. The pool starts
 the correcting candidates first (they fit: the costliest), so that a stage does not wait at its
 end for one long fit started last.
@@ -118,11 +118,11 @@ from ..field.kernel import field_from_voxel_ids
 from ..field.pair_field import scan_patterns
 from ..hypotheses import BUILTINS, CORRECTING, apply_step, validate_step
 from ..hypotheses.outcome import Outcome, displacement
-from ..hypotheses.outliers import neighbour_threads
 from ..hypotheses.steps import step_name
 from ..io.parquet_table import read_metadata, read_table, write_table
 from ..pair import RegisteredPair
 from ..storage.stage_ids import canonical_json
+from ..threads import usable_threads
 from .tags import vector_tags, voxel_energy, whitened_energy
 
 log = logging.getLogger(__name__)
@@ -242,7 +242,7 @@ def suggestions(
     def evaluate(task: tuple[int, dict]) -> tuple[dict | None, Outcome | None]:
         return candidate_row(stage, *task, base_dir, study_grid, defaults)
 
-    threads = min(len(todo), candidate_threads() if workers is None else workers)
+    threads = min(len(todo), usable_threads() if workers is None else workers)
     if threads > 1:  # the candidates are independent; numpy, scipy and Open3D release the GIL
         # the fits first (the costliest: ICP, the calibrations' iterations), so that no thread
         # is left with one at the end while the others wait; the rows are kept by their k
@@ -380,12 +380,6 @@ def candidate_row(
         time.perf_counter() - start,
     )
     return row, outcome
-
-
-def candidate_threads() -> int:
-    """Threads evaluating a stage's candidates: ``OMP_NUM_THREADS`` if set (a workflow job's
-    is 1), else the usable cores."""
-    return neighbour_threads()
 
 
 def rank_table(rows: list[dict]) -> dict[str, np.ndarray]:

@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..analysis.stopping_rule import explain_settings
-from ..analysis.suggest import candidate_threads, points_digest, rows_by_candidate, suggestions, write_suggestions
+from ..analysis.suggest import points_digest, rows_by_candidate, suggestions, write_suggestions
 from ..errors import ConfigError, InputError
 from ..io import read_scan, write_scan
 from ..io.atomic import write_text
@@ -28,6 +28,7 @@ from ..study.explain_loop import Explanation, explain_pair
 from ..study.pairs import recorded_scan_spec
 from ..study.stack import apply_stack
 from ..study.summary import read_stats, write_summary
+from ..threads import usable_threads
 from .jobs import field_stage, rematch_stage, write_stage
 
 if TYPE_CHECKING:  # the config's schema and validator load only where a config is read
@@ -220,10 +221,10 @@ def explain_scans(
 
 def stage_figures(study: Study, out_dir: Path):
     """``out_dir``'s stage figures (``report.explanation.StageFigures``): drawn by a second
-    process while the loop goes on when more than one core is usable (``candidate_threads``)."""
+    process while the loop goes on when more than one core is usable (``usable_threads``)."""
     from ..report.explanation import StageFigures  # the figures: matplotlib, only here
 
-    return StageFigures(out_dir.resolve().name, study.grid, out_dir, study.config["plots"], candidate_threads() > 1)
+    return StageFigures(out_dir.resolve().name, study.grid, out_dir, study.config["plots"], usable_threads() > 1)
 
 
 def explain_into(pair: RegisteredPair, study: Study, out_dir: Path, figures=None) -> Explanation:

@@ -25,13 +25,14 @@ are measured again at the new places, as a search measures them, and only the po
 
 from __future__ import annotations
 
-import os
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from ..pair import RegisteredPair
+from ..threads import usable_threads
 from .params import doc
+from .survivors import survivor_rows
 
 
 @dataclass(frozen=True)
@@ -46,15 +47,6 @@ class Params:
     def __post_init__(self):
         if self.nb_neighbors < 1 or not self.std_ratio > 0:
             raise ValueError(f"need nb_neighbors >= 1 and std_ratio > 0, got {self.nb_neighbors} and {self.std_ratio}")
-
-
-def neighbour_threads() -> int:
-    """Threads for the neighbour search: ``OMP_NUM_THREADS`` if set, else the usable cores."""
-    try:
-        threads = int(os.environ.get("OMP_NUM_THREADS", ""))
-    except ValueError:
-        threads = 0
-    return threads if threads > 0 else len(os.sched_getaffinity(0))
 
 
 @dataclass(frozen=True)
@@ -100,7 +92,7 @@ def after_removal(
     if len(removed) == 0:
         return before
     # the survivors' neighbours, numbered among the survivors (right where none was removed)
-    index = (np.cumsum(keep, dtype=np.int32) - 1)[before.index[keep]]
+    index = survivor_rows(keep)[before.index[keep]]
     carried = [before.mean[keep], before.reach[keep], index, before.beyond[keep]]
     if len(kept):
         _search_again(carried, kept, _reaches(kept, carried[1], removed, workers), before.k, workers)
@@ -192,7 +184,7 @@ def _mean(distances: np.ndarray) -> np.ndarray:
 
 
 def _workers(workers: int | None) -> int:
-    return workers or neighbour_threads()
+    return workers or usable_threads()
 
 
 def statistical_inliers(

@@ -56,6 +56,7 @@ from ..poses import in_sensor_frame, rotation_from_vector
 from .outcome import Outcome
 from .params import doc
 from .realign import transform_record
+from .survivors import survivor_rows
 
 MIN_POINTS = 20  # pairs in the fit, and points of each cloud
 MIN_RING_POINTS = 30  # a ring's own offset needs this many pairs
@@ -169,7 +170,7 @@ def carried_planes(before: Planes, other: np.ndarray, keep: np.ndarray) -> Plane
     known = np.flatnonzero(around[:, 0] >= 0)
     whole = known[keep[around[known]].all(axis=1)]
     planes.normals[whole] = normals[whole]
-    planes.neighbours[whole] = (np.cumsum(keep, dtype=np.int32) - 1)[around[whole]]  # numbered among the survivors
+    planes.neighbours[whole] = survivor_rows(keep)[around[whole]]
     return planes
 
 

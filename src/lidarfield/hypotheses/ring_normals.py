@@ -29,6 +29,7 @@ import math
 import numpy as np
 
 from ..field.significance import GRAZING_MIN
+from .survivors import survivor_rows
 
 # The one-ring test's first search: on a dense scan most points have another ring's point among
 # their nearest few, which settles them for under a third of the time of all ``k`` (80 channels,
@@ -106,7 +107,7 @@ def one_ring_after_removal(
     one_ring, witness = one_ring[keep], witness[keep]
     held = witness >= 0
     held[held] = keep[witness[held]]
-    witness = np.where(held, (np.cumsum(keep) - 1)[np.maximum(witness, 0)], -1)  # numbered among the kept
+    witness = np.where(held, survivor_rows(keep)[np.maximum(witness, 0)], -1)
     stale = near[~held[near]]
     if len(stale):
         one_ring[stale], witness[stale] = witnessed_one_ring(kept, elevation_deg, radius_m, k, stale)

@@ -54,6 +54,16 @@ def test_one_lasers_offset_is_found_and_recovered_within_its_standard_error(base
     np.testing.assert_array_equal(moved, cloud_channels(pair, 2) == int(laser))
 
 
+def test_the_record_says_whether_the_fit_converged():
+    """On the real VLP-16 with its laser 0.3 deg off, the fit meets its tolerance within a few
+    iterations; stopped after one, from no offset, it says that it did not."""
+    _, pair = _case("real-vlp16-capture", "channel_elevation", "visible")
+    full = apply_step(pair, {"elevation_calibration": {}}).fitted
+    assert full["converged"] is True and 1 < full["iterations"] < ec.Params().max_iterations
+    stopped = apply_step(pair, {"elevation_calibration": {"max_iterations": 1}}).fitted
+    assert stopped["iterations"] == 1 and stopped["converged"] is False
+
+
 @pytest.mark.parametrize("base", ["real-vlp16-capture", "sim-intersection-still-rig", "sim-canyon-still-vlp16"])
 def test_no_laser_is_fitted_on_a_fault_free_pair(base):
     _, pair = _case(base)

@@ -56,6 +56,7 @@ def test_fits_the_simulated_range_fault_and_the_field_returns_to_the_truths(faul
     assert abs(c["scale"] - SCALE) < 0.0005 and abs(c["offset_m"] - OFFSET) < 0.005, c
     assert 0 < c["scale_se"] < 0.0005 and 0 < c["offset_se_m"] < 0.005
     assert c["cloud"] == 2 and c["points"] > 1000 and c["residual_rms_m"] < 0.02
+    assert c["converged"] and c["iterations"] < 20
     # cloud 2 moved along its own lines of sight about sensor 2, cloud 1 and the pose unchanged
     assert stage.moved2 and not stage.moved1 and stage.removed1 == stage.removed2 == 0
     assert np.array_equal(stage.pair.xyz1, faulty.xyz1) and np.array_equal(stage.pair.T_1_2, faulty.T_1_2)
@@ -72,6 +73,17 @@ def test_fits_the_simulated_range_fault_and_the_field_returns_to_the_truths(faul
     assert f_before["verdict"] == "patterned" and f_before["p_coherence"] <= 0.002
     assert f_before["energy_share_radial"] > 0.5 > f_before["energy_share_rigid"]
     assert f_after["verdict"] == f_truth["verdict"] == "random"
+
+
+@pytest.mark.parametrize("with_pose", [False, True])
+def test_a_fit_stopped_by_max_iterations_says_it_did_not_converge(faulty, with_pose):
+    """One iteration from the identity does not reach a 3 mm, 0.3% range fault: the record says
+    the fit is where that iteration left it; with room, the same fit converges."""
+    stopped = apply_step(faulty, {"range_calibration": {"max_iterations": 1, "with_pose": with_pose}}).fitted
+    assert stopped["iterations"] == 1 and stopped["converged"] is False
+    assert abs(stopped["scale"] - SCALE) > 0.0002 or abs(stopped["offset_m"] - OFFSET) > 0.002
+    full = apply_step(faulty, {"range_calibration": {"with_pose": with_pose}}).fitted
+    assert full["converged"] is True and 1 < full["iterations"] < 20
 
 
 def test_range_calibration_is_the_first_suggestion_for_a_range_fault(faulty):

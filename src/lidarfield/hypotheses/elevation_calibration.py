@@ -34,8 +34,9 @@ not propose it.
 What it records (the stage's ``correction``): ``cloud``, ``lasers`` (how many were screened),
 ``laser_offsets_deg`` and ``laser_offsets_se_deg`` (by laser, as text, the fitted ones only),
 ``points`` (pairs of the fitted lasers in the last solve), ``residual_rms_m`` and ``sigma_m``
-(their point-to-plane residuals' RMS and the weighted standard deviation), ``iterations`` and
-``parameters`` (the number of lasers fitted). The standard errors are ``sigma^2 / sum w (n . t)^2``
+(their point-to-plane residuals' RMS and the weighted standard deviation), ``iterations``,
+``converged`` (false where ``max_iterations`` stopped it first) and ``parameters`` (the number
+of lasers fitted). The standard errors are ``sigma^2 / sum w (n . t)^2``
 of the last solve per laser; like ``range_calibration``'s they treat neighbouring residuals as
 independent: read them as lower bounds.
 """
@@ -147,6 +148,7 @@ def elevation_calibration(pair: RegisteredPair, params: Params) -> Outcome:
         "residual_rms_m": float(np.sqrt(np.mean(residual**2))),
         "sigma_m": sigma,
         "iterations": iterations,
+        "converged": converged,
         "parameters": len(chosen),
     }
     moved = np.flatnonzero(np.isin(laser, chosen))

@@ -26,7 +26,8 @@ in the fit shares one pooled offset.
 What it records (the stage's ``correction``): ``cloud``, ``scale``, ``offset_m``, their standard
 errors ``scale_se``, ``offset_se_m``, ``points`` (pairs used in the last solve),
 ``residual_rms_m`` (their point-to-plane residuals' RMS), ``sigma_m`` (the weighted residuals'
-standard deviation), ``iterations``, ``parameters`` (how many it fitted: 2, or 1 + the offsets);
+standard deviation), ``iterations``, ``converged`` (false where ``max_iterations`` stopped it
+first: the fit is where its last iteration left it), ``parameters`` (how many it fitted: 2, or 1 + the offsets);
 with ``per_ring``, ``ring_offsets_m`` and ``ring_offsets_se_m`` (by ring, as text) and
 ``offset_m`` their mean over the rings; with ``with_pose``, ``pose``: the fitted rigid
 transform ``T`` of cloud 2 in frame 1 (a point ``p`` becomes ``R p + t``), recorded as
@@ -395,6 +396,7 @@ def range_calibration(pair: RegisteredPair, params: Params) -> Outcome:
         "residual_rms_m": float(np.sqrt(np.mean(residual**2))),
         "sigma_m": float(np.sqrt(sigma2)),
         "iterations": iterations,
+        "converged": converged,
         "method": "point_to_plane_huber",
         "parameters": p + rigid,
     }

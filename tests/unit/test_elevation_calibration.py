@@ -64,6 +64,17 @@ def test_the_record_says_whether_the_fit_converged():
     assert stopped["iterations"] == 1 and stopped["converged"] is False
 
 
+def test_on_the_two_lidar_rig_a_fit_that_never_meets_its_tolerance_says_so():
+    """On the simulated rig with its laser 1 deg off, the fit ends two pairings apart (offsets
+    0.010 deg apart, a fifth of its standard error) and runs to ``max_iterations``: the record
+    says it did not converge, and the offset is still the injected one within its error."""
+    _, pair = _case("sim-intersection-still-rig", "channel_elevation", "obvious")
+    fitted = apply_step(pair, {"elevation_calibration": {}}).fitted
+    assert fitted["iterations"] == ec.Params().max_iterations and fitted["converged"] is False
+    (offset,), (se,) = fitted["laser_offsets_deg"].values(), fitted["laser_offsets_se_deg"].values()
+    assert abs(offset - 1.0) <= 2 * se
+
+
 @pytest.mark.parametrize("base", ["real-vlp16-capture", "sim-intersection-still-rig", "sim-canyon-still-vlp16"])
 def test_no_laser_is_fitted_on_a_fault_free_pair(base):
     _, pair = _case(base)

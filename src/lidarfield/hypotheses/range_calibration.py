@@ -27,8 +27,8 @@ What it records (the stage's ``correction``): ``cloud``, ``scale``, ``offset_m``
 errors ``scale_se``, ``offset_se_m``, ``points`` (pairs used in the last solve),
 ``residual_rms_m`` (their point-to-plane residuals' RMS), ``sigma_m`` (the weighted residuals'
 standard deviation), ``iterations``, ``converged`` (false where ``max_iterations`` stopped it
-first: the fit is where its last iteration left it), ``parameters`` (how many it fitted: 2, or 1 + the offsets);
-with ``per_ring``, ``ring_offsets_m`` and ``ring_offsets_se_m`` (by ring, as text) and
+first: the fit is where its last iteration left it), ``parameters`` (how many it fitted: 2, or
+1 + the offsets); with ``per_ring``, ``ring_offsets_m`` and ``ring_offsets_se_m`` (by ring, as text) and
 ``offset_m`` their mean over the rings; with ``with_pose``, ``pose``: the fitted rigid
 transform ``T`` of cloud 2 in frame 1 (a point ``p`` becomes ``R p + t``), recorded as
 ``realign`` records its own (``translation_m`` is ``T``'s, not the motion of sensor 2's origin),
